@@ -1,0 +1,2 @@
+//! The `forgemon` binary.
+fn main() {}

@@ -1,0 +1,305 @@
+//! The billet: a cylinder upset between flat dies.
+//!
+//! The load is the analytical upsetting law with Coulomb friction of the hammer paper
+//! (seed 000, eq. 3), the flow stress is constant or Hansel–Spittel (seed 001, eq. 6), and
+//! the load-side effects of the library (`friction_rise`, `strain_rate`,
+//! `strain_hardening`, `thermal`) act here. Pure code: no IO, no clock.
+
+use std::f64::consts::PI;
+
+/// Strain below which the flow-stress laws are evaluated at this floor.
+///
+/// Hansel–Spittel's `eps^m2 * exp(m4/eps)` and the `strain_hardening` power law are zero
+/// (or singular) at zero strain; FE codes floor the strain the same way. 1e-4 is far below
+/// any strain a blow reaches (a 10 µm dent in a 30 mm billet is 3e-4).
+pub const STRAIN_FLOOR: f64 = 1e-4;
+
+/// Strain rate (1/s) below which rate-sensitive laws are evaluated at this floor.
+///
+/// Stuck and separating phases have zero plastic rate; a quasi-static 1e-2 /s keeps the
+/// power laws finite there. Blows run at 1–100 /s.
+pub const STRAIN_RATE_FLOOR_PER_S: f64 = 1e-2;
+
+/// `A = 2 mu r / h` below which the friction factor uses its series expansion.
+const SMALL_A: f64 = 1e-6;
+
+/// The billet as the process sheet describes it (CONTRACTS.md §2).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BilletGeometry {
+    /// Diameter before the first blow of the sheet, m.
+    pub diameter_m: f64,
+    /// Height before the first blow of the sheet, m. Strains are measured from here.
+    pub height_m: f64,
+}
+
+impl BilletGeometry {
+    /// Volume of the cylinder, conserved while it is upset.
+    pub fn volume_m3(&self) -> f64 {
+        PI * (0.5 * self.diameter_m).powi(2) * self.height_m
+    }
+
+    /// Radius at height `h_m`, by constant volume (the papers' barrelling-free cylinder).
+    pub fn radius_at(&self, h_m: f64) -> f64 {
+        (self.volume_m3() / (PI * h_m)).sqrt()
+    }
+
+    /// Logarithmic strain at height `h_m`: `ln(height_m / h)`.
+    pub fn strain_at(&self, h_m: f64) -> f64 {
+        (self.height_m / h_m).ln()
+    }
+}
+
+/// Flow-stress law of the material (CONTRACTS.md §2 `[material]`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum FlowStress {
+    /// Constant flow stress, Pa (the hammer paper's sigma_0).
+    Constant { sigma0_pa: f64 },
+    /// `sigma = A exp(m1 T) eps^m2 epsdot^m3 exp(m4/eps)` (seed 001, eq. 6), T in °C.
+    HanselSpittel {
+        a_pa: f64,
+        m1: f64,
+        m2: f64,
+        m3: f64,
+        m4: f64,
+        temperature_c: f64,
+    },
+}
+
+impl FlowStress {
+    /// Flow stress at strain `eps` and strain rate `epsdot_per_s` (both floored).
+    pub fn sigma_pa(&self, eps: f64, epsdot_per_s: f64) -> f64 {
+        match *self {
+            FlowStress::Constant { sigma0_pa } => sigma0_pa,
+            FlowStress::HanselSpittel {
+                a_pa,
+                m1,
+                m2,
+                m3,
+                m4,
+                temperature_c,
+            } => {
+                let eps = eps.max(STRAIN_FLOOR);
+                let rate = epsdot_per_s.max(STRAIN_RATE_FLOOR_PER_S);
+                a_pa * (m1 * temperature_c).exp() * eps.powf(m2) * rate.powf(m3) * (m4 / eps).exp()
+            }
+        }
+    }
+}
+
+/// Load-side effect parameters (CONTRACTS.md §6). Neutral values leave the base law as is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoadEffects {
+    /// `friction_rise`: mu(h) = mu0 (h0/h)^p. Neutral 0.
+    pub friction_exponent: f64,
+    /// `strain_rate`: sigma (epsdot/epsdot_ref)^m. Neutral m = 0.
+    pub rate_m: f64,
+    pub rate_ref_per_s: f64,
+    /// `strain_hardening`: sigma (eps/eps_ref)^n. Neutral n = 0.
+    pub hardening_n: f64,
+    pub hardening_eps_ref: f64,
+    /// `thermal`: sigma exp(q_dT (i-1)) on blow i. Neutral 0.
+    pub thermal_q_dt: f64,
+}
+
+impl LoadEffects {
+    /// No load-side effect.
+    pub const NEUTRAL: LoadEffects = LoadEffects {
+        friction_exponent: 0.0,
+        rate_m: 0.0,
+        rate_ref_per_s: 1.0,
+        hardening_n: 0.0,
+        hardening_eps_ref: 1.0,
+        thermal_q_dt: 0.0,
+    };
+}
+
+impl Default for LoadEffects {
+    fn default() -> Self {
+        Self::NEUTRAL
+    }
+}
+
+/// Upsetting load at one instant, split as the papers split the energy.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UpsetLoad {
+    /// Total load with friction, N (eq. 3).
+    pub total_n: f64,
+    /// Frictionless load `pi r^2 sigma`, N. Work of this part is the plastic energy.
+    pub frictionless_n: f64,
+}
+
+/// The billet law for one blow: geometry, material, friction and load effects, with the
+/// blow index already folded in. `load` is the hot function of the simulator.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BilletLaw {
+    geometry: BilletGeometry,
+    material: FlowStress,
+    mu0: f64,
+    effects: LoadEffects,
+    /// `exp(q_dT (i-1))` for this blow.
+    thermal_factor: f64,
+}
+
+impl BilletLaw {
+    /// The law for blow `blow_index` (1-based) of the sheet.
+    pub fn new(
+        geometry: BilletGeometry,
+        material: FlowStress,
+        friction: f64,
+        effects: LoadEffects,
+        blow_index: usize,
+    ) -> Self {
+        let thermal_factor = (effects.thermal_q_dt * (blow_index.saturating_sub(1)) as f64).exp();
+        Self {
+            geometry,
+            material,
+            mu0: friction,
+            effects,
+            thermal_factor,
+        }
+    }
+
+    pub fn geometry(&self) -> &BilletGeometry {
+        &self.geometry
+    }
+
+    /// Whether the load depends on the strain rate (the simulator then needs its slope).
+    pub fn is_rate_dependent(&self) -> bool {
+        matches!(self.material, FlowStress::HanselSpittel { m3, .. } if m3 != 0.0)
+            || self.effects.rate_m != 0.0
+    }
+
+    /// Coulomb friction at height `h_m` (`friction_rise` makes it grow as the billet flattens).
+    pub fn friction_at(&self, h_m: f64) -> f64 {
+        if self.effects.friction_exponent == 0.0 {
+            self.mu0
+        } else {
+            self.mu0 * (self.geometry.height_m / h_m).powf(self.effects.friction_exponent)
+        }
+    }
+
+    /// Flow stress at height `h_m` and strain rate `epsdot_per_s`, with the load effects.
+    pub fn sigma_pa(&self, h_m: f64, epsdot_per_s: f64) -> f64 {
+        let eps = self.geometry.strain_at(h_m);
+        let mut sigma = self.material.sigma_pa(eps, epsdot_per_s) * self.thermal_factor;
+        let e = &self.effects;
+        if e.rate_m != 0.0 {
+            sigma *= (epsdot_per_s.max(STRAIN_RATE_FLOOR_PER_S) / e.rate_ref_per_s).powf(e.rate_m);
+        }
+        if e.hardening_n != 0.0 {
+            sigma *= (eps.max(STRAIN_FLOOR) / e.hardening_eps_ref).powf(e.hardening_n);
+        }
+        sigma
+    }
+
+    /// Upsetting load at height `h_m` while compressed at `epsdot_per_s` (eq. 3).
+    pub fn load(&self, h_m: f64, epsdot_per_s: f64) -> UpsetLoad {
+        let r = self.geometry.radius_at(h_m);
+        let sigma = self.sigma_pa(h_m, epsdot_per_s);
+        let frictionless_n = PI * r * r * sigma;
+        let a = 2.0 * self.friction_at(h_m) * r / h_m;
+        UpsetLoad {
+            total_n: frictionless_n * friction_factor(a),
+            frictionless_n,
+        }
+    }
+}
+
+/// `F / (pi r^2 sigma)` of eq. 3: `(2/A) ((e^A - 1)/A - 1)`, which tends to 1 as A -> 0.
+pub fn friction_factor(a: f64) -> f64 {
+    if a < SMALL_A {
+        1.0 + a / 3.0 + a * a / 12.0
+    } else {
+        2.0 / a * (a.exp_m1() / a - 1.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn steel() -> BilletLaw {
+        // Hammer paper §2.1/§2.3.2: 60 mm x 112 mm, mu 0.2, sigma_0 90 MPa.
+        BilletLaw::new(
+            BilletGeometry {
+                diameter_m: 0.060,
+                height_m: 0.112,
+            },
+            FlowStress::Constant { sigma0_pa: 90e6 },
+            0.2,
+            LoadEffects::NEUTRAL,
+            1,
+        )
+    }
+
+    #[test]
+    fn friction_factor_is_continuous_at_the_series_switch() {
+        let below = friction_factor(SMALL_A * 0.999_999);
+        let above = friction_factor(SMALL_A * 1.000_001);
+        assert!((below - above).abs() < 1e-9, "{below} vs {above}");
+        assert_eq!(friction_factor(0.0), 1.0);
+    }
+
+    #[test]
+    fn frictionless_limit_is_area_times_stress() {
+        let law = BilletLaw::new(
+            BilletGeometry {
+                diameter_m: 0.060,
+                height_m: 0.112,
+            },
+            FlowStress::Constant { sigma0_pa: 90e6 },
+            0.0,
+            LoadEffects::NEUTRAL,
+            1,
+        );
+        let l = law.load(0.112, 10.0);
+        let expect = PI * 0.03 * 0.03 * 90e6;
+        assert!((l.total_n - expect).abs() < 1e-6 * expect);
+        assert_eq!(l.total_n, l.frictionless_n);
+    }
+
+    #[test]
+    fn eq3_matches_the_design_reproduction_at_the_final_height() {
+        // DESIGN.md §2.1 reproduction table, billet column: eq. 3 at the simulated final
+        // height of 92.93 mm gives 322 kN (±0.5 %, the table's rounding).
+        let l = steel().load(0.09293, 10.0);
+        assert!(
+            (l.total_n / 322e3 - 1.0).abs() < 0.005,
+            "load at 92.93 mm: {}",
+            l.total_n
+        );
+    }
+
+    #[test]
+    fn friction_rise_raises_mu_as_the_billet_flattens() {
+        let mut e = LoadEffects::NEUTRAL;
+        e.friction_exponent = 0.5;
+        let law = BilletLaw::new(
+            steel().geometry.clone(),
+            steel().material.clone(),
+            0.2,
+            e,
+            1,
+        );
+        assert_eq!(law.friction_at(0.112), 0.2);
+        assert!((law.friction_at(0.028) - 0.4).abs() < 1e-12); // (112/28)^0.5 = 2
+    }
+
+    #[test]
+    fn hansel_spittel_copper_at_forty_percent_strain() {
+        // Press paper Table 2 (copper, 20 °C). Direct evaluation of eq. 6 at eps 0.4, 10 /s:
+        // 411.19 * e^(-0.0242) * 0.4^0.21554 * 10^0.01472 * e^(-0.0234) = 333 MPa.
+        let hs = FlowStress::HanselSpittel {
+            a_pa: 411.19e6,
+            m1: -0.00121,
+            m2: 0.21554,
+            m3: 0.01472,
+            m4: -0.00935,
+            temperature_c: 20.0,
+        };
+        let s = hs.sigma_pa(0.4, 10.0);
+        assert!((s / 333e6 - 1.0).abs() < 0.005, "{s}");
+        // Floors keep the law finite at zero strain and rate.
+        assert!(hs.sigma_pa(0.0, 0.0).is_finite());
+    }
+}

@@ -1,0 +1,487 @@
+//! The effect library: unmodelled physical effects that can be switched on top of either
+//! machine model (CONTRACTS.md §6). Diagnosis fits them; simulated devices and tests
+//! generate data with them.
+//!
+//! Each effect has a neutral parameter value at which the model is exactly the base model.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use super::billet::LoadEffects;
+
+/// Default reference strain rate of `strain_rate` when the spec leaves it out, 1/s.
+/// Blows of both papers run at 10–40 /s, so the factor stays near 1 at the reference.
+pub const DEFAULT_RATE_REF_PER_S: f64 = 10.0;
+/// Default reference strain of `strain_hardening` when the spec leaves it out.
+pub const DEFAULT_EPS_REF: f64 = 0.2;
+/// Default foundation damping when the spec leaves it out, N s/m (undamped foundation).
+pub const DEFAULT_FOUNDATION_DAMPING: f64 = 0.0;
+
+/// One effect with its parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Effect {
+    Clearance {
+        gap_m: f64,
+    },
+    ElasticRecovery {
+        k_contact_n_per_m: f64,
+    },
+    FrictionRise {
+        exponent: f64,
+    },
+    StrainRate {
+        m: f64,
+        rate_ref_per_s: f64,
+    },
+    StrainHardening {
+        n: f64,
+        eps_ref: f64,
+    },
+    Thermal {
+        q_dt: f64,
+    },
+    Foundation {
+        m3_kg: f64,
+        k3_n_per_m: f64,
+        c3_ns_per_m: f64,
+    },
+    SensorHighpass {
+        tau_s: f64,
+    },
+}
+
+/// What can be wrong with an effect spec; every variant names the effect and the key.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EffectError {
+    #[error("unknown effect '{name}' (known: {})", EFFECT_NAMES.join(", "))]
+    UnknownEffect { name: String },
+    #[error("effect '{effect}' has no parameter '{param}' (it takes: {allowed})")]
+    UnknownParam {
+        effect: &'static str,
+        param: String,
+        allowed: String,
+    },
+    #[error("effect '{effect}' needs parameter '{param}'")]
+    MissingParam {
+        effect: &'static str,
+        param: &'static str,
+    },
+    #[error("effect '{effect}': '{param}={value}' is not a number")]
+    NotANumber {
+        effect: &'static str,
+        param: String,
+        value: String,
+    },
+    #[error("effect '{effect}': {param} = {value} {why}")]
+    OutOfRange {
+        effect: &'static str,
+        param: &'static str,
+        value: f64,
+        why: &'static str,
+    },
+    #[error("effect spec '{spec}' is not NAME or NAME:param=value[,param=value]")]
+    Malformed { spec: String },
+}
+
+/// The library's names, in CONTRACTS.md order.
+pub const EFFECT_NAMES: [&str; 8] = [
+    "clearance",
+    "elastic_recovery",
+    "friction_rise",
+    "strain_rate",
+    "strain_hardening",
+    "thermal",
+    "foundation",
+    "sensor_highpass",
+];
+
+impl Effect {
+    /// The library name (CONTRACTS.md §6).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Effect::Clearance { .. } => "clearance",
+            Effect::ElasticRecovery { .. } => "elastic_recovery",
+            Effect::FrictionRise { .. } => "friction_rise",
+            Effect::StrainRate { .. } => "strain_rate",
+            Effect::StrainHardening { .. } => "strain_hardening",
+            Effect::Thermal { .. } => "thermal",
+            Effect::Foundation { .. } => "foundation",
+            Effect::SensorHighpass { .. } => "sensor_highpass",
+        }
+    }
+
+    /// Parameter names and values, with their unit-carrying contract names.
+    pub fn params(&self) -> Vec<(&'static str, f64)> {
+        match *self {
+            Effect::Clearance { gap_m } => vec![("gap_m", gap_m)],
+            Effect::ElasticRecovery { k_contact_n_per_m } => {
+                vec![("k_contact_N_per_m", k_contact_n_per_m)]
+            }
+            Effect::FrictionRise { exponent } => vec![("exponent", exponent)],
+            Effect::StrainRate { m, rate_ref_per_s } => {
+                vec![("m", m), ("rate_ref_per_s", rate_ref_per_s)]
+            }
+            Effect::StrainHardening { n, eps_ref } => vec![("n", n), ("eps_ref", eps_ref)],
+            Effect::Thermal { q_dt } => vec![("q_dT", q_dt)],
+            Effect::Foundation {
+                m3_kg,
+                k3_n_per_m,
+                c3_ns_per_m,
+            } => vec![
+                ("m3_kg", m3_kg),
+                ("k3_N_per_m", k3_n_per_m),
+                ("c3_Ns_per_m", c3_ns_per_m),
+            ],
+            Effect::SensorHighpass { tau_s } => vec![("tau_s", tau_s)],
+        }
+    }
+
+    /// Build an effect from its name and `param -> value` pairs, checking every key.
+    pub fn from_params(name: &str, given: &BTreeMap<String, f64>) -> Result<Effect, EffectError> {
+        let effect: &'static str = EFFECT_NAMES
+            .iter()
+            .copied()
+            .find(|n| *n == name)
+            .ok_or_else(|| EffectError::UnknownEffect {
+                name: name.to_string(),
+            })?;
+        let allowed: &[&'static str] = match effect {
+            "clearance" => &["gap_m"],
+            "elastic_recovery" => &["k_contact_N_per_m"],
+            "friction_rise" => &["exponent"],
+            "strain_rate" => &["m", "rate_ref_per_s"],
+            "strain_hardening" => &["n", "eps_ref"],
+            "thermal" => &["q_dT"],
+            "foundation" => &["m3_kg", "k3_N_per_m", "c3_Ns_per_m"],
+            _ => &["tau_s"],
+        };
+        if let Some(bad) = given.keys().find(|k| !allowed.contains(&k.as_str())) {
+            return Err(EffectError::UnknownParam {
+                effect,
+                param: bad.clone(),
+                allowed: allowed.join(", "),
+            });
+        }
+        let req = |p: &'static str| {
+            given
+                .get(p)
+                .copied()
+                .ok_or(EffectError::MissingParam { effect, param: p })
+        };
+        let opt = |p: &'static str, d: f64| given.get(p).copied().unwrap_or(d);
+        let e = match effect {
+            "clearance" => Effect::Clearance {
+                gap_m: req("gap_m")?,
+            },
+            "elastic_recovery" => Effect::ElasticRecovery {
+                k_contact_n_per_m: req("k_contact_N_per_m")?,
+            },
+            "friction_rise" => Effect::FrictionRise {
+                exponent: req("exponent")?,
+            },
+            "strain_rate" => Effect::StrainRate {
+                m: req("m")?,
+                rate_ref_per_s: opt("rate_ref_per_s", DEFAULT_RATE_REF_PER_S),
+            },
+            "strain_hardening" => Effect::StrainHardening {
+                n: req("n")?,
+                eps_ref: opt("eps_ref", DEFAULT_EPS_REF),
+            },
+            "thermal" => Effect::Thermal { q_dt: req("q_dT")? },
+            "foundation" => Effect::Foundation {
+                m3_kg: req("m3_kg")?,
+                k3_n_per_m: req("k3_N_per_m")?,
+                c3_ns_per_m: opt("c3_Ns_per_m", DEFAULT_FOUNDATION_DAMPING),
+            },
+            _ => Effect::SensorHighpass {
+                tau_s: req("tau_s")?,
+            },
+        };
+        e.validate()?;
+        Ok(e)
+    }
+
+    /// Parse the CLI form `NAME:param=value[,param=value]`.
+    pub fn parse_spec(spec: &str) -> Result<Effect, EffectError> {
+        let (name, rest) = spec.split_once(':').unwrap_or((spec, ""));
+        let name = name.trim();
+        if name.is_empty() {
+            return Err(EffectError::Malformed {
+                spec: spec.to_string(),
+            });
+        }
+        let mut given = BTreeMap::new();
+        for pair in rest.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+            let (k, v) = pair.split_once('=').ok_or_else(|| EffectError::Malformed {
+                spec: spec.to_string(),
+            })?;
+            let value: f64 = v.trim().parse().map_err(|_| {
+                let effect = EFFECT_NAMES
+                    .iter()
+                    .copied()
+                    .find(|n| *n == name)
+                    .unwrap_or("?");
+                EffectError::NotANumber {
+                    effect,
+                    param: k.trim().to_string(),
+                    value: v.trim().to_string(),
+                }
+            })?;
+            given.insert(k.trim().to_string(), value);
+        }
+        Effect::from_params(name, &given)
+    }
+
+    fn validate(&self) -> Result<(), EffectError> {
+        let effect = self.name();
+        let check = |param: &'static str, value: f64, ok: bool, why: &'static str| {
+            if ok && !value.is_nan() {
+                Ok(())
+            } else {
+                Err(EffectError::OutOfRange {
+                    effect,
+                    param,
+                    value,
+                    why,
+                })
+            }
+        };
+        match *self {
+            Effect::Clearance { gap_m } => check(
+                "gap_m",
+                gap_m,
+                (0.0..f64::INFINITY).contains(&gap_m),
+                "must be finite and >= 0 m",
+            ),
+            Effect::ElasticRecovery {
+                k_contact_n_per_m: k,
+            } => check(
+                "k_contact_N_per_m",
+                k,
+                k > 0.0,
+                "must be > 0 (infinite is neutral)",
+            ),
+            Effect::FrictionRise { exponent } => {
+                check("exponent", exponent, exponent.is_finite(), "must be finite")
+            }
+            Effect::StrainRate { m, rate_ref_per_s } => {
+                check(
+                    "m",
+                    m,
+                    (0.0..f64::INFINITY).contains(&m),
+                    "must be finite and >= 0",
+                )?;
+                let r = rate_ref_per_s;
+                check(
+                    "rate_ref_per_s",
+                    r,
+                    r > 0.0 && r.is_finite(),
+                    "must be finite and > 0",
+                )
+            }
+            Effect::StrainHardening { n, eps_ref } => {
+                check(
+                    "n",
+                    n,
+                    (0.0..f64::INFINITY).contains(&n),
+                    "must be finite and >= 0",
+                )?;
+                check(
+                    "eps_ref",
+                    eps_ref,
+                    eps_ref > 0.0 && eps_ref.is_finite(),
+                    "must be finite and > 0",
+                )
+            }
+            Effect::Thermal { q_dt } => check("q_dT", q_dt, q_dt.is_finite(), "must be finite"),
+            Effect::Foundation {
+                m3_kg,
+                k3_n_per_m,
+                c3_ns_per_m,
+            } => {
+                check(
+                    "m3_kg",
+                    m3_kg,
+                    m3_kg > 0.0 && m3_kg.is_finite(),
+                    "must be finite and > 0 kg",
+                )?;
+                check(
+                    "k3_N_per_m",
+                    k3_n_per_m,
+                    k3_n_per_m > 0.0,
+                    "must be > 0 (infinite is neutral)",
+                )?;
+                let c3 = c3_ns_per_m;
+                check(
+                    "c3_Ns_per_m",
+                    c3,
+                    (0.0..f64::INFINITY).contains(&c3),
+                    "must be finite and >= 0",
+                )
+            }
+            Effect::SensorHighpass { tau_s } => check(
+                "tau_s",
+                tau_s,
+                tau_s > 0.0,
+                "must be > 0 s (infinite is neutral)",
+            ),
+        }
+    }
+}
+
+impl fmt::Display for Effect {
+    /// The CLI spec form, which `parse_spec` reads back.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:", self.name())?;
+        for (i, (k, v)) in self.params().iter().enumerate() {
+            write!(f, "{}{k}={v:e}", if i > 0 { "," } else { "" })?;
+        }
+        Ok(())
+    }
+}
+
+/// A third mass under the machine spring (`foundation`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Foundation {
+    pub m3_kg: f64,
+    pub k3_n_per_m: f64,
+    pub c3_ns_per_m: f64,
+}
+
+/// All effects switched on for a simulation, as the blow model consumes them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EffectSet {
+    /// `clearance`: dead travel in the lower tool/sensor path, m. 0 is neutral and keeps
+    /// the paper's catch-up assumption (lower mass at the impact speed).
+    pub clearance_gap_m: f64,
+    /// `elastic_recovery`: contact compliance in series with the billet. Infinite is neutral.
+    pub k_contact_n_per_m: f64,
+    /// Load-side effects.
+    pub load: LoadEffects,
+    /// `foundation`: a third mass; `None` (or infinite k3) is neutral.
+    pub foundation: Option<Foundation>,
+    /// `sensor_highpass`: time constant of the charge amplifier, s. Infinite is neutral.
+    pub highpass_tau_s: f64,
+}
+
+impl EffectSet {
+    /// The base model: every effect neutral.
+    pub const NONE: EffectSet = EffectSet {
+        clearance_gap_m: 0.0,
+        k_contact_n_per_m: f64::INFINITY,
+        load: LoadEffects::NEUTRAL,
+        foundation: None,
+        highpass_tau_s: f64::INFINITY,
+    };
+
+    /// The set with the given effects switched on (a later one of the same name wins).
+    pub fn from_effects<'a>(effects: impl IntoIterator<Item = &'a Effect>) -> EffectSet {
+        let mut set = EffectSet::NONE;
+        for e in effects {
+            set.apply(e);
+        }
+        set
+    }
+
+    pub fn apply(&mut self, effect: &Effect) {
+        match *effect {
+            Effect::Clearance { gap_m } => self.clearance_gap_m = gap_m,
+            Effect::ElasticRecovery { k_contact_n_per_m } => {
+                self.k_contact_n_per_m = k_contact_n_per_m
+            }
+            Effect::FrictionRise { exponent } => self.load.friction_exponent = exponent,
+            Effect::StrainRate { m, rate_ref_per_s } => {
+                self.load.rate_m = m;
+                self.load.rate_ref_per_s = rate_ref_per_s;
+            }
+            Effect::StrainHardening { n, eps_ref } => {
+                self.load.hardening_n = n;
+                self.load.hardening_eps_ref = eps_ref;
+            }
+            Effect::Thermal { q_dt } => self.load.thermal_q_dt = q_dt,
+            Effect::Foundation {
+                m3_kg,
+                k3_n_per_m,
+                c3_ns_per_m,
+            } => {
+                self.foundation = k3_n_per_m.is_finite().then_some(Foundation {
+                    m3_kg,
+                    k3_n_per_m,
+                    c3_ns_per_m,
+                })
+            }
+            Effect::SensorHighpass { tau_s } => self.highpass_tau_s = tau_s,
+        }
+    }
+}
+
+impl Default for EffectSet {
+    fn default() -> Self {
+        Self::NONE
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_library_name_parses_and_prints_back() {
+        let specs = [
+            "clearance:gap_m=0.0003",
+            "elastic_recovery:k_contact_N_per_m=2.6e9",
+            "friction_rise:exponent=0.3",
+            "strain_rate:m=0.1,rate_ref_per_s=5",
+            "strain_hardening:n=0.2,eps_ref=0.3",
+            "thermal:q_dT=0.05",
+            "foundation:m3_kg=5000,k3_N_per_m=1e9,c3_Ns_per_m=1e5",
+            "sensor_highpass:tau_s=0.01",
+        ];
+        for (spec, name) in specs.iter().zip(EFFECT_NAMES) {
+            let e = Effect::parse_spec(spec).unwrap();
+            assert_eq!(e.name(), name);
+            assert_eq!(Effect::parse_spec(&e.to_string()).unwrap(), e);
+        }
+    }
+
+    #[test]
+    fn bad_specs_name_what_is_wrong() {
+        let err = Effect::parse_spec("clearence:gap_m=1e-4").unwrap_err();
+        assert!(
+            err.to_string().contains("unknown effect 'clearence'"),
+            "{err}"
+        );
+        let err = Effect::parse_spec("clearance:gap=1e-4").unwrap_err();
+        assert!(err.to_string().contains("no parameter 'gap'"), "{err}");
+        let err = Effect::parse_spec("clearance:gap_m=abc").unwrap_err();
+        assert!(
+            err.to_string().contains("'gap_m=abc' is not a number"),
+            "{err}"
+        );
+        let err = Effect::parse_spec("clearance").unwrap_err();
+        assert!(err.to_string().contains("needs parameter 'gap_m'"), "{err}");
+        let err = Effect::parse_spec("sensor_highpass:tau_s=-1").unwrap_err();
+        assert!(err.to_string().contains("tau_s = -1"), "{err}");
+        let err = Effect::parse_spec("clearance:gap_m").unwrap_err();
+        assert!(matches!(err, EffectError::Malformed { .. }), "{err}");
+    }
+
+    #[test]
+    fn optional_parameters_take_their_named_defaults() {
+        let e = Effect::parse_spec("strain_rate:m=0.1").unwrap();
+        assert_eq!(
+            e,
+            Effect::StrainRate {
+                m: 0.1,
+                rate_ref_per_s: DEFAULT_RATE_REF_PER_S
+            }
+        );
+    }
+
+    #[test]
+    fn infinite_stiffness_is_accepted_as_neutral() {
+        let e = Effect::parse_spec("elastic_recovery:k_contact_N_per_m=inf").unwrap();
+        let set = EffectSet::from_effects([&e]);
+        assert_eq!(set, EffectSet::NONE);
+    }
+}
