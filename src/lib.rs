@@ -1,4 +1,6 @@
 //! forgemon: blow-by-blow monitoring of energy-driven forging machines (gravity drop
 //! hammers and screw presses). See ARCHITECTURE.md for the map of the crate.
 
+pub mod cli;
+pub mod config;
 pub mod physics;

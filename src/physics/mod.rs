@@ -7,6 +7,7 @@ pub mod effects;
 pub mod integrator;
 pub mod ledger;
 pub mod machine;
+pub mod montecarlo;
 pub mod process;
 pub mod sequence;
 

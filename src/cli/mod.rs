@@ -1,0 +1,36 @@
+//! Command-line interface: one `Command` enum, one file per verb. Each verb's `run` returns
+//! the process exit code; only `main` turns errors into one.
+
+use std::path::Path;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+
+pub mod simulate;
+
+/// forgemon: blow-by-blow monitoring of gravity drop hammers and screw presses.
+#[derive(Debug, Parser)]
+#[command(name = "forgemon", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Simulate consecutive blows on a billet (or bare strikes) with the machine model.
+    Simulate(simulate::SimulateArgs),
+}
+
+impl Cli {
+    pub fn run(self) -> anyhow::Result<std::process::ExitCode> {
+        match self.command {
+            Command::Simulate(args) => simulate::run(args),
+        }
+    }
+}
+
+/// Read a text file, naming it in the error.
+pub(crate) fn read_text(path: &Path) -> anyhow::Result<String> {
+    std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))
+}
