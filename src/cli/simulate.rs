@@ -82,7 +82,10 @@ struct Inputs {
 }
 
 fn load_inputs(args: &SimulateArgs) -> anyhow::Result<Inputs> {
-    let machine = parse_machine(&args.machine.display().to_string(), &read_text(&args.machine)?)?;
+    let machine = parse_machine(
+        &args.machine.display().to_string(),
+        &read_text(&args.machine)?,
+    )?;
     let mut effects = machine.effects.clone();
     for spec in &args.effects {
         let e = Effect::parse_spec(spec).with_context(|| format!("--effect {spec}"))?;
@@ -90,10 +93,18 @@ fn load_inputs(args: &SimulateArgs) -> anyhow::Result<Inputs> {
         effects.push(e);
     }
     let set = EffectSet::from_effects(&effects);
-    Ok(Inputs { machine, effects, set })
+    Ok(Inputs {
+        machine,
+        effects,
+        set,
+    })
 }
 
-fn load_process(path: &Path, machine: &MachineFile, machine_path: &Path) -> anyhow::Result<Process> {
+fn load_process(
+    path: &Path,
+    machine: &MachineFile,
+    machine_path: &Path,
+) -> anyhow::Result<Process> {
     let p = parse_process(&path.display().to_string(), &read_text(path)?)?;
     if p.machine != machine.machine.kind() {
         bail!(
@@ -111,13 +122,19 @@ fn options(args: &SimulateArgs) -> anyhow::Result<SimOptions> {
     let method = match args.rk4_dt {
         Some(dt) if dt.is_finite() && dt > 0.0 => Method::Rk4 { dt_s: dt },
         Some(dt) => bail!("--rk4-dt must be finite and > 0, got {dt}"),
-        None if args.rtol.is_finite() && args.rtol > 0.0 && args.rtol < 1.0 => Method::Dopri5 { rtol: args.rtol },
+        None if args.rtol.is_finite() && args.rtol > 0.0 && args.rtol < 1.0 => {
+            Method::Dopri5 { rtol: args.rtol }
+        }
         None => bail!("--rtol must be in (0, 1), got {}", args.rtol),
     };
     if args.trace.is_some() && !(args.trace_dt.is_finite() && args.trace_dt > 0.0) {
         bail!("--trace-dt must be finite and > 0, got {}", args.trace_dt);
     }
-    Ok(SimOptions { method, post_s: POST_WINDOW_S, trace_dt_s: args.trace.as_ref().map(|_| args.trace_dt) })
+    Ok(SimOptions {
+        method,
+        post_s: POST_WINDOW_S,
+        trace_dt_s: args.trace.as_ref().map(|_| args.trace_dt),
+    })
 }
 
 pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
@@ -135,23 +152,64 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
         results = args
             .v0
             .iter()
-            .map(|&v| simulate_bare(&inputs.machine.machine, &inputs.set, v, &opts).with_context(|| format!("bare strike at {v} m/s")))
+            .map(|&v| {
+                simulate_bare(&inputs.machine.machine, &inputs.set, v, &opts)
+                    .with_context(|| format!("bare strike at {v} m/s"))
+            })
             .collect::<anyhow::Result<_>>()?;
-        out["strikes"] = results.iter().enumerate().map(|(i, r)| strike_json(i + 1, r)).collect();
+        out["strikes"] = results
+            .iter()
+            .enumerate()
+            .map(|(i, r)| strike_json(i + 1, r))
+            .collect();
     } else {
-        let process_path = args.process.as_ref().context("--process is required without --bare")?;
+        let process_path = args
+            .process
+            .as_ref()
+            .context("--process is required without --bare")?;
         let process = load_process(process_path, &inputs.machine, &args.machine)?;
-        results = simulate_sequence(&inputs.machine.machine, &inputs.set, &process, &args.v0, &opts)?;
-        out["blows"] = results.iter().enumerate().map(|(i, r)| blow_json(i + 1, r, process.measured_final_heights_m.get(i))).collect();
+        results = simulate_sequence(
+            &inputs.machine.machine,
+            &inputs.set,
+            &process,
+            &args.v0,
+            &opts,
+        )?;
+        out["blows"] = results
+            .iter()
+            .enumerate()
+            .map(|(i, r)| blow_json(i + 1, r, process.measured_final_heights_m.get(i)))
+            .collect();
         if let Some(runs) = args.monte_carlo {
-            let unc = Uncertainty { v0_mps: args.mc_v0_95, friction: args.mc_friction_95, load_n: args.mc_load_95 };
-            let mc = monte_carlo(&inputs.machine.machine, &inputs.set, &process, &args.v0, &unc, runs, args.seed, &SimOptions { trace_dt_s: None, ..opts })?;
+            let unc = Uncertainty {
+                v0_mps: args.mc_v0_95,
+                friction: args.mc_friction_95,
+                load_n: args.mc_load_95,
+            };
+            let mc = monte_carlo(
+                &inputs.machine.machine,
+                &inputs.set,
+                &process,
+                &args.v0,
+                &unc,
+                runs,
+                args.seed,
+                &SimOptions {
+                    trace_dt_s: None,
+                    ..opts
+                },
+            )?;
             out["monte_carlo"] = serde_json::to_value(&mc)?;
         }
     }
-    out["effects"] = inputs.effects.iter().map(|e| Value::String(e.to_string())).collect();
+    out["effects"] = inputs
+        .effects
+        .iter()
+        .map(|e| Value::String(e.to_string()))
+        .collect();
     if let Some(path) = &args.trace {
-        write_trace(path, &results).with_context(|| format!("{}: cannot write the trace", path.display()))?;
+        write_trace(path, &results)
+            .with_context(|| format!("{}: cannot write the trace", path.display()))?;
     }
     let stdout = std::io::stdout();
     let mut w = stdout.lock();
@@ -174,7 +232,9 @@ fn energy_json(e: &Ledger) -> Value {
 }
 
 fn blow_json(n: usize, r: &BlowResult, measured: Option<&f64>) -> Value {
-    let f = r.forming.expect("sequence blows always have forming indicators");
+    let f = r
+        .forming
+        .expect("sequence blows always have forming indicators");
     let mut v = json!({
         "blow": n,
         "v0_mps": r.v0_mps,
@@ -212,7 +272,17 @@ fn write_trace(path: &Path, results: &[BlowResult]) -> anyhow::Result<()> {
     for (i, r) in results.iter().enumerate() {
         for p in &r.trace {
             let o = &p.out;
-            writeln!(w, "{},{:.9},{:.3},{:.3},{:.9},{:.9},{:.9}", i + 1, p.t_s, o.sensor_n, o.billet_n, o.upper_m, o.lower_m, o.h_m)?;
+            writeln!(
+                w,
+                "{},{:.9},{:.3},{:.3},{:.9},{:.9},{:.9}",
+                i + 1,
+                p.t_s,
+                o.sensor_n,
+                o.billet_n,
+                o.upper_m,
+                o.lower_m,
+                o.h_m
+            )?;
         }
     }
     w.flush()?;
@@ -225,11 +295,21 @@ fn write_table(w: &mut impl Write, out: &Value) -> anyhow::Result<()> {
     if let Some(strikes) = out["strikes"].as_array() {
         writeln!(w, "strike  v0 m/s  peak kN  contact ms")?;
         for s in strikes {
-            writeln!(w, "{:>6}  {:>6.3}  {:>7.0}  {:>10.2}", s["strike"].as_u64().unwrap_or(0), num(s, "v0_mps"), num(s, "peak_load_N") / 1e3, num(s, "contact_time_s") * 1e3)?;
+            writeln!(
+                w,
+                "{:>6}  {:>6.3}  {:>7.0}  {:>10.2}",
+                s["strike"].as_u64().unwrap_or(0),
+                num(s, "v0_mps"),
+                num(s, "peak_load_N") / 1e3,
+                num(s, "contact_time_s") * 1e3
+            )?;
         }
     }
     if let Some(blows) = out["blows"].as_array() {
-        writeln!(w, "blow  v0 m/s  h_end mm  final kN  peak kN  forming ms  spring-back ms  plastic J  friction J  damped J  elastic J  efficiency")?;
+        writeln!(
+            w,
+            "blow  v0 m/s  h_end mm  final kN  peak kN  forming ms  spring-back ms  plastic J  friction J  damped J  elastic J  efficiency"
+        )?;
         for b in blows {
             let e = &b["energy"];
             writeln!(
@@ -251,12 +331,38 @@ fn write_table(w: &mut impl Write, out: &Value) -> anyhow::Result<()> {
         }
     }
     if let Some(mc) = out["monte_carlo"].as_object() {
-        writeln!(w, "\nMonte Carlo: {} runs (seed {}, {} failed); mean [95 % band]", mc["runs"], mc["seed"], mc["failed"])?;
-        writeln!(w, "blow  final load kN              h_end mm                 efficiency")?;
+        writeln!(
+            w,
+            "\nMonte Carlo: {} runs (seed {}, {} failed); mean [95 % band]",
+            mc["runs"], mc["seed"], mc["failed"]
+        )?;
+        writeln!(
+            w,
+            "blow  final load kN              h_end mm                 efficiency"
+        )?;
         for b in mc["blows"].as_array().into_iter().flatten() {
-            let band = |k: &str, s: f64| format!("{:.1} [{:.1}, {:.1}]", num(&b[k], "mean") * s, num(&b[k], "p2_5") * s, num(&b[k], "p97_5") * s);
-            let eff = format!("{:.3} [{:.3}, {:.3}]", num(&b["efficiency"], "mean"), num(&b["efficiency"], "p2_5"), num(&b["efficiency"], "p97_5"));
-            writeln!(w, "{:>4}  {:<24} {:<24} {}", b["blow"].as_u64().unwrap_or(0), band("final_load_N", 1e-3), band("h_end_m", 1e3), eff)?;
+            let band = |k: &str, s: f64| {
+                format!(
+                    "{:.1} [{:.1}, {:.1}]",
+                    num(&b[k], "mean") * s,
+                    num(&b[k], "p2_5") * s,
+                    num(&b[k], "p97_5") * s
+                )
+            };
+            let eff = format!(
+                "{:.3} [{:.3}, {:.3}]",
+                num(&b["efficiency"], "mean"),
+                num(&b["efficiency"], "p2_5"),
+                num(&b["efficiency"], "p97_5")
+            );
+            writeln!(
+                w,
+                "{:>4}  {:<24} {:<24} {}",
+                b["blow"].as_u64().unwrap_or(0),
+                band("final_load_N", 1e-3),
+                band("h_end_m", 1e3),
+                eff
+            )?;
         }
     }
     Ok(())
@@ -269,7 +375,18 @@ mod tests {
 
     #[test]
     fn contract_command_line_parses() {
-        let cli = Cli::try_parse_from(["forgemon", "simulate", "--machine", "m.toml", "--process", "p.toml", "--v0", "3.9,5.3", "--json"]).unwrap();
+        let cli = Cli::try_parse_from([
+            "forgemon",
+            "simulate",
+            "--machine",
+            "m.toml",
+            "--process",
+            "p.toml",
+            "--v0",
+            "3.9,5.3",
+            "--json",
+        ])
+        .unwrap();
         let Command::Simulate(a) = cli.command;
         assert_eq!(a.v0, vec![3.9, 5.3]);
         assert!(a.json && !a.bare);
@@ -277,13 +394,54 @@ mod tests {
 
     #[test]
     fn process_is_required_unless_bare() {
-        assert!(Cli::try_parse_from(["forgemon", "simulate", "--machine", "m.toml", "--v0", "3.9"]).is_err());
-        assert!(Cli::try_parse_from(["forgemon", "simulate", "--machine", "m.toml", "--v0", "0.363", "--bare"]).is_ok());
-        assert!(Cli::try_parse_from(["forgemon", "simulate", "--machine", "m", "--process", "p", "--v0", "1", "--bare"]).is_err());
+        assert!(
+            Cli::try_parse_from(["forgemon", "simulate", "--machine", "m.toml", "--v0", "3.9"])
+                .is_err()
+        );
+        assert!(
+            Cli::try_parse_from([
+                "forgemon",
+                "simulate",
+                "--machine",
+                "m.toml",
+                "--v0",
+                "0.363",
+                "--bare"
+            ])
+            .is_ok()
+        );
+        assert!(
+            Cli::try_parse_from([
+                "forgemon",
+                "simulate",
+                "--machine",
+                "m",
+                "--process",
+                "p",
+                "--v0",
+                "1",
+                "--bare"
+            ])
+            .is_err()
+        );
     }
 
     #[test]
     fn seed_needs_monte_carlo() {
-        assert!(Cli::try_parse_from(["forgemon", "simulate", "--machine", "m", "--process", "p", "--v0", "1", "--seed", "3"]).is_err());
+        assert!(
+            Cli::try_parse_from([
+                "forgemon",
+                "simulate",
+                "--machine",
+                "m",
+                "--process",
+                "p",
+                "--v0",
+                "1",
+                "--seed",
+                "3"
+            ])
+            .is_err()
+        );
     }
 }

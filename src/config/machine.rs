@@ -44,7 +44,12 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
                 None => f64::INFINITY,
             },
         }),
-        other => return Err(keys.invalid("kind", format!("must be \"hammer\" or \"screw_press\", got \"{other}\""))),
+        other => {
+            return Err(keys.invalid(
+                "kind",
+                format!("must be \"hammer\" or \"screw_press\", got \"{other}\""),
+            ));
+        }
     };
     let mut effects = Vec::new();
     if table.contains_key("effects") {
@@ -55,7 +60,8 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
             for k in sub.table.keys() {
                 params.insert(k.clone(), sub.number(k)?);
             }
-            let e = Effect::from_params(name, &params).map_err(|err| ek.invalid(name, err.to_string()))?;
+            let e = Effect::from_params(name, &params)
+                .map_err(|err| ek.invalid(name, err.to_string()))?;
             effects.push(e);
         }
     }
@@ -66,13 +72,19 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
 mod tests {
     use super::*;
 
-    const HAMMER: &str = "kind = \"hammer\"\nm1_kg = 732\nm2_kg = 19\nk_N_per_m = 3.15e9\nc_Ns_per_m = 18540\n";
+    const HAMMER: &str =
+        "kind = \"hammer\"\nm1_kg = 732\nm2_kg = 19\nk_N_per_m = 3.15e9\nc_Ns_per_m = 18540\n";
 
     #[test]
     fn contract_hammer_example_parses() {
         let m = parse_machine("m.toml", HAMMER).unwrap();
-        let Machine::Hammer(h) = m.machine else { panic!("not a hammer") };
-        assert_eq!((h.m1_kg, h.m2_kg, h.k_n_per_m, h.c_ns_per_m), (732.0, 19.0, 3.15e9, 18540.0));
+        let Machine::Hammer(h) = m.machine else {
+            panic!("not a hammer")
+        };
+        assert_eq!(
+            (h.m1_kg, h.m2_kg, h.k_n_per_m, h.c_ns_per_m),
+            (732.0, 19.0, 3.15e9, 18540.0)
+        );
         assert!(m.effects.is_empty());
     }
 
@@ -81,7 +93,9 @@ mod tests {
         let text = "kind = \"screw_press\"\nm_tool_kg = 3110\nm_ram_kg = 106000\nk_link_N_per_m = 1.72e9\n\
                     c_link_Ns_per_m = 3.61e5\nk_frame_N_per_m = 9.74e9\nc_frame_Ns_per_m = 0\nk_sensor_N_per_m = 3.39e10\n";
         let m = parse_machine("p.toml", text).unwrap();
-        assert!(matches!(m.machine, Machine::ScrewPress(p) if p.m_tool_kg == 3110.0 && p.k_tool_contact_n_per_m.is_infinite()));
+        assert!(
+            matches!(m.machine, Machine::ScrewPress(p) if p.m_tool_kg == 3110.0 && p.k_tool_contact_n_per_m.is_infinite())
+        );
     }
 
     #[test]
@@ -89,13 +103,27 @@ mod tests {
         let e = parse_machine("m.toml", "kind = \"hammer\"\nm1_kg = 732\n").unwrap_err();
         assert_eq!(e.to_string(), "m.toml: missing key 'm2_kg'");
         let e = parse_machine("m.toml", &HAMMER.replace("m2_kg = 19", "m2_kg = -19")).unwrap_err();
-        assert_eq!(e.to_string(), "m.toml: key 'm2_kg' must be finite and > 0, got -19");
-        let e = parse_machine("m.toml", &HAMMER.replace("m2_kg = 19", "m2_kg = \"19\"")).unwrap_err();
-        assert_eq!(e.to_string(), "m.toml: key 'm2_kg' must be a number, not string");
+        assert_eq!(
+            e.to_string(),
+            "m.toml: key 'm2_kg' must be finite and > 0, got -19"
+        );
+        let e =
+            parse_machine("m.toml", &HAMMER.replace("m2_kg = 19", "m2_kg = \"19\"")).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "m.toml: key 'm2_kg' must be a number, not string"
+        );
         let e = parse_machine("m.toml", "kind = \"anvil\"").unwrap_err();
-        assert!(e.to_string().contains("key 'kind' must be \"hammer\" or \"screw_press\""), "{e}");
+        assert!(
+            e.to_string()
+                .contains("key 'kind' must be \"hammer\" or \"screw_press\""),
+            "{e}"
+        );
         let e = parse_machine("m.toml", "kind = \n").unwrap_err();
-        assert!(e.to_string().starts_with("m.toml: not valid TOML") && e.to_string().contains("line 1"), "{e}");
+        assert!(
+            e.to_string().starts_with("m.toml: not valid TOML") && e.to_string().contains("line 1"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -103,7 +131,15 @@ mod tests {
         let text = format!("{HAMMER}[effects.clearance]\ngap_m = 2e-4\n");
         let m = parse_machine("m.toml", &text).unwrap();
         assert_eq!(m.effects, vec![Effect::Clearance { gap_m: 2e-4 }]);
-        let e = parse_machine("m.toml", &format!("{HAMMER}[effects.clearance]\ngap = 2e-4\n")).unwrap_err();
-        assert!(e.to_string().contains("key 'effects.clearance'") && e.to_string().contains("no parameter 'gap'"), "{e}");
+        let e = parse_machine(
+            "m.toml",
+            &format!("{HAMMER}[effects.clearance]\ngap = 2e-4\n"),
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string().contains("key 'effects.clearance'")
+                && e.to_string().contains("no parameter 'gap'"),
+            "{e}"
+        );
     }
 }

@@ -8,13 +8,17 @@ pub mod integrator;
 pub mod ledger;
 pub mod machine;
 pub mod montecarlo;
+pub mod plant;
 pub mod process;
 pub mod sequence;
+#[cfg(test)]
+mod validation;
 
 pub use billet::{BilletGeometry, BilletLaw, FlowStress, LoadEffects};
-pub use blow::{BlowError, BlowResult, Forming, Plant, SimOptions, simulate_blow};
+pub use blow::{BlowError, BlowResult, Forming, SimOptions, simulate_blow};
 pub use effects::{Effect, EffectSet};
 pub use ledger::Ledger;
 pub use machine::{Hammer, Machine, MachineKind, ScrewPress};
+pub use plant::Plant;
 pub use process::Process;
 pub use sequence::{SequenceError, simulate_bare, simulate_sequence};

@@ -3,9 +3,10 @@
 //! unloaded, at each first contact.
 
 use super::billet::BilletLaw;
-use super::blow::{BlowError, BlowResult, Plant, SimOptions, simulate_blow};
+use super::blow::{BlowError, BlowResult, SimOptions, simulate_blow};
 use super::effects::EffectSet;
 use super::machine::Machine;
+use super::plant::Plant;
 use super::process::Process;
 
 /// A blow of a sequence that failed, with its number.

@@ -1,0 +1,718 @@
+//! The plant of one blow: a hammer or screw press on a billet (or a bare strike), as a
+//! hybrid system for `integrator`.
+//!
+//! The machine is a chain of masses and springs (DESIGN.md §2.1–2.2) closed through the
+//! billet. The billet is rigid-plastic (the papers' gamma): it pushes with the upsetting
+//! load only while it is being compressed to a new minimum height. Between two masses
+//! (hammer) the contact has three phases: `Plastic` (flowing, F = F_L), `Stuck` (the masses
+//! move together, 0 < F < F_L) and `Free`. When the billet sits on a compliance (the
+//! press's massless sensor/frame chain, or the `elastic_recovery` effect) the phases are
+//! `Free`, `Elastic` and `Plastic`, and the plastic rate follows from the consistency
+//! condition. `integrator` locates every switch.
+
+use super::billet::{BilletLaw, STRAIN_RATE_FLOOR_PER_S};
+use super::effects::{EffectSet, Foundation};
+use super::integrator::{Crossing, Guards, Hybrid};
+use super::machine::{Machine, series};
+
+/// Length of the state vector.
+pub const N: usize = 14;
+
+// State layout. Positions and velocities point down (CONTRACTS.md conventions) and start
+// at 0 at first contact.
+const XU: usize = 0; // upper body: hammer ram m1 / press tool
+pub(super) const VU: usize = 1;
+const XR: usize = 2; // press ram behind the link
+pub(super) const VR: usize = 3;
+const XL: usize = 4; // hammer lower tool m2
+pub(super) const VL: usize = 5;
+const X3: usize = 6; // foundation mass (effect)
+pub(super) const V3: usize = 7;
+const XN: usize = 8; // press frame node (massless, first order when c_frame > 0)
+const P: usize = 9; // plastic compression of the billet: h = h_start - p
+pub(super) const Z: usize = 10; // low-pass state of the sensor high-pass (effect)
+pub(super) const WP: usize = 11; // plastic work, J
+pub(super) const WF: usize = 12; // friction work, J
+pub(super) const WD: usize = 13; // damped work, J
+
+/// Contact phase of the billet (or of the tools in a bare strike).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Contact {
+    Free,
+    Stuck,
+    Elastic,
+    Plastic,
+}
+
+/// The discrete state: contact phase, and whether the clearance in the hammer's support
+/// path is closed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Mode {
+    pub contact: Contact,
+    pub engaged: bool,
+}
+
+// Guard identities.
+const G_TOUCH: u8 = 0;
+const G_REL_VEL_ZERO: u8 = 1;
+const G_STICK_ZERO: u8 = 2;
+const G_STICK_YIELD: u8 = 3;
+const G_OPEN: u8 = 4;
+const G_YIELD: u8 = 5;
+const G_UNLOAD: u8 = 6;
+const G_ENGAGE: u8 = 7;
+const G_DISENGAGE: u8 = 8;
+const G_SENSOR_ZERO: u8 = 9;
+
+/// What sits under the billet.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Lower {
+    /// Hammer: lower tool mass on the frame spring and damper (they carry the sensor load).
+    Mass {
+        m_kg: f64,
+        k_n_per_m: f64,
+        c_ns_per_m: f64,
+    },
+    /// Press: massless sensor in series with the frame. With `c_frame > 0` the node between
+    /// them is a first-order state; otherwise the frame is folded into the contact series.
+    Chain {
+        k_frame_n_per_m: f64,
+        c_frame_ns_per_m: f64,
+    },
+}
+
+/// The machine, billet and effects of one blow, ready to integrate.
+#[derive(Debug, Clone)]
+pub struct Plant {
+    m_upper_kg: f64,
+    /// Press ram: (mass, link stiffness, link damping).
+    ram: Option<(f64, f64, f64)>,
+    lower: Lower,
+    /// Contact stiffness in series with the billet; infinite for the hammer's rigid contact.
+    pub(super) k_contact_n_per_m: f64,
+    node: bool,
+    foundation: Option<Foundation>,
+    /// Clearance in the hammer's support path (lower mass starts at rest).
+    gap_support_m: f64,
+    /// Clearance (dead travel) in the press's massless sensor path.
+    gap_contact_m: f64,
+    highpass_tau_s: f64,
+    pub(super) billet: Option<BilletLaw>,
+    pub(super) h_start_m: f64,
+    rate_dependent: bool,
+    max_step_s: f64,
+    pub(super) f_max_hz: f64,
+}
+
+/// Forces and rates at one state, shared by the vector field, the guards and the outputs.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Eval {
+    delta_m: f64,
+    ddelta_mps: f64,
+    h_m: f64,
+    contact_n: f64,
+    frictionless_share: f64,
+    p_rate_mps: f64,
+    link_n: f64,
+    support_n: f64,
+    stick_n: f64,
+    vn_mps: f64,
+    sensor_raw_n: f64,
+    acc_upper: f64,
+    acc_lower: f64,
+}
+
+impl Plant {
+    /// Build the blow of `machine` with `effects` on a billet of height `h_start_m`
+    /// described by `billet` (`None`: a bare strike, tool on tool).
+    pub fn new(
+        machine: &Machine,
+        effects: &EffectSet,
+        billet: Option<BilletLaw>,
+        h_start_m: f64,
+    ) -> Plant {
+        let kc_effect = effects.k_contact_n_per_m;
+        let (m_upper_kg, ram, lower, k_contact, node, gap_support_m, gap_contact_m) = match *machine
+        {
+            Machine::Hammer(h) => {
+                let k_contact = if billet.is_some() {
+                    kc_effect
+                } else {
+                    series(h.k_tool_contact_n_per_m, kc_effect)
+                };
+                let lower = Lower::Mass {
+                    m_kg: h.m2_kg,
+                    k_n_per_m: h.k_n_per_m,
+                    c_ns_per_m: h.c_ns_per_m,
+                };
+                (
+                    h.m1_kg,
+                    None,
+                    lower,
+                    k_contact,
+                    false,
+                    effects.clearance_gap_m,
+                    0.0,
+                )
+            }
+            Machine::ScrewPress(p) => {
+                let node = p.c_frame_ns_per_m > 0.0;
+                let mut k = series(
+                    series(p.k_sensor_n_per_m, p.k_tool_contact_n_per_m),
+                    kc_effect,
+                );
+                if !node {
+                    k = series(k, p.k_frame_n_per_m);
+                }
+                let lower = Lower::Chain {
+                    k_frame_n_per_m: p.k_frame_n_per_m,
+                    c_frame_ns_per_m: p.c_frame_ns_per_m,
+                };
+                let ram = Some((p.m_ram_kg, p.k_link_n_per_m, p.c_link_ns_per_m));
+                (
+                    p.m_tool_kg,
+                    ram,
+                    lower,
+                    k,
+                    node,
+                    0.0,
+                    effects.clearance_gap_m,
+                )
+            }
+        };
+        let rate_dependent = billet.as_ref().is_some_and(|b| b.is_rate_dependent());
+        // Fastest local mode: each body against everything that holds it.
+        let mut f2: f64 = 0.0;
+        let kc_fin = if k_contact.is_finite() {
+            k_contact
+        } else {
+            0.0
+        };
+        if let Some((m_r, k_l, _)) = ram {
+            f2 = f2.max(k_l / m_r);
+            f2 = f2.max((k_l + kc_fin) / m_upper_kg);
+        } else {
+            f2 = f2.max(kc_fin / m_upper_kg);
+        }
+        if let Lower::Mass {
+            m_kg, k_n_per_m, ..
+        } = lower
+        {
+            f2 = f2.max((k_n_per_m + kc_fin) / m_kg);
+        }
+        if let Some(f) = effects.foundation {
+            let k_above = match lower {
+                Lower::Mass { k_n_per_m, .. } => k_n_per_m,
+                Lower::Chain {
+                    k_frame_n_per_m, ..
+                } => k_frame_n_per_m,
+            };
+            f2 = f2.max((f.k3_n_per_m + k_above) / f.m3_kg);
+        }
+        let f_max_hz = f2.sqrt() / (2.0 * std::f64::consts::PI);
+        Plant {
+            m_upper_kg,
+            ram,
+            lower,
+            k_contact_n_per_m: k_contact,
+            node,
+            foundation: effects.foundation,
+            gap_support_m,
+            gap_contact_m,
+            highpass_tau_s: effects.highpass_tau_s,
+            billet,
+            h_start_m,
+            rate_dependent,
+            max_step_s: 1.0 / (8.0 * f_max_hz),
+            f_max_hz,
+        }
+    }
+
+    fn rigid(&self) -> bool {
+        self.k_contact_n_per_m.is_infinite()
+    }
+
+    /// Upsetting load (total, frictionless) at height `h` and approach rate `ddelta`.
+    fn upset(&self, h: f64, ddelta: f64) -> (f64, f64) {
+        match &self.billet {
+            Some(b) => {
+                let l = b.load(h, ddelta.max(0.0) / h);
+                (l.total_n, l.frictionless_n)
+            }
+            None => (f64::INFINITY, f64::INFINITY),
+        }
+    }
+
+    pub(super) fn eval(&self, y: &[f64; N], mode: Mode) -> Eval {
+        let mut e = Eval::default();
+        let (x3, v3) = if self.foundation.is_some() {
+            (y[X3], y[V3])
+        } else {
+            (0.0, 0.0)
+        };
+        e.link_n = match self.ram {
+            Some((_, k, c)) => k * (y[XR] - y[XU]) + c * (y[VR] - y[VU]),
+            None => 0.0,
+        };
+        e.h_m = self.h_start_m - y[P];
+        match self.lower {
+            Lower::Mass {
+                m_kg,
+                k_n_per_m,
+                c_ns_per_m,
+            } => {
+                e.delta_m = y[XU] - y[XL];
+                e.ddelta_mps = y[VU] - y[VL];
+                e.support_n = if mode.engaged {
+                    k_n_per_m * (y[XL] - x3 - self.gap_support_m) + c_ns_per_m * (y[VL] - v3)
+                } else {
+                    0.0
+                };
+                e.stick_n = (e.link_n / self.m_upper_kg + e.support_n / m_kg)
+                    / (1.0 / self.m_upper_kg + 1.0 / m_kg);
+            }
+            Lower::Chain {
+                k_frame_n_per_m,
+                c_frame_ns_per_m,
+            } => {
+                let xl = if self.node { y[XN] } else { x3 };
+                e.delta_m = y[XU] - xl;
+                // The node's velocity follows from its force balance once the contact force
+                // is known; the approach rate uses the base's velocity (see `consistency`).
+                e.ddelta_mps = y[VU] - v3;
+                let _ = (k_frame_n_per_m, c_frame_ns_per_m);
+            }
+        }
+        let (total, frictionless) = self.upset(e.h_m, e.ddelta_mps);
+        e.frictionless_share = if total.is_finite() && total > 0.0 {
+            frictionless / total
+        } else {
+            1.0
+        };
+        // Contact force and plastic rate.
+        if self.rigid() {
+            match mode.contact {
+                Contact::Free | Contact::Elastic => {}
+                Contact::Stuck => e.contact_n = e.stick_n,
+                Contact::Plastic => {
+                    e.contact_n = total;
+                    e.p_rate_mps = e.ddelta_mps;
+                }
+            }
+        } else {
+            let compression = e.delta_m - y[P] - self.gap_contact_m;
+            if mode.contact != Contact::Free {
+                e.contact_n = self.k_contact_n_per_m * compression.max(0.0);
+            }
+        }
+        // Node velocity (press with a damped frame).
+        if let Lower::Chain {
+            k_frame_n_per_m,
+            c_frame_ns_per_m,
+        } = self.lower
+            && self.node
+        {
+            e.vn_mps = v3 + (e.contact_n - k_frame_n_per_m * (y[XN] - x3)) / c_frame_ns_per_m;
+        }
+        // Accelerations of the bodies either side of the billet.
+        e.acc_upper = (e.link_n - e.contact_n) / self.m_upper_kg;
+        e.acc_lower = match self.lower {
+            Lower::Mass { m_kg, .. } => (e.contact_n - e.support_n) / m_kg,
+            Lower::Chain { .. } => self.foundation_acc(y, e.contact_n),
+        };
+        if !self.rigid() && mode.contact == Contact::Plastic {
+            e.p_rate_mps = self.consistency(&e, total);
+        }
+        e.sensor_raw_n = match self.lower {
+            Lower::Mass { .. } => e.support_n,
+            Lower::Chain { .. } => e.contact_n,
+        };
+        e
+    }
+
+    fn foundation_acc(&self, y: &[f64; N], down_n: f64) -> f64 {
+        match self.foundation {
+            Some(f) => (down_n - f.k3_n_per_m * y[X3] - f.c3_ns_per_m * y[V3]) / f.m3_kg,
+            None => 0.0,
+        }
+    }
+
+    /// Plastic rate of a billet on a compliance `k`: the elastic force `k (delta - p)` must
+    /// follow the flow load `F_L(h, epsdot)` with `epsdot = delta'/h`, so
+    /// `k (delta' - p') = -dF/dh p' + dF/depsdot (delta''/h + delta' p'/h^2)`.
+    /// The strain rate uses the approach rate (the elastic part of it is neglected: the
+    /// compliance deflects by tens of µm against mm of flow), which keeps this explicit.
+    fn consistency(&self, e: &Eval, total: f64) -> f64 {
+        let k = self.k_contact_n_per_m;
+        let h = e.h_m;
+        let dh = 1e-7 * h;
+        let (up, _) = self.upset(h + dh, e.ddelta_mps);
+        let (dn, _) = self.upset(h - dh, e.ddelta_mps);
+        let f_h = (up - dn) / (2.0 * dh);
+        let rate = e.ddelta_mps.max(0.0) / h;
+        let f_r = if self.rate_dependent && rate > STRAIN_RATE_FLOOR_PER_S {
+            let dr = 1e-6 * rate;
+            let (fr, _) = self.upset(h, (rate + dr) * h);
+            (fr - total) / dr
+        } else {
+            0.0
+        };
+        let dd = e.acc_upper - e.acc_lower;
+        let num = k * e.ddelta_mps - f_r * dd / h;
+        let den = k - f_h + f_r * e.ddelta_mps.max(0.0) / (h * h);
+        num / den
+    }
+
+    /// Sensor output: the raw load, or the high-passed one with `sensor_highpass`.
+    pub(super) fn sensor(&self, y: &[f64; N], e: &Eval) -> f64 {
+        if self.highpass_tau_s.is_finite() {
+            e.sensor_raw_n - y[Z]
+        } else {
+            e.sensor_raw_n
+        }
+    }
+
+    /// Mechanical energy in the machine (kinetic plus spring), J.
+    pub fn mechanical_energy(&self, y: &[f64; N], mode: Mode) -> f64 {
+        let (x3, v3) = if self.foundation.is_some() {
+            (y[X3], y[V3])
+        } else {
+            (0.0, 0.0)
+        };
+        let mut e = 0.5 * self.m_upper_kg * y[VU] * y[VU];
+        if let Some((m, k, _)) = self.ram {
+            e += 0.5 * m * y[VR] * y[VR] + 0.5 * k * (y[XR] - y[XU]).powi(2);
+        }
+        match self.lower {
+            Lower::Mass {
+                m_kg, k_n_per_m, ..
+            } => {
+                e += 0.5 * m_kg * y[VL] * y[VL];
+                if mode.engaged {
+                    e += 0.5 * k_n_per_m * (y[XL] - x3 - self.gap_support_m).powi(2);
+                }
+            }
+            Lower::Chain {
+                k_frame_n_per_m, ..
+            } => {
+                if self.node {
+                    e += 0.5 * k_frame_n_per_m * (y[XN] - x3).powi(2);
+                }
+            }
+        }
+        if !self.rigid() && mode.contact != Contact::Free {
+            let xl = match self.lower {
+                Lower::Mass { .. } => y[XL],
+                Lower::Chain { .. } if self.node => y[XN],
+                Lower::Chain { .. } => x3,
+            };
+            let c = (y[XU] - xl - y[P] - self.gap_contact_m).max(0.0);
+            e += 0.5 * self.k_contact_n_per_m * c * c;
+        }
+        if let Some(f) = self.foundation {
+            e += 0.5 * f.m3_kg * v3 * v3 + 0.5 * f.k3_n_per_m * x3 * x3;
+        }
+        e
+    }
+
+    /// State at first contact: every moving body at the impact speed, springs unloaded.
+    /// With `clearance` the hammer's lower mass starts at rest (it has not been caught up).
+    pub fn initial_state(&self, v0_mps: f64) -> ([f64; N], Mode) {
+        let mut y = [0.0; N];
+        y[VU] = v0_mps;
+        if self.ram.is_some() {
+            y[VR] = v0_mps;
+        }
+        if matches!(self.lower, Lower::Mass { .. }) && self.gap_support_m == 0.0 {
+            y[VL] = v0_mps;
+        }
+        let engaged = self.gap_support_m == 0.0;
+        let mut mode = Mode {
+            contact: Contact::Elastic,
+            engaged,
+        };
+        if self.rigid() {
+            mode.contact = Contact::Free;
+            mode = self.on_event(&mut y, mode, G_TOUCH);
+        }
+        (y, mode)
+    }
+
+    /// Energy the moving bodies bring to the blow, J.
+    pub fn kinetic_in(&self, y0: &[f64; N]) -> f64 {
+        self.mechanical_energy(
+            y0,
+            Mode {
+                contact: Contact::Free,
+                engaged: false,
+            },
+        )
+    }
+
+    /// Where the rigid contact goes when the billet touches or the bodies stop approaching.
+    fn classify_rigid(&self, y: &mut [f64; N], mode: Mode, approaching: bool) -> Contact {
+        let e = self.eval(
+            y,
+            Mode {
+                contact: Contact::Free,
+                ..mode
+            },
+        );
+        let (f_l, _) = self.upset(e.h_m, e.ddelta_mps);
+        if approaching || e.stick_n >= f_l {
+            y[P] = e.delta_m;
+            Contact::Plastic
+        } else if e.stick_n > 0.0 {
+            if let Lower::Mass { m_kg, .. } = self.lower {
+                let v = (self.m_upper_kg * y[VU] + m_kg * y[VL]) / (self.m_upper_kg + m_kg);
+                y[VU] = v;
+                y[VL] = v;
+            }
+            Contact::Stuck
+        } else {
+            Contact::Free
+        }
+    }
+
+    /// Make the contact phase agree with the state after an event. Two guards can cross at
+    /// the same instant (the sensor load and the stick force reach zero together when the
+    /// tools part); the first event leaves the second at exactly zero, where a strict sign
+    /// change can no longer be seen. So a phase whose condition no longer holds ends here.
+    fn settle(&self, y: &mut [f64; N], mode: Mode) -> Mode {
+        let mut next = mode;
+        match mode.contact {
+            Contact::Stuck => {
+                let e = self.eval(y, mode);
+                let (f_l, _) = self.upset(e.h_m, 0.0);
+                if e.stick_n <= 0.0 {
+                    next.contact = Contact::Free;
+                } else if e.stick_n >= f_l {
+                    y[P] = e.delta_m;
+                    next.contact = Contact::Plastic;
+                }
+            }
+            Contact::Elastic => {
+                let e = self.eval(y, mode);
+                if e.delta_m - y[P] - self.gap_contact_m <= 0.0 && e.ddelta_mps <= 0.0 {
+                    next.contact = Contact::Free;
+                }
+            }
+            Contact::Free | Contact::Plastic => {}
+        }
+        next
+    }
+
+    /// Outputs at a state: (sensor load, billet force, upper position, lower position, height).
+    pub fn outputs(&self, y: &[f64; N], mode: Mode) -> Outputs {
+        let e = self.eval(y, mode);
+        let lower_m = match self.lower {
+            Lower::Mass { .. } => y[XL],
+            Lower::Chain { .. } if self.node => y[XN],
+            Lower::Chain { .. } => y[X3],
+        };
+        Outputs {
+            sensor_n: self.sensor(y, &e),
+            billet_n: e.contact_n,
+            upper_m: y[XU],
+            lower_m,
+            h_m: e.h_m,
+        }
+    }
+
+    /// Rate of the sensor output, for peak interpolation within a step.
+    pub(super) fn sensor_rate(&self, y: &[f64; N], dy: &[f64; N], mode: Mode) -> f64 {
+        let raw = match self.lower {
+            Lower::Mass {
+                k_n_per_m,
+                c_ns_per_m,
+                ..
+            } => {
+                if mode.engaged {
+                    let (v3, a3) = if self.foundation.is_some() {
+                        (y[V3], dy[V3])
+                    } else {
+                        (0.0, 0.0)
+                    };
+                    k_n_per_m * (y[VL] - v3) + c_ns_per_m * (dy[VL] - a3)
+                } else {
+                    0.0
+                }
+            }
+            Lower::Chain { .. } => {
+                if mode.contact == Contact::Free {
+                    0.0
+                } else {
+                    let vl = if self.node {
+                        dy[XN]
+                    } else if self.foundation.is_some() {
+                        y[V3]
+                    } else {
+                        0.0
+                    };
+                    self.k_contact_n_per_m * (y[VU] - vl - dy[P])
+                }
+            }
+        };
+        if self.highpass_tau_s.is_finite() {
+            raw - dy[Z]
+        } else {
+            raw
+        }
+    }
+}
+
+/// Signals a person or the diagnosis looks at.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Outputs {
+    pub sensor_n: f64,
+    pub billet_n: f64,
+    pub upper_m: f64,
+    pub lower_m: f64,
+    pub h_m: f64,
+}
+
+impl Hybrid<N> for Plant {
+    type Mode = Mode;
+
+    fn rhs(&self, y: &[f64; N], mode: Mode, dy: &mut [f64; N]) {
+        let e = self.eval(y, mode);
+        let (x3v, v3) = if self.foundation.is_some() {
+            (y[X3], y[V3])
+        } else {
+            (0.0, 0.0)
+        };
+        let _ = x3v;
+        dy[XU] = y[VU];
+        dy[VU] = e.acc_upper;
+        let mut damped = 0.0;
+        if let Some((m, _, c)) = self.ram {
+            dy[XR] = y[VR];
+            dy[VR] = -e.link_n / m;
+            damped += c * (y[VR] - y[VU]).powi(2);
+        } else {
+            dy[XR] = 0.0;
+            dy[VR] = 0.0;
+        }
+        let mut down_n = e.contact_n;
+        match self.lower {
+            Lower::Mass { c_ns_per_m, .. } => {
+                dy[XL] = y[VL];
+                dy[VL] = e.acc_lower;
+                if mode.engaged {
+                    damped += c_ns_per_m * (y[VL] - v3).powi(2);
+                }
+                down_n = e.support_n;
+                dy[XN] = 0.0;
+            }
+            Lower::Chain {
+                c_frame_ns_per_m, ..
+            } => {
+                dy[XL] = 0.0;
+                dy[VL] = 0.0;
+                if self.node {
+                    dy[XN] = e.vn_mps;
+                    damped += c_frame_ns_per_m * (e.vn_mps - v3).powi(2);
+                } else {
+                    dy[XN] = 0.0;
+                }
+            }
+        }
+        if let Some(f) = self.foundation {
+            dy[X3] = y[V3];
+            dy[V3] = self.foundation_acc(y, down_n);
+            damped += f.c3_ns_per_m * y[V3] * y[V3];
+        } else {
+            dy[X3] = 0.0;
+            dy[V3] = 0.0;
+        }
+        dy[P] = e.p_rate_mps;
+        dy[Z] = if self.highpass_tau_s.is_finite() {
+            (e.sensor_raw_n - y[Z]) / self.highpass_tau_s
+        } else {
+            0.0
+        };
+        let work = e.contact_n * e.p_rate_mps;
+        dy[WP] = work * e.frictionless_share;
+        dy[WF] = work * (1.0 - e.frictionless_share);
+        dy[WD] = damped;
+    }
+
+    fn guards(&self, y: &[f64; N], dy: &[f64; N], mode: Mode, out: &mut Guards) {
+        let e = self.eval(y, mode);
+        if self.rigid() {
+            match mode.contact {
+                Contact::Free | Contact::Elastic => {
+                    out.push(G_TOUCH, e.delta_m - y[P], Crossing::Rising)
+                }
+                Contact::Plastic => out.push(G_REL_VEL_ZERO, e.ddelta_mps, Crossing::Falling),
+                Contact::Stuck => {
+                    let (f_l, _) = self.upset(e.h_m, 0.0);
+                    out.push(G_STICK_ZERO, e.stick_n, Crossing::Falling);
+                    out.push(G_STICK_YIELD, e.stick_n - f_l, Crossing::Rising);
+                }
+            }
+        } else {
+            let compression = e.delta_m - y[P] - self.gap_contact_m;
+            match mode.contact {
+                Contact::Free | Contact::Stuck => out.push(G_TOUCH, compression, Crossing::Rising),
+                Contact::Elastic => {
+                    out.push(G_OPEN, compression, Crossing::Falling);
+                    if self.billet.is_some() {
+                        let (f_l, _) = self.upset(e.h_m, e.ddelta_mps);
+                        out.push(G_YIELD, e.contact_n - f_l, Crossing::Rising);
+                    }
+                }
+                Contact::Plastic => out.push(G_UNLOAD, dy[P], Crossing::Falling),
+            }
+        }
+        if self.gap_support_m > 0.0 {
+            let x3 = if self.foundation.is_some() {
+                y[X3]
+            } else {
+                0.0
+            };
+            let closure = y[XL] - x3 - self.gap_support_m;
+            if mode.engaged {
+                out.push(G_DISENGAGE, closure, Crossing::Falling);
+            } else {
+                out.push(G_ENGAGE, closure, Crossing::Rising);
+            }
+        }
+        if mode.contact != Contact::Plastic {
+            out.push(G_SENSOR_ZERO, self.sensor(y, &e), Crossing::Falling);
+        }
+    }
+
+    fn on_event(&self, y: &mut [f64; N], mode: Mode, guard_id: u8) -> Mode {
+        let mut next = mode;
+        match guard_id {
+            G_TOUCH if self.rigid() => {
+                let approaching = y[VU]
+                    > if matches!(self.lower, Lower::Mass { .. }) {
+                        y[VL]
+                    } else {
+                        0.0
+                    };
+                next.contact = self.classify_rigid(y, mode, approaching);
+            }
+            G_TOUCH => next.contact = Contact::Elastic,
+            G_REL_VEL_ZERO => next.contact = self.classify_rigid(y, mode, false),
+            G_STICK_ZERO | G_OPEN => next.contact = Contact::Free,
+            G_STICK_YIELD => {
+                let e = self.eval(y, mode);
+                y[P] = e.delta_m;
+                next.contact = Contact::Plastic;
+            }
+            G_YIELD => next.contact = Contact::Plastic,
+            G_UNLOAD => next.contact = Contact::Elastic,
+            G_ENGAGE => next.engaged = true,
+            G_DISENGAGE => next.engaged = false,
+            _ => {}
+        }
+        self.settle(y, next)
+    }
+
+    fn max_step(&self) -> f64 {
+        self.max_step_s
+    }
+}

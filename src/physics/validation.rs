@@ -1,0 +1,466 @@
+//! Validation of the simulator against the two papers, the energy ledger, the integrator's
+//! convergence and the effect library. The machines and billets are the example files in
+//! `config/`, so these tests also prove that those files reproduce the papers.
+//!
+//! Every tolerance names its source.
+
+use super::blow::{BlowResult, SimOptions, simulate_blow};
+use super::effects::{EFFECT_NAMES, Effect, EffectSet};
+use super::integrator::Method;
+use super::machine::{Machine, MachineKind};
+use super::plant::Plant;
+use super::process::Process;
+use super::sequence::{blow_plant, simulate_bare, simulate_sequence};
+use crate::config::{parse_machine, parse_process};
+
+fn hammer() -> Machine {
+    parse_machine(
+        "hammer",
+        include_str!("../../config/hammer-lg1000.machine.toml"),
+    )
+    .unwrap()
+    .machine
+}
+fn press() -> Machine {
+    parse_machine(
+        "press",
+        include_str!("../../config/screw-press-spr400.machine.toml"),
+    )
+    .unwrap()
+    .machine
+}
+fn steel() -> Process {
+    parse_process(
+        "steel",
+        include_str!("../../config/steel-16NiCrMo13.process.toml"),
+    )
+    .unwrap()
+}
+fn copper() -> Process {
+    parse_process(
+        "copper",
+        include_str!("../../config/copper-cu99.process.toml"),
+    )
+    .unwrap()
+}
+
+/// Hammer paper §3.1.2: blow 1 on the steel billet at 3.9 m/s.
+const V_STEEL_1: f64 = 3.9;
+/// Press paper §3.2: bare strikes at 0.363 m/s; §2.2 Table 1: copper blows at 0.346 m/s.
+const V_BARE: f64 = 0.363;
+const V_COPPER: f64 = 0.346;
+
+fn rel(a: f64, b: f64) -> f64 {
+    (a - b).abs() / b.abs()
+}
+
+fn steel_blow1(effects: &EffectSet, opts: &SimOptions) -> BlowResult {
+    simulate_sequence(&hammer(), effects, &steel(), &[V_STEEL_1], opts)
+        .unwrap()
+        .remove(0)
+}
+
+fn copper_ten(effects: &EffectSet) -> Vec<BlowResult> {
+    simulate_sequence(
+        &press(),
+        effects,
+        &copper(),
+        &[V_COPPER; 10],
+        &SimOptions::default(),
+    )
+    .unwrap()
+}
+
+fn with_trace() -> SimOptions {
+    SimOptions {
+        trace_dt_s: Some(1e-6),
+        ..SimOptions::default()
+    }
+}
+
+#[test]
+fn hammer_paper_table3_blow1() {
+    let b = steel_blow1(&EffectSet::NONE, &SimOptions::default());
+    let f = b.forming.unwrap();
+    // Seed 000 Table 3, simulation column, with the tolerances of issue #2.
+    assert!(
+        rel(f.h_end_m, 0.093) < 0.02,
+        "final height {} m vs 93 mm ±2 %",
+        f.h_end_m
+    );
+    assert!(
+        rel(f.final_load_n, 333e3) < 0.05,
+        "final load {} N vs 333 kN ±5 %",
+        f.final_load_n
+    );
+    assert!(
+        rel(f.forming_time_s, 9.3e-3) < 0.10,
+        "forming time {} s vs 9.3 ms ±10 %",
+        f.forming_time_s
+    );
+    let sb = f.spring_back_time_s.unwrap();
+    assert!(rel(sb, 0.8e-3) < 0.20, "spring-back {sb} s vs 0.8 ms ±20 %");
+    // Seed 000 §4.3: the damped energy is very near the initial kinetic energy of m2.
+    let Machine::Hammer(h) = hammer() else {
+        unreachable!()
+    };
+    let ke_m2 = 0.5 * h.m2_kg * V_STEEL_1 * V_STEEL_1;
+    assert!(
+        rel(b.energy.damped_j, ke_m2) < 0.10,
+        "damped {} J vs ½ m2 v0² = {ke_m2} J ±10 %",
+        b.energy.damped_j
+    );
+}
+
+#[test]
+fn press_paper_bare_strike_peak() {
+    let b = simulate_bare(&press(), &EffectSet::NONE, V_BARE, &SimOptions::default()).unwrap();
+    // Seed 001 §3.2: simulated peak 4993 kN; ±3 % (issue #2).
+    assert!(
+        rel(b.peak_load_n, 4993e3) < 0.03,
+        "bare peak {} N vs 4993 kN ±3 %",
+        b.peak_load_n
+    );
+    // DESIGN.md §2.2: contact about 27 ms, the recorded window (FFT resolution 36.4 Hz). ±10 %.
+    assert!(
+        rel(b.contact_time_s, 0.0275) < 0.10,
+        "contact {} s vs 1/36.4 Hz",
+        b.contact_time_s
+    );
+}
+
+#[test]
+fn press_paper_copper_ten_blows() {
+    let blows = copper_ten(&EffectSet::NONE);
+    // Seed 001 §3.3: simulated first-blow peak 1124 kN; the paper used an FE load curve and we
+    // use the analytical law, so ±15 % (issue #2).
+    assert!(
+        rel(blows[0].peak_load_n, 1124e3) < 0.15,
+        "blow 1 peak {} N",
+        blows[0].peak_load_n
+    );
+    // Seed 001 §3.4: 87 % on blow 1 falling to 25 % by blow 10; bounds of issue #2.
+    assert!(
+        blows[0].efficiency() >= 0.80,
+        "blow 1 efficiency {}",
+        blows[0].efficiency()
+    );
+    assert!(
+        blows[9].efficiency() <= 0.40,
+        "blow 10 efficiency {}",
+        blows[9].efficiency()
+    );
+    // Seed 001 §3.4: elastic energy exceeds plastic from the 6th blow; by blow 7 at the latest.
+    let first = blows
+        .iter()
+        .position(|b| b.energy.elastic_j > b.energy.plastic_j)
+        .map(|i| i + 1);
+    assert!(
+        first.is_some_and(|n| n <= 7),
+        "elastic > plastic first on blow {first:?}"
+    );
+    // Seed 001 §3.4: 7.5 mm measured after ten blows; 5.5–9 mm (issue #2).
+    let h = blows[9].forming.unwrap().h_end_m;
+    assert!((0.0055..=0.009).contains(&h), "final height {h} m");
+    // Efficiency falls blow after blow (seed 001 Fig. 13).
+    for w in blows.windows(2) {
+        assert!(w[1].efficiency() < w[0].efficiency());
+    }
+}
+
+/// One setting per effect that moves the model visibly but stays physical.
+fn example_effect(name: &str) -> Effect {
+    let spec = match name {
+        "clearance" => "clearance:gap_m=3e-4",
+        "elastic_recovery" => "elastic_recovery:k_contact_N_per_m=1e9",
+        "friction_rise" => "friction_rise:exponent=2.0",
+        "strain_rate" => "strain_rate:m=0.1,rate_ref_per_s=1",
+        "strain_hardening" => "strain_hardening:n=0.3,eps_ref=0.1",
+        "thermal" => "thermal:q_dT=0.3",
+        "foundation" => "foundation:m3_kg=20000,k3_N_per_m=2e9,c3_Ns_per_m=2e5",
+        _ => "sensor_highpass:tau_s=2e-3",
+    };
+    Effect::parse_spec(spec).unwrap()
+}
+
+/// The effect at its neutral value.
+fn neutral_effect(name: &str) -> Effect {
+    let spec = match name {
+        "clearance" => "clearance:gap_m=0",
+        "elastic_recovery" => "elastic_recovery:k_contact_N_per_m=inf",
+        "friction_rise" => "friction_rise:exponent=0",
+        "strain_rate" => "strain_rate:m=0",
+        "strain_hardening" => "strain_hardening:n=0",
+        "thermal" => "thermal:q_dT=0",
+        "foundation" => "foundation:m3_kg=20000,k3_N_per_m=inf",
+        _ => "sensor_highpass:tau_s=inf",
+    };
+    Effect::parse_spec(spec).unwrap()
+}
+
+#[test]
+fn ledger_closes_on_every_blow_with_and_without_each_effect() {
+    let mut sets = vec![("none".to_string(), EffectSet::NONE)];
+    for name in EFFECT_NAMES {
+        sets.push((
+            name.to_string(),
+            EffectSet::from_effects([&example_effect(name)]),
+        ));
+    }
+    for (name, set) in &sets {
+        let mut blows = vec![steel_blow1(set, &SimOptions::default())];
+        blows.push(simulate_bare(&press(), set, V_BARE, &SimOptions::default()).unwrap());
+        blows.extend(copper_ten(set));
+        for (i, b) in blows.iter().enumerate() {
+            // CONTRACTS.md §4: the five terms add up to the kinetic energy within 1 %.
+            let c = b.energy.closure_error();
+            assert!(
+                c.abs() < 0.01,
+                "effect {name}, run {i}: ledger closes to {c:e} ({:?})",
+                b.energy
+            );
+        }
+    }
+}
+
+#[test]
+fn tightening_the_tolerance_tenfold_moves_the_final_height_by_less_than_10_um() {
+    let at = |rtol: f64| {
+        steel_blow1(
+            &EffectSet::NONE,
+            &SimOptions {
+                method: Method::Dopri5 { rtol },
+                ..SimOptions::default()
+            },
+        )
+    };
+    let h_default = at(super::blow::DEFAULT_RTOL).forming.unwrap().h_end_m;
+    let h_tight = at(super::blow::DEFAULT_RTOL / 10.0)
+        .forming
+        .unwrap()
+        .h_end_m;
+    // Issue #2: < 0.01 mm.
+    assert!(
+        (h_default - h_tight).abs() < 1e-5,
+        "{h_default} vs {h_tight}"
+    );
+}
+
+#[test]
+fn adaptive_agrees_with_fixed_step_rk4_reference() {
+    let adaptive = steel_blow1(&EffectSet::NONE, &SimOptions::default());
+    let rk4 = steel_blow1(
+        &EffectSet::NONE,
+        &SimOptions {
+            method: Method::Rk4 { dt_s: 1e-8 },
+            ..SimOptions::default()
+        },
+    );
+    let (a, r) = (adaptive.forming.unwrap(), rk4.forming.unwrap());
+    // Issue #2: within 0.02 mm of the RK4 reference at 1e-8 s.
+    assert!(
+        (a.h_end_m - r.h_end_m).abs() < 2e-5,
+        "{} vs {}",
+        a.h_end_m,
+        r.h_end_m
+    );
+    // The reference's energies agree too (closure is independent of the method).
+    assert!(rel(adaptive.energy.plastic_j, rk4.energy.plastic_j) < 1e-3);
+}
+
+#[test]
+fn every_effect_at_its_neutral_value_is_exactly_the_base_model() {
+    let base_h = steel_blow1(&EffectSet::NONE, &SimOptions::default());
+    let base_p = copper_ten(&EffectSet::NONE);
+    for name in EFFECT_NAMES {
+        let set = EffectSet::from_effects([&neutral_effect(name)]);
+        assert_eq!(
+            steel_blow1(&set, &SimOptions::default()),
+            base_h,
+            "{name} (hammer)"
+        );
+        assert_eq!(copper_ten(&set), base_p, "{name} (press)");
+    }
+}
+
+fn one(name: &str) -> EffectSet {
+    EffectSet::from_effects([&example_effect(name)])
+}
+
+#[test]
+fn clearance_delays_the_sensor_load_and_lowers_the_energy_in() {
+    let base = steel_blow1(&EffectSet::NONE, &with_trace());
+    let gap = steel_blow1(&one("clearance"), &with_trace());
+    // The lower mass starts at rest: only the ram brings energy, ½ m1 v0².
+    let Machine::Hammer(h) = hammer() else {
+        unreachable!()
+    };
+    assert!(
+        rel(
+            gap.energy.kinetic_in_j,
+            0.5 * h.m1_kg * V_STEEL_1 * V_STEEL_1
+        ) < 1e-12
+    );
+    // The sensor carries nothing until the 0.3 mm gap has closed; the base model loads at once.
+    let at = |b: &BlowResult, t: f64| b.trace.iter().find(|p| p.t_s >= t).unwrap().out.sensor_n;
+    assert_eq!(at(&gap, 50e-6), 0.0);
+    assert!(
+        at(&base, 50e-6) > 10e3,
+        "base sensor at 50 µs: {}",
+        at(&base, 50e-6)
+    );
+    // On the press the gap is dead travel of the sensor path: no load at first either.
+    let p = simulate_blow(
+        &blow_plant(&press(), &one("clearance"), &copper(), 1, 0.030),
+        V_COPPER,
+        &with_trace(),
+    )
+    .unwrap();
+    let first_load = p.trace.iter().find(|q| q.out.sensor_n > 0.0).unwrap().t_s;
+    // 0.3 mm at 0.346 m/s is 0.87 ms.
+    assert!(
+        rel(first_load, 3e-4 / V_COPPER) < 0.02,
+        "press load starts at {first_load} s"
+    );
+}
+
+#[test]
+fn elastic_recovery_lengthens_the_spring_back() {
+    let sb = |set: &EffectSet| {
+        steel_blow1(set, &SimOptions::default())
+            .forming
+            .unwrap()
+            .spring_back_time_s
+            .unwrap()
+    };
+    let (base, er) = (sb(&EffectSet::NONE), sb(&one("elastic_recovery")));
+    // Seed 000 §4.2 blames the 4.6x longer measured spring-back on an unmodelled element.
+    assert!(er > 1.5 * base, "spring-back {er} s vs base {base} s");
+}
+
+#[test]
+fn friction_rise_spends_more_on_friction_and_forges_less() {
+    let base = steel_blow1(&EffectSet::NONE, &SimOptions::default());
+    let fr = steel_blow1(&one("friction_rise"), &SimOptions::default());
+    // mu grows by (112/93)^2 = 1.45 by the end of blow 1, ~20 % on average over it.
+    assert!(
+        fr.energy.friction_j > 1.1 * base.energy.friction_j,
+        "{} vs {}",
+        fr.energy.friction_j,
+        base.energy.friction_j
+    );
+    assert!(fr.forming.unwrap().h_end_m > base.forming.unwrap().h_end_m);
+    assert!(fr.forming.unwrap().final_load_n > base.forming.unwrap().final_load_n);
+}
+
+#[test]
+fn strain_rate_sensitivity_stiffens_the_billet_at_blow_speeds() {
+    // m 0.1 against 1 /s: a 3.9 m/s blow on 112 mm runs at ~35 /s, so sigma rises ~40 %.
+    let base = steel_blow1(&EffectSet::NONE, &SimOptions::default())
+        .forming
+        .unwrap();
+    let sr = steel_blow1(&one("strain_rate"), &SimOptions::default())
+        .forming
+        .unwrap();
+    assert!(sr.h_end_m > base.h_end_m && sr.forming_time_s < base.forming_time_s);
+}
+
+#[test]
+fn strain_hardening_makes_later_blows_harder() {
+    // Flow stress grows with the accumulated strain, so the load ratio of blow 3 to blow 1
+    // grows beyond the base model's (which only has the geometry's growth).
+    let v = [3.9, 5.3, 5.3];
+    let ratio = |set: &EffectSet| {
+        let b = simulate_sequence(&hammer(), set, &steel(), &v, &SimOptions::default()).unwrap();
+        b[2].forming.unwrap().final_load_n / b[0].forming.unwrap().final_load_n
+    };
+    let (base, hard) = (ratio(&EffectSet::NONE), ratio(&one("strain_hardening")));
+    assert!(hard > base * 1.05, "ratio {hard} vs base {base}");
+}
+
+#[test]
+fn thermal_cooling_leaves_blow_one_alone_and_hardens_the_next() {
+    let v = [3.9, 3.9];
+    let base = simulate_sequence(
+        &hammer(),
+        &EffectSet::NONE,
+        &steel(),
+        &v,
+        &SimOptions::default(),
+    )
+    .unwrap();
+    let cold = simulate_sequence(
+        &hammer(),
+        &one("thermal"),
+        &steel(),
+        &v,
+        &SimOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(base[0], cold[0]);
+    // Same start height for blow 2; exp(0.3) = 1.35x flow stress means less deformation.
+    let dh = |b: &BlowResult| b.h_start_m - b.forming.unwrap().h_end_m;
+    assert!(dh(&cold[1]) < 0.85 * dh(&base[1]));
+}
+
+#[test]
+fn a_soft_foundation_takes_energy_from_the_billet() {
+    let base = steel_blow1(&EffectSet::NONE, &SimOptions::default());
+    let soft = steel_blow1(&one("foundation"), &SimOptions::default());
+    // The anvil swings on its foundation spring: energy that would have forged the billet is
+    // left in the machine, so the blow is less efficient, forges less and springs back longer.
+    // (The impact peak is the lower tool's inertia and hardly moves.)
+    assert!(
+        soft.efficiency() < base.efficiency() - 0.005,
+        "{} vs {}",
+        soft.efficiency(),
+        base.efficiency()
+    );
+    assert!(soft.energy.elastic_j > 2.0 * base.energy.elastic_j);
+    let (fs, fb) = (soft.forming.unwrap(), base.forming.unwrap());
+    assert!(fs.h_end_m > fb.h_end_m);
+    assert!(fs.spring_back_time_s.unwrap() > fb.spring_back_time_s.unwrap());
+}
+
+#[test]
+fn sensor_highpass_undershoots_zero_after_the_blow() {
+    let run = |set: &EffectSet| {
+        simulate_blow(
+            &blow_plant(&press(), set, &copper(), 1, 0.030),
+            V_COPPER,
+            &with_trace(),
+        )
+        .unwrap()
+    };
+    let (base, hp) = (run(&EffectSet::NONE), run(&one("sensor_highpass")));
+    let min_after = |b: &BlowResult| {
+        b.trace
+            .iter()
+            .filter(|p| p.t_s > b.contact_time_s)
+            .map(|p| p.out.sensor_n)
+            .fold(f64::INFINITY, f64::min)
+    };
+    // The press's sensor carries exactly nothing once the tool has left.
+    assert_eq!(min_after(&base), 0.0);
+    // A charge amplifier with tau 2 ms against a ~50 ms blow swings well below zero.
+    assert!(
+        min_after(&hp) < -0.05 * hp.peak_load_n,
+        "undershoot {}",
+        min_after(&hp)
+    );
+    // It also returns to zero earlier, so the spring-back looks shorter.
+    let sb = |b: &BlowResult| {
+        b.forming
+            .unwrap()
+            .spring_back_time_s
+            .unwrap_or(f64::INFINITY)
+    };
+    assert!(sb(&hp) < sb(&base));
+}
+
+#[test]
+fn process_sheets_pair_with_their_machines() {
+    assert_eq!(steel().machine, MachineKind::Hammer);
+    assert_eq!(copper().machine, MachineKind::ScrewPress);
+    let _ = Plant::new(&hammer(), &EffectSet::NONE, None, 0.0);
+}
