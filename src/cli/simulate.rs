@@ -33,7 +33,7 @@ pub struct SimulateArgs {
     #[arg(long, required_unless_present = "bare")]
     pub process: Option<PathBuf>,
     /// Impact speed of each blow, m/s, comma separated: one blow per value.
-    #[arg(long, value_delimiter = ',', required = true, num_args = 1..)]
+    #[arg(long, value_delimiter = ',', required = true, num_args = 1.., allow_negative_numbers = true)]
     pub v0: Vec<f64>,
     /// Print one JSON object (CONTRACTS.md §4) instead of a table.
     #[arg(long)]
