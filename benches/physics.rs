@@ -30,14 +30,24 @@ fn blows(c: &mut Criterion) {
     let no_post = SimOptions { post_s: 0.0, ..SimOptions::default() };
     let rk4 = SimOptions { method: Method::Rk4 { dt_s: 1e-7 }, ..SimOptions::default() };
     let mut g = c.benchmark_group("blow");
-    g.bench_function("hammer_table3_blow1", |b| b.iter(|| simulate_sequence(&m, &EffectSet::NONE, &p, black_box(&[3.9]), &fast).unwrap()));
-    g.bench_function("hammer_table3_blow1_no_post_window", |b| b.iter(|| simulate_sequence(&m, &EffectSet::NONE, &p, black_box(&[3.9]), &no_post).unwrap()));
+    g.bench_function("hammer_table3_blow1", |b| {
+        b.iter(|| simulate_sequence(&m, &EffectSet::NONE, &p, black_box(&[3.9]), &fast).unwrap())
+    });
+    g.bench_function("hammer_table3_blow1_no_post_window", |b| {
+        b.iter(|| simulate_sequence(&m, &EffectSet::NONE, &p, black_box(&[3.9]), &no_post).unwrap())
+    });
     let pr = press();
-    g.bench_function("press_bare_strike", |b| b.iter(|| simulate_bare(&pr, &EffectSet::NONE, black_box(0.363), &fast).unwrap()));
+    g.bench_function("press_bare_strike", |b| {
+        b.iter(|| simulate_bare(&pr, &EffectSet::NONE, black_box(0.363), &fast).unwrap())
+    });
     let cu = copper();
-    g.bench_function("press_copper_ten_blows", |b| b.iter(|| simulate_sequence(&pr, &EffectSet::NONE, &cu, black_box(&[0.346; 10]), &fast).unwrap()));
+    g.bench_function("press_copper_ten_blows", |b| {
+        b.iter(|| simulate_sequence(&pr, &EffectSet::NONE, &cu, black_box(&[0.346; 10]), &fast).unwrap())
+    });
     g.sample_size(10);
-    g.bench_function("hammer_table3_blow1_rk4_1e-7", |b| b.iter(|| simulate_sequence(&m, &EffectSet::NONE, &p, black_box(&[3.9]), &rk4).unwrap()));
+    g.bench_function("hammer_table3_blow1_rk4_1e-7", |b| {
+        b.iter(|| simulate_sequence(&m, &EffectSet::NONE, &p, black_box(&[3.9]), &rk4).unwrap())
+    });
     g.finish();
 }
 
@@ -46,7 +56,19 @@ fn study(c: &mut Criterion) {
     let mut g = c.benchmark_group("monte_carlo");
     g.sample_size(10);
     g.bench_function("hammer_blow1_3000_runs", |b| {
-        b.iter(|| monte_carlo(&m, &EffectSet::NONE, &p, &[3.9], &Uncertainty::default(), black_box(3000), 1, &SimOptions::default()).unwrap())
+        b.iter(|| {
+            monte_carlo(
+                &m,
+                &EffectSet::NONE,
+                &p,
+                &[3.9],
+                &Uncertainty::default(),
+                black_box(3000),
+                1,
+                &SimOptions::default(),
+            )
+            .unwrap()
+        })
     });
     g.finish();
 }

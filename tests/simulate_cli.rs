@@ -53,7 +53,16 @@ fn contract_json_has_every_field_and_the_ledger_closes() {
     assert_eq!(blows.len(), 2);
     for (i, b) in blows.iter().enumerate() {
         assert_eq!(b["blow"].as_u64(), Some(i as u64 + 1));
-        for k in ["v0_mps", "h_start_m", "h_end_m", "final_load_N", "peak_load_N", "forming_time_s", "spring_back_time_s", "efficiency"] {
+        for k in [
+            "v0_mps",
+            "h_start_m",
+            "h_end_m",
+            "final_load_N",
+            "peak_load_N",
+            "forming_time_s",
+            "spring_back_time_s",
+            "efficiency",
+        ] {
             assert!(b[k].is_number(), "{k} missing in {b}");
         }
         let e = &b["energy"];
@@ -105,7 +114,20 @@ fn effects_on_the_command_line_change_the_blows_they_should() {
 
 #[test]
 fn monte_carlo_is_deterministic_per_seed_and_brackets_the_nominal_blow() {
-    let args = ["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "3.9", "--monte-carlo", "300", "--seed", "7", "--json"];
+    let args = [
+        "simulate",
+        "--machine",
+        HAMMER,
+        "--process",
+        STEEL,
+        "--v0",
+        "3.9",
+        "--monte-carlo",
+        "300",
+        "--seed",
+        "7",
+        "--json",
+    ];
     let a = json_of(&args);
     let b = json_of(&args);
     assert_eq!(a, b, "same seed, same bands");
@@ -126,7 +148,20 @@ fn monte_carlo_is_deterministic_per_seed_and_brackets_the_nominal_blow() {
 fn trace_csv_holds_the_blow() {
     let path = tmp("trace.csv");
     let p = path.to_str().unwrap();
-    let v = json_of(&["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "3.9,5.3", "--json", "--trace", p, "--trace-dt", "1e-6"]);
+    let v = json_of(&[
+        "simulate",
+        "--machine",
+        HAMMER,
+        "--process",
+        STEEL,
+        "--v0",
+        "3.9,5.3",
+        "--json",
+        "--trace",
+        p,
+        "--trace-dt",
+        "1e-6",
+    ]);
     let text = std::fs::read_to_string(&path).unwrap();
     let mut lines = text.lines();
     assert_eq!(lines.next(), Some("blow,t_s,load_N,billet_load_N,x_upper_m,x_lower_m,h_m"));
@@ -153,7 +188,10 @@ fn copper_on_the_press_runs_through_the_cli() {
 
 #[test]
 fn bad_files_and_flags_name_the_file_and_key() {
-    fails_naming(&["simulate", "--machine", "config/nope.toml", "--process", STEEL, "--v0", "3.9"], &["config/nope.toml", "cannot read"]);
+    fails_naming(
+        &["simulate", "--machine", "config/nope.toml", "--process", STEEL, "--v0", "3.9"],
+        &["config/nope.toml", "cannot read"],
+    );
     let bad = tmp("bad.machine.toml");
     std::fs::write(&bad, "kind = \"hammer\"\nm1_kg = 732\nm2_kg = 19\nk_N_per_m = 3.15e9\n").unwrap();
     let b = bad.to_str().unwrap();
@@ -161,17 +199,33 @@ fn bad_files_and_flags_name_the_file_and_key() {
     std::fs::write(&bad, "kind = \"hammer\"\nm1_kg = = 732\n").unwrap();
     fails_naming(&["simulate", "--machine", b, "--process", STEEL, "--v0", "3.9"], &[b, "not valid TOML", "line 2"]);
     std::fs::write(&bad, "kind = \"hammer\"\nm1_kg = 732\nm2_kg = 0\nk_N_per_m = 3.15e9\nc_Ns_per_m = 1\n").unwrap();
-    fails_naming(&["simulate", "--machine", b, "--process", STEEL, "--v0", "3.9"], &[b, "'m2_kg' must be finite and > 0"]);
+    fails_naming(
+        &["simulate", "--machine", b, "--process", STEEL, "--v0", "3.9"],
+        &[b, "'m2_kg' must be finite and > 0"],
+    );
     fails_naming(&["simulate", "--machine", PRESS, "--process", STEEL, "--v0", "0.3"], &[STEEL, "'machine'", PRESS]);
-    fails_naming(&["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "3.9", "--effect", "gap:gap_m=1"], &["--effect gap:gap_m=1", "unknown effect 'gap'"]);
+    fails_naming(
+        &["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "3.9", "--effect", "gap:gap_m=1"],
+        &["--effect gap:gap_m=1", "unknown effect 'gap'"],
+    );
     fails_naming(&["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "-3.9"], &["--v0", "-3.9"]);
     fails_naming(&["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "fast"], &["--v0", "fast"]);
     fails_naming(&["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "3.9", "--rtol", "0"], &["--rtol"]);
-    fails_naming(&["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "3.9", "--monte-carlo", "1"], &["--monte-carlo", "at least 2"]);
+    fails_naming(
+        &["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "3.9", "--monte-carlo", "1"],
+        &["--monte-carlo", "at least 2"],
+    );
     let sheet = tmp("bad.process.toml");
-    std::fs::write(&sheet, std::fs::read_to_string(root().join(STEEL)).unwrap().replace("sigma0_Pa = 90e6", "sigma0_Pa = \"hot\"")).unwrap();
+    std::fs::write(
+        &sheet,
+        std::fs::read_to_string(root().join(STEEL)).unwrap().replace("sigma0_Pa = 90e6", "sigma0_Pa = \"hot\""),
+    )
+    .unwrap();
     let s = sheet.to_str().unwrap();
-    fails_naming(&["simulate", "--machine", HAMMER, "--process", s, "--v0", "3.9"], &[s, "material.sigma0_Pa", "must be a number"]);
+    fails_naming(
+        &["simulate", "--machine", HAMMER, "--process", s, "--v0", "3.9"],
+        &[s, "material.sigma0_Pa", "must be a number"],
+    );
     let empty = tmp("empty.process.toml");
     std::fs::write(&empty, "").unwrap();
     let e = empty.to_str().unwrap();

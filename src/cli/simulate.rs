@@ -82,10 +82,7 @@ struct Inputs {
 }
 
 fn load_inputs(args: &SimulateArgs) -> anyhow::Result<Inputs> {
-    let machine = parse_machine(
-        &args.machine.display().to_string(),
-        &read_text(&args.machine)?,
-    )?;
+    let machine = parse_machine(&args.machine.display().to_string(), &read_text(&args.machine)?)?;
     let mut effects = machine.effects.clone();
     for spec in &args.effects {
         let e = Effect::parse_spec(spec).with_context(|| format!("--effect {spec}"))?;
@@ -93,18 +90,10 @@ fn load_inputs(args: &SimulateArgs) -> anyhow::Result<Inputs> {
         effects.push(e);
     }
     let set = EffectSet::from_effects(&effects);
-    Ok(Inputs {
-        machine,
-        effects,
-        set,
-    })
+    Ok(Inputs { machine, effects, set })
 }
 
-fn load_process(
-    path: &Path,
-    machine: &MachineFile,
-    machine_path: &Path,
-) -> anyhow::Result<Process> {
+fn load_process(path: &Path, machine: &MachineFile, machine_path: &Path) -> anyhow::Result<Process> {
     let p = parse_process(&path.display().to_string(), &read_text(path)?)?;
     if p.machine != machine.machine.kind() {
         bail!(
@@ -122,19 +111,13 @@ fn options(args: &SimulateArgs) -> anyhow::Result<SimOptions> {
     let method = match args.rk4_dt {
         Some(dt) if dt.is_finite() && dt > 0.0 => Method::Rk4 { dt_s: dt },
         Some(dt) => bail!("--rk4-dt must be finite and > 0, got {dt}"),
-        None if args.rtol.is_finite() && args.rtol > 0.0 && args.rtol < 1.0 => {
-            Method::Dopri5 { rtol: args.rtol }
-        }
+        None if args.rtol.is_finite() && args.rtol > 0.0 && args.rtol < 1.0 => Method::Dopri5 { rtol: args.rtol },
         None => bail!("--rtol must be in (0, 1), got {}", args.rtol),
     };
     if args.trace.is_some() && !(args.trace_dt.is_finite() && args.trace_dt > 0.0) {
         bail!("--trace-dt must be finite and > 0, got {}", args.trace_dt);
     }
-    Ok(SimOptions {
-        method,
-        post_s: POST_WINDOW_S,
-        trace_dt_s: args.trace.as_ref().map(|_| args.trace_dt),
-    })
+    Ok(SimOptions { method, post_s: POST_WINDOW_S, trace_dt_s: args.trace.as_ref().map(|_| args.trace_dt) })
 }
 
 pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
@@ -157,35 +140,18 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
                     .with_context(|| format!("bare strike at {v} m/s"))
             })
             .collect::<anyhow::Result<_>>()?;
-        out["strikes"] = results
-            .iter()
-            .enumerate()
-            .map(|(i, r)| strike_json(i + 1, r))
-            .collect();
+        out["strikes"] = results.iter().enumerate().map(|(i, r)| strike_json(i + 1, r)).collect();
     } else {
-        let process_path = args
-            .process
-            .as_ref()
-            .context("--process is required without --bare")?;
+        let process_path = args.process.as_ref().context("--process is required without --bare")?;
         let process = load_process(process_path, &inputs.machine, &args.machine)?;
-        results = simulate_sequence(
-            &inputs.machine.machine,
-            &inputs.set,
-            &process,
-            &args.v0,
-            &opts,
-        )?;
+        results = simulate_sequence(&inputs.machine.machine, &inputs.set, &process, &args.v0, &opts)?;
         out["blows"] = results
             .iter()
             .enumerate()
             .map(|(i, r)| blow_json(i + 1, r, process.measured_final_heights_m.get(i)))
             .collect();
         if let Some(runs) = args.monte_carlo {
-            let unc = Uncertainty {
-                v0_mps: args.mc_v0_95,
-                friction: args.mc_friction_95,
-                load_n: args.mc_load_95,
-            };
+            let unc = Uncertainty { v0_mps: args.mc_v0_95, friction: args.mc_friction_95, load_n: args.mc_load_95 };
             let mc = monte_carlo(
                 &inputs.machine.machine,
                 &inputs.set,
@@ -194,22 +160,14 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
                 &unc,
                 runs,
                 args.seed,
-                &SimOptions {
-                    trace_dt_s: None,
-                    ..opts
-                },
+                &SimOptions { trace_dt_s: None, ..opts },
             )?;
             out["monte_carlo"] = serde_json::to_value(&mc)?;
         }
     }
-    out["effects"] = inputs
-        .effects
-        .iter()
-        .map(|e| Value::String(e.to_string()))
-        .collect();
+    out["effects"] = inputs.effects.iter().map(|e| Value::String(e.to_string())).collect();
     if let Some(path) = &args.trace {
-        write_trace(path, &results)
-            .with_context(|| format!("{}: cannot write the trace", path.display()))?;
+        write_trace(path, &results).with_context(|| format!("{}: cannot write the trace", path.display()))?;
     }
     let stdout = std::io::stdout();
     let mut w = stdout.lock();
@@ -232,9 +190,7 @@ fn energy_json(e: &Ledger) -> Value {
 }
 
 fn blow_json(n: usize, r: &BlowResult, measured: Option<&f64>) -> Value {
-    let f = r
-        .forming
-        .expect("sequence blows always have forming indicators");
+    let f = r.forming.expect("sequence blows always have forming indicators");
     let mut v = json!({
         "blow": n,
         "v0_mps": r.v0_mps,
@@ -336,18 +292,10 @@ fn write_table(w: &mut impl Write, out: &Value) -> anyhow::Result<()> {
             "\nMonte Carlo: {} runs (seed {}, {} failed); mean [95 % band]",
             mc["runs"], mc["seed"], mc["failed"]
         )?;
-        writeln!(
-            w,
-            "blow  final load kN              h_end mm                 efficiency"
-        )?;
+        writeln!(w, "blow  final load kN              h_end mm                 efficiency")?;
         for b in mc["blows"].as_array().into_iter().flatten() {
             let band = |k: &str, s: f64| {
-                format!(
-                    "{:.1} [{:.1}, {:.1}]",
-                    num(&b[k], "mean") * s,
-                    num(&b[k], "p2_5") * s,
-                    num(&b[k], "p97_5") * s
-                )
+                format!("{:.1} [{:.1}, {:.1}]", num(&b[k], "mean") * s, num(&b[k], "p2_5") * s, num(&b[k], "p97_5") * s)
             };
             let eff = format!(
                 "{:.3} [{:.3}, {:.3}]",
@@ -394,35 +342,13 @@ mod tests {
 
     #[test]
     fn process_is_required_unless_bare() {
+        assert!(Cli::try_parse_from(["forgemon", "simulate", "--machine", "m.toml", "--v0", "3.9"]).is_err());
         assert!(
-            Cli::try_parse_from(["forgemon", "simulate", "--machine", "m.toml", "--v0", "3.9"])
+            Cli::try_parse_from(["forgemon", "simulate", "--machine", "m.toml", "--v0", "0.363", "--bare"]).is_ok()
+        );
+        assert!(
+            Cli::try_parse_from(["forgemon", "simulate", "--machine", "m", "--process", "p", "--v0", "1", "--bare"])
                 .is_err()
-        );
-        assert!(
-            Cli::try_parse_from([
-                "forgemon",
-                "simulate",
-                "--machine",
-                "m.toml",
-                "--v0",
-                "0.363",
-                "--bare"
-            ])
-            .is_ok()
-        );
-        assert!(
-            Cli::try_parse_from([
-                "forgemon",
-                "simulate",
-                "--machine",
-                "m",
-                "--process",
-                "p",
-                "--v0",
-                "1",
-                "--bare"
-            ])
-            .is_err()
         );
     }
 

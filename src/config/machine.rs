@@ -45,10 +45,7 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
             },
         }),
         other => {
-            return Err(keys.invalid(
-                "kind",
-                format!("must be \"hammer\" or \"screw_press\", got \"{other}\""),
-            ));
+            return Err(keys.invalid("kind", format!("must be \"hammer\" or \"screw_press\", got \"{other}\"")));
         }
     };
     let mut effects = Vec::new();
@@ -60,8 +57,7 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
             for k in sub.table.keys() {
                 params.insert(k.clone(), sub.number(k)?);
             }
-            let e = Effect::from_params(name, &params)
-                .map_err(|err| ek.invalid(name, err.to_string()))?;
+            let e = Effect::from_params(name, &params).map_err(|err| ek.invalid(name, err.to_string()))?;
             effects.push(e);
         }
     }
@@ -72,19 +68,13 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
 mod tests {
     use super::*;
 
-    const HAMMER: &str =
-        "kind = \"hammer\"\nm1_kg = 732\nm2_kg = 19\nk_N_per_m = 3.15e9\nc_Ns_per_m = 18540\n";
+    const HAMMER: &str = "kind = \"hammer\"\nm1_kg = 732\nm2_kg = 19\nk_N_per_m = 3.15e9\nc_Ns_per_m = 18540\n";
 
     #[test]
     fn contract_hammer_example_parses() {
         let m = parse_machine("m.toml", HAMMER).unwrap();
-        let Machine::Hammer(h) = m.machine else {
-            panic!("not a hammer")
-        };
-        assert_eq!(
-            (h.m1_kg, h.m2_kg, h.k_n_per_m, h.c_ns_per_m),
-            (732.0, 19.0, 3.15e9, 18540.0)
-        );
+        let Machine::Hammer(h) = m.machine else { panic!("not a hammer") };
+        assert_eq!((h.m1_kg, h.m2_kg, h.k_n_per_m, h.c_ns_per_m), (732.0, 19.0, 3.15e9, 18540.0));
         assert!(m.effects.is_empty());
     }
 
@@ -103,27 +93,13 @@ mod tests {
         let e = parse_machine("m.toml", "kind = \"hammer\"\nm1_kg = 732\n").unwrap_err();
         assert_eq!(e.to_string(), "m.toml: missing key 'm2_kg'");
         let e = parse_machine("m.toml", &HAMMER.replace("m2_kg = 19", "m2_kg = -19")).unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "m.toml: key 'm2_kg' must be finite and > 0, got -19"
-        );
-        let e =
-            parse_machine("m.toml", &HAMMER.replace("m2_kg = 19", "m2_kg = \"19\"")).unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "m.toml: key 'm2_kg' must be a number, not string"
-        );
+        assert_eq!(e.to_string(), "m.toml: key 'm2_kg' must be finite and > 0, got -19");
+        let e = parse_machine("m.toml", &HAMMER.replace("m2_kg = 19", "m2_kg = \"19\"")).unwrap_err();
+        assert_eq!(e.to_string(), "m.toml: key 'm2_kg' must be a number, not string");
         let e = parse_machine("m.toml", "kind = \"anvil\"").unwrap_err();
-        assert!(
-            e.to_string()
-                .contains("key 'kind' must be \"hammer\" or \"screw_press\""),
-            "{e}"
-        );
+        assert!(e.to_string().contains("key 'kind' must be \"hammer\" or \"screw_press\""), "{e}");
         let e = parse_machine("m.toml", "kind = \n").unwrap_err();
-        assert!(
-            e.to_string().starts_with("m.toml: not valid TOML") && e.to_string().contains("line 1"),
-            "{e}"
-        );
+        assert!(e.to_string().starts_with("m.toml: not valid TOML") && e.to_string().contains("line 1"), "{e}");
     }
 
     #[test]
@@ -131,14 +107,9 @@ mod tests {
         let text = format!("{HAMMER}[effects.clearance]\ngap_m = 2e-4\n");
         let m = parse_machine("m.toml", &text).unwrap();
         assert_eq!(m.effects, vec![Effect::Clearance { gap_m: 2e-4 }]);
-        let e = parse_machine(
-            "m.toml",
-            &format!("{HAMMER}[effects.clearance]\ngap = 2e-4\n"),
-        )
-        .unwrap_err();
+        let e = parse_machine("m.toml", &format!("{HAMMER}[effects.clearance]\ngap = 2e-4\n")).unwrap_err();
         assert!(
-            e.to_string().contains("key 'effects.clearance'")
-                && e.to_string().contains("no parameter 'gap'"),
+            e.to_string().contains("key 'effects.clearance'") && e.to_string().contains("no parameter 'gap'"),
             "{e}"
         );
     }

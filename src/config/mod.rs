@@ -18,11 +18,7 @@ pub enum ConfigError {
     #[error("{origin}: missing key '{key}'")]
     Missing { origin: String, key: String },
     #[error("{origin}: key '{key}' {why}")]
-    Invalid {
-        origin: String,
-        key: String,
-        why: String,
-    },
+    Invalid { origin: String, key: String, why: String },
 }
 
 /// Typed access to a TOML table with errors that name `origin` and the dotted key.
@@ -34,44 +30,25 @@ pub(crate) struct Keys<'a> {
 
 impl<'a> Keys<'a> {
     pub fn root(origin: &'a str, table: &'a toml::Table) -> Self {
-        Keys {
-            origin,
-            prefix: String::new(),
-            table,
-        }
+        Keys { origin, prefix: String::new(), table }
     }
 
     pub fn path(&self, key: &str) -> String {
-        if self.prefix.is_empty() {
-            key.to_string()
-        } else {
-            format!("{}.{key}", self.prefix)
-        }
+        if self.prefix.is_empty() { key.to_string() } else { format!("{}.{key}", self.prefix) }
     }
 
     pub fn invalid(&self, key: &str, why: impl Into<String>) -> ConfigError {
-        ConfigError::Invalid {
-            origin: self.origin.to_string(),
-            key: self.path(key),
-            why: why.into(),
-        }
+        ConfigError::Invalid { origin: self.origin.to_string(), key: self.path(key), why: why.into() }
     }
 
     pub fn missing(&self, key: &str) -> ConfigError {
-        ConfigError::Missing {
-            origin: self.origin.to_string(),
-            key: self.path(key),
-        }
+        ConfigError::Missing { origin: self.origin.to_string(), key: self.path(key) }
     }
 
     /// A sub-table.
     pub fn table(&self, key: &str) -> Result<Keys<'a>, ConfigError> {
         match self.table.get(key) {
-            Some(toml::Value::Table(t)) => Ok(Keys {
-                origin: self.origin,
-                prefix: self.path(key),
-                table: t,
-            }),
+            Some(toml::Value::Table(t)) => Ok(Keys { origin: self.origin, prefix: self.path(key), table: t }),
             Some(_) => Err(self.invalid(key, "must be a table")),
             None => Err(self.missing(key)),
         }
@@ -122,19 +99,14 @@ impl<'a> Keys<'a> {
     /// A finite number.
     pub fn finite(&self, key: &str) -> Result<f64, ConfigError> {
         let x = self.number(key)?;
-        if x.is_finite() {
-            Ok(x)
-        } else {
-            Err(self.invalid(key, format!("must be finite, got {x}")))
-        }
+        if x.is_finite() { Ok(x) } else { Err(self.invalid(key, format!("must be finite, got {x}"))) }
     }
 }
 
 /// Parse `text` as a TOML table, naming `origin` (and the line) on a syntax error.
 pub(crate) fn parse_table(origin: &str, text: &str) -> Result<toml::Table, ConfigError> {
-    text.parse::<toml::Table>()
-        .map_err(|e| ConfigError::Syntax {
-            origin: origin.to_string(),
-            message: e.to_string().trim().replace('\n', " "),
-        })
+    text.parse::<toml::Table>().map_err(|e| ConfigError::Syntax {
+        origin: origin.to_string(),
+        message: e.to_string().trim().replace('\n', " "),
+    })
 }

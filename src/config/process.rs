@@ -14,22 +14,14 @@ pub fn parse_process(origin: &str, text: &str) -> Result<Process, ConfigError> {
         "hammer" => MachineKind::Hammer,
         "screw_press" => MachineKind::ScrewPress,
         other => {
-            return Err(keys.invalid(
-                "machine",
-                format!("must be \"hammer\" or \"screw_press\", got \"{other}\""),
-            ));
+            return Err(keys.invalid("machine", format!("must be \"hammer\" or \"screw_press\", got \"{other}\"")));
         }
     };
     let b = keys.table("billet")?;
-    let billet = BilletGeometry {
-        diameter_m: b.positive("diameter_m")?,
-        height_m: b.positive("height_m")?,
-    };
+    let billet = BilletGeometry { diameter_m: b.positive("diameter_m")?, height_m: b.positive("height_m")? };
     let m = keys.table("material")?;
     let material = match m.string("model")? {
-        "constant" => FlowStress::Constant {
-            sigma0_pa: m.positive("sigma0_Pa")?,
-        },
+        "constant" => FlowStress::Constant { sigma0_pa: m.positive("sigma0_Pa")? },
         "hansel_spittel" => FlowStress::HanselSpittel {
             a_pa: m.positive("A_Pa")?,
             m1: m.finite("m1")?,
@@ -39,10 +31,7 @@ pub fn parse_process(origin: &str, text: &str) -> Result<Process, ConfigError> {
             temperature_c: m.finite("temperature_C")?,
         },
         other => {
-            return Err(m.invalid(
-                "model",
-                format!("must be \"constant\" or \"hansel_spittel\", got \"{other}\""),
-            ));
+            return Err(m.invalid("model", format!("must be \"constant\" or \"hansel_spittel\", got \"{other}\"")));
         }
     };
     let friction = keys.table("interface")?.non_negative("friction")?;
@@ -55,11 +44,7 @@ pub fn parse_process(origin: &str, text: &str) -> Result<Process, ConfigError> {
                 let toml::Value::Table(t) = blow else {
                     return Err(keys.invalid(&key, "must be a table"));
                 };
-                let bk = Keys {
-                    origin,
-                    prefix: key,
-                    table: t,
-                };
+                let bk = Keys { origin, prefix: key, table: t };
                 let h = bk.positive("final_height_m")?;
                 let previous = measured.last().copied().unwrap_or(billet.height_m);
                 if h > previous {
@@ -73,13 +58,7 @@ pub fn parse_process(origin: &str, text: &str) -> Result<Process, ConfigError> {
         }
         Some(_) => return Err(keys.invalid("blows", "must be an array of tables ([[blows]])")),
     }
-    Ok(Process {
-        machine,
-        billet,
-        material,
-        friction,
-        measured_final_heights_m: measured,
-    })
+    Ok(Process { machine, billet, material, friction, measured_final_heights_m: measured })
 }
 
 #[cfg(test)]
@@ -94,13 +73,7 @@ mod tests {
         let text = format!("{STEEL}[[blows]]\nfinal_height_m = 0.0889\n");
         let p = parse_process("p.toml", &text).unwrap();
         assert_eq!(p.machine, MachineKind::Hammer);
-        assert_eq!(
-            p.billet,
-            BilletGeometry {
-                diameter_m: 0.060,
-                height_m: 0.112
-            }
-        );
+        assert_eq!(p.billet, BilletGeometry { diameter_m: 0.060, height_m: 0.112 });
         assert_eq!(p.material, FlowStress::Constant { sigma0_pa: 90e6 });
         assert_eq!(p.friction, 0.2);
         assert_eq!(p.measured_final_heights_m, vec![0.0889]);
@@ -110,29 +83,13 @@ mod tests {
     fn errors_name_file_and_key() {
         let e = parse_process("p.toml", &STEEL.replace("height_m = 0.112\n", "")).unwrap_err();
         assert_eq!(e.to_string(), "p.toml: missing key 'billet.height_m'");
-        let e = parse_process("p.toml", &STEEL.replace("\"constant\"", "\"johnson_cook\""))
-            .unwrap_err();
+        let e = parse_process("p.toml", &STEEL.replace("\"constant\"", "\"johnson_cook\"")).unwrap_err();
         assert!(e.to_string().contains("key 'material.model'"), "{e}");
         let e = parse_process("p.toml", &STEEL.replace("sigma0_Pa", "sigma_Pa")).unwrap_err();
         assert_eq!(e.to_string(), "p.toml: missing key 'material.sigma0_Pa'");
-        let e = parse_process(
-            "p.toml",
-            &format!("{STEEL}[[blows]]\nfinal_height_m = 0.2\n"),
-        )
-        .unwrap_err();
-        assert!(
-            e.to_string().contains("key 'blows[1].final_height_m'"),
-            "{e}"
-        );
-        let e = parse_process(
-            "p.toml",
-            &STEEL.replace("friction = 0.2", "friction = -0.2"),
-        )
-        .unwrap_err();
-        assert!(
-            e.to_string()
-                .contains("key 'interface.friction' must be finite and >= 0"),
-            "{e}"
-        );
+        let e = parse_process("p.toml", &format!("{STEEL}[[blows]]\nfinal_height_m = 0.2\n")).unwrap_err();
+        assert!(e.to_string().contains("key 'blows[1].final_height_m'"), "{e}");
+        let e = parse_process("p.toml", &STEEL.replace("friction = 0.2", "friction = -0.2")).unwrap_err();
+        assert!(e.to_string().contains("key 'interface.friction' must be finite and >= 0"), "{e}");
     }
 }

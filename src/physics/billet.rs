@@ -55,14 +55,7 @@ pub enum FlowStress {
     /// Constant flow stress, Pa (the hammer paper's sigma_0).
     Constant { sigma0_pa: f64 },
     /// `sigma = A exp(m1 T) eps^m2 epsdot^m3 exp(m4/eps)` (seed 001, eq. 6), T in °C.
-    HanselSpittel {
-        a_pa: f64,
-        m1: f64,
-        m2: f64,
-        m3: f64,
-        m4: f64,
-        temperature_c: f64,
-    },
+    HanselSpittel { a_pa: f64, m1: f64, m2: f64, m3: f64, m4: f64, temperature_c: f64 },
 }
 
 impl FlowStress {
@@ -70,14 +63,7 @@ impl FlowStress {
     pub fn sigma_pa(&self, eps: f64, epsdot_per_s: f64) -> f64 {
         match *self {
             FlowStress::Constant { sigma0_pa } => sigma0_pa,
-            FlowStress::HanselSpittel {
-                a_pa,
-                m1,
-                m2,
-                m3,
-                m4,
-                temperature_c,
-            } => {
+            FlowStress::HanselSpittel { a_pa, m1, m2, m3, m4, temperature_c } => {
                 let eps = eps.max(STRAIN_FLOOR);
                 let rate = epsdot_per_s.max(STRAIN_RATE_FLOOR_PER_S);
                 a_pa * (m1 * temperature_c).exp() * eps.powf(m2) * rate.powf(m3) * (m4 / eps).exp()
@@ -138,6 +124,10 @@ pub struct BilletLaw {
     effects: LoadEffects,
     /// `exp(q_dT (i-1))` for this blow.
     thermal_factor: f64,
+    /// `r0^2 h0`: volume over pi, so that `r^2 = r0h0 / h`.
+    r0sq_h0_m3: f64,
+    /// Whether the flow stress depends on strain (else `ln` is skipped in the hot path).
+    strain_dependent: bool,
 }
 
 impl BilletLaw {
@@ -150,13 +140,9 @@ impl BilletLaw {
         blow_index: usize,
     ) -> Self {
         let thermal_factor = (effects.thermal_q_dt * (blow_index.saturating_sub(1)) as f64).exp();
-        Self {
-            geometry,
-            material,
-            mu0: friction,
-            effects,
-            thermal_factor,
-        }
+        let r0sq_h0_m3 = (0.5 * geometry.diameter_m).powi(2) * geometry.height_m;
+        let strain_dependent = matches!(material, FlowStress::HanselSpittel { .. }) || effects.hardening_n != 0.0;
+        Self { geometry, material, mu0: friction, effects, thermal_factor, r0sq_h0_m3, strain_dependent }
     }
 
     pub fn geometry(&self) -> &BilletGeometry {
@@ -165,8 +151,7 @@ impl BilletLaw {
 
     /// Whether the load depends on the strain rate (the simulator then needs its slope).
     pub fn is_rate_dependent(&self) -> bool {
-        matches!(self.material, FlowStress::HanselSpittel { m3, .. } if m3 != 0.0)
-            || self.effects.rate_m != 0.0
+        matches!(self.material, FlowStress::HanselSpittel { m3, .. } if m3 != 0.0) || self.effects.rate_m != 0.0
     }
 
     /// Coulomb friction at height `h_m` (`friction_rise` makes it grow as the billet flattens).
@@ -180,7 +165,7 @@ impl BilletLaw {
 
     /// Flow stress at height `h_m` and strain rate `epsdot_per_s`, with the load effects.
     pub fn sigma_pa(&self, h_m: f64, epsdot_per_s: f64) -> f64 {
-        let eps = self.geometry.strain_at(h_m);
+        let eps = if self.strain_dependent { self.geometry.strain_at(h_m) } else { 0.0 };
         let mut sigma = self.material.sigma_pa(eps, epsdot_per_s) * self.thermal_factor;
         let e = &self.effects;
         if e.rate_m != 0.0 {
@@ -194,24 +179,18 @@ impl BilletLaw {
 
     /// Upsetting load at height `h_m` while compressed at `epsdot_per_s` (eq. 3).
     pub fn load(&self, h_m: f64, epsdot_per_s: f64) -> UpsetLoad {
-        let r = self.geometry.radius_at(h_m);
+        let r_sq = self.r0sq_h0_m3 / h_m;
+        let r = r_sq.sqrt();
         let sigma = self.sigma_pa(h_m, epsdot_per_s);
-        let frictionless_n = PI * r * r * sigma;
+        let frictionless_n = PI * r_sq * sigma;
         let a = 2.0 * self.friction_at(h_m) * r / h_m;
-        UpsetLoad {
-            total_n: frictionless_n * friction_factor(a),
-            frictionless_n,
-        }
+        UpsetLoad { total_n: frictionless_n * friction_factor(a), frictionless_n }
     }
 }
 
 /// `F / (pi r^2 sigma)` of eq. 3: `(2/A) ((e^A - 1)/A - 1)`, which tends to 1 as A -> 0.
 pub fn friction_factor(a: f64) -> f64 {
-    if a < SMALL_A {
-        1.0 + a / 3.0 + a * a / 12.0
-    } else {
-        2.0 / a * (a.exp_m1() / a - 1.0)
-    }
+    if a < SMALL_A { 1.0 + a / 3.0 + a * a / 12.0 } else { 2.0 / a * (a.exp_m1() / a - 1.0) }
 }
 
 #[cfg(test)]
@@ -221,10 +200,7 @@ mod tests {
     fn steel() -> BilletLaw {
         // Hammer paper §2.1/§2.3.2: 60 mm x 112 mm, mu 0.2, sigma_0 90 MPa.
         BilletLaw::new(
-            BilletGeometry {
-                diameter_m: 0.060,
-                height_m: 0.112,
-            },
+            BilletGeometry { diameter_m: 0.060, height_m: 0.112 },
             FlowStress::Constant { sigma0_pa: 90e6 },
             0.2,
             LoadEffects::NEUTRAL,
@@ -243,10 +219,7 @@ mod tests {
     #[test]
     fn frictionless_limit_is_area_times_stress() {
         let law = BilletLaw::new(
-            BilletGeometry {
-                diameter_m: 0.060,
-                height_m: 0.112,
-            },
+            BilletGeometry { diameter_m: 0.060, height_m: 0.112 },
             FlowStress::Constant { sigma0_pa: 90e6 },
             0.0,
             LoadEffects::NEUTRAL,
@@ -263,24 +236,14 @@ mod tests {
         // DESIGN.md §2.1 reproduction table, billet column: eq. 3 at the simulated final
         // height of 92.93 mm gives 322 kN (±0.5 %, the table's rounding).
         let l = steel().load(0.09293, 10.0);
-        assert!(
-            (l.total_n / 322e3 - 1.0).abs() < 0.005,
-            "load at 92.93 mm: {}",
-            l.total_n
-        );
+        assert!((l.total_n / 322e3 - 1.0).abs() < 0.005, "load at 92.93 mm: {}", l.total_n);
     }
 
     #[test]
     fn friction_rise_raises_mu_as_the_billet_flattens() {
         let mut e = LoadEffects::NEUTRAL;
         e.friction_exponent = 0.5;
-        let law = BilletLaw::new(
-            steel().geometry.clone(),
-            steel().material.clone(),
-            0.2,
-            e,
-            1,
-        );
+        let law = BilletLaw::new(steel().geometry.clone(), steel().material.clone(), 0.2, e, 1);
         assert_eq!(law.friction_at(0.112), 0.2);
         assert!((law.friction_at(0.028) - 0.4).abs() < 1e-12); // (112/28)^0.5 = 2
     }

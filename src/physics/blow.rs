@@ -8,9 +8,13 @@ use super::plant::{Contact, Mode, N, Outputs, Plant, V3, VL, VR, VU, WD, WF, WP,
 
 /// Simulated time after the contact ends that a blow keeps running (CONTRACTS.md §6 `post`).
 pub const POST_WINDOW_S: f64 = 5e-3;
-/// Default relative tolerance of the step control. Chosen by the convergence test: tightening
-/// it tenfold moves the paper blow's final height by far less than 0.01 mm.
-pub const DEFAULT_RTOL: f64 = 1e-6;
+/// Default relative tolerance of the step control. On the hammer paper's blow 1, tightening
+/// it tenfold moves the final height by 0.05 µm and the final load by 0.06 kN (issue #2 asks
+/// for < 10 µm); 1e-4 would still pass that test but moves the final load by 1.6 kN.
+pub const DEFAULT_RTOL: f64 = 1e-5;
+/// Plastic flow after the end of forming smaller than this is creep, not forming, m.
+/// A tenth of the 10 µm encoder step of the press paper (seed 001 §2.1).
+pub const FORMING_CREEP_M: f64 = 1e-6;
 /// A blow that has not ended after this much simulated time is reported as an error.
 pub const MAX_BLOW_S: f64 = 1.0;
 /// More switching events than this in one blow means the contact chatters.
@@ -72,11 +76,7 @@ pub struct SimOptions {
 
 impl Default for SimOptions {
     fn default() -> Self {
-        SimOptions {
-            method: Method::Dopri5 { rtol: DEFAULT_RTOL },
-            post_s: POST_WINDOW_S,
-            trace_dt_s: None,
-        }
+        SimOptions { method: Method::Dopri5 { rtol: DEFAULT_RTOL }, post_s: POST_WINDOW_S, trace_dt_s: None }
     }
 }
 
@@ -96,12 +96,16 @@ struct Recorder<'a> {
     plant: &'a Plant,
     post_s: f64,
     peak_n: f64,
-    form_end: Option<(f64, f64, f64)>, // (t, h, sensor load)
-    zero_after_form: Option<f64>,
+    /// Every exit from plastic flow: (t, h, sensor load).
+    plastic_exits: Vec<(f64, f64, f64)>,
+    /// Every instant the sensor load reached zero outside plastic flow, after the first exit.
+    sensor_zeros: Vec<f64>,
     separation: Option<(f64, [f64; N], Mode)>,
     trace_dt: Option<f64>,
     next_sample: f64,
     trace: Vec<TracePoint>,
+    /// Sensor load and its rate at the end of the last step, reused as the next step's start.
+    last_end: Option<(f64, f64, f64)>,
 }
 
 impl Observer<N, Mode> for Recorder<'_> {
@@ -117,13 +121,14 @@ impl Observer<N, Mode> for Recorder<'_> {
     ) -> Option<f64> {
         let h = t1 - t0;
         // Peak of the sensor load within the step: the cubic through both ends.
-        let e0 = self.plant.eval(y0, mode);
-        let e1 = self.plant.eval(y1, mode);
-        let (s0, s1) = (self.plant.sensor(y0, &e0), self.plant.sensor(y1, &e1));
-        let (r0, r1) = (
-            self.plant.sensor_rate(y0, dy0, mode) * h,
-            self.plant.sensor_rate(y1, dy1, mode) * h,
-        );
+        let (s0, rate0) = match self.last_end {
+            Some((t, s, r)) if t == t0 => (s, r),
+            _ => (self.plant.sensor(y0, &self.plant.eval(y0, mode)), self.plant.sensor_rate(y0, dy0, mode)),
+        };
+        let s1 = self.plant.sensor(y1, &self.plant.eval(y1, mode));
+        let rate1 = self.plant.sensor_rate(y1, dy1, mode);
+        self.last_end = Some((t1, s1, rate1));
+        let (r0, r1) = (rate0 * h, rate1 * h);
         self.peak_n = self.peak_n.max(s0).max(s1);
         if h > 0.0 {
             for theta in cubic_extrema(s0, r0, s1, r1) {
@@ -135,10 +140,7 @@ impl Observer<N, Mode> for Recorder<'_> {
             while self.next_sample <= t1 && h > 0.0 {
                 let theta = ((self.next_sample - t0) / h).clamp(0.0, 1.0);
                 let y = integrator::hermite(y0, dy0, y1, dy1, h, theta);
-                self.trace.push(TracePoint {
-                    t_s: self.next_sample,
-                    out: self.plant.outputs(&y, mode),
-                });
+                self.trace.push(TracePoint { t_s: self.next_sample, out: self.plant.outputs(&y, mode) });
                 self.next_sample += dt;
             }
         }
@@ -146,25 +148,41 @@ impl Observer<N, Mode> for Recorder<'_> {
     }
 
     fn on_event(&mut self, t: f64, y: &[f64; N], from: Mode, to: Mode, _guard: u8) {
+        // The mode (and possibly the state) changed: the cached step end is stale.
+        self.last_end = None;
         if from.contact == Contact::Plastic && to.contact != Contact::Plastic {
             let o = self.plant.outputs(y, to);
-            self.form_end = Some((t, o.h_m, o.sensor_n));
-            self.zero_after_form = None;
+            self.plastic_exits.push((t, o.h_m, o.sensor_n));
         }
-        if to.contact != Contact::Plastic
-            && self.form_end.is_some()
-            && self.zero_after_form.is_none()
+        if to.contact != Contact::Plastic && !self.plastic_exits.is_empty() && self.plant.outputs(y, to).sensor_n <= 0.0
         {
-            let o = self.plant.outputs(y, to);
-            if o.sensor_n <= 0.0 {
-                self.zero_after_form = Some(t);
-            }
+            self.sensor_zeros.push(t);
         }
         if to.contact == Contact::Free && from.contact != Contact::Free {
             self.separation = Some((t, *y, to));
         } else if from.contact == Contact::Free && to.contact != Contact::Free {
             self.separation = None;
         }
+    }
+}
+
+/// The end of forming is the first exit from plastic flow after which the billet loses less
+/// than `FORMING_CREEP_M` more height: near the end the stick force can hover at the flow
+/// load, and a sub-micrometre re-entry must not move the end of forming (CONTRACTS.md §4:
+/// "numerical creep after that instant does not move it").
+fn forming_indicators(exits: &[(f64, f64, f64)], zeros: &[f64], h_start_m: f64, t_sep: f64) -> Forming {
+    let Some(&(_, h_final, _)) = exits.last() else {
+        // The billet never yielded: a fully elastic blow. Forming ends at first contact
+        // (load 0), and the spring-back is the whole contact.
+        return Forming { h_end_m: h_start_m, final_load_n: 0.0, forming_time_s: 0.0, spring_back_time_s: Some(t_sep) };
+    };
+    let &(t_end, h_end, load) =
+        exits.iter().find(|e| e.1 - h_final < FORMING_CREEP_M).expect("the last exit qualifies");
+    Forming {
+        h_end_m: h_end,
+        final_load_n: load,
+        forming_time_s: t_end,
+        spring_back_time_s: zeros.iter().find(|&&t| t > t_end).map(|t| t - t_end),
     }
 }
 
@@ -200,11 +218,7 @@ fn scales(plant: &Plant, v0_mps: f64, kinetic_in_j: f64) -> [f64; N] {
     let v = v0_mps.max(0.01);
     // Travel in a tenth of the fastest period, and the load that moves a spring that far.
     let x = v / (10.0 * plant.f_max_hz.max(1.0));
-    let k_ref = if plant.k_contact_n_per_m.is_finite() {
-        plant.k_contact_n_per_m
-    } else {
-        1e9
-    };
+    let k_ref = if plant.k_contact_n_per_m.is_finite() { plant.k_contact_n_per_m } else { 1e9 };
     let f = k_ref * x;
     let mut s = [x; N];
     for i in [VU, VR, VL, V3] {
@@ -218,18 +232,12 @@ fn scales(plant: &Plant, v0_mps: f64, kinetic_in_j: f64) -> [f64; N] {
 }
 
 /// Simulate one blow at impact speed `v0_mps`.
-pub fn simulate_blow(
-    plant: &Plant,
-    v0_mps: f64,
-    opts: &SimOptions,
-) -> Result<BlowResult, BlowError> {
+pub fn simulate_blow(plant: &Plant, v0_mps: f64, opts: &SimOptions) -> Result<BlowResult, BlowError> {
     if !(v0_mps.is_finite() && v0_mps > 0.0) {
         return Err(BlowError::BadSpeed { v0_mps });
     }
     if plant.billet.is_some() && !(plant.h_start_m.is_finite() && plant.h_start_m > 0.0) {
-        return Err(BlowError::BadHeight {
-            h_m: plant.h_start_m,
-        });
+        return Err(BlowError::BadHeight { h_m: plant.h_start_m });
     }
     let (y0, mode0) = plant.initial_state(v0_mps);
     let kinetic_in_j = plant.kinetic_in(&y0);
@@ -237,30 +245,18 @@ pub fn simulate_blow(
         plant,
         post_s: opts.post_s,
         peak_n: 0.0,
-        form_end: None,
-        zero_after_form: None,
+        plastic_exits: Vec::new(),
+        sensor_zeros: Vec::new(),
         separation: None,
         trace_dt: opts.trace_dt_s,
         next_sample: 0.0,
         trace: Vec::new(),
+        last_end: None,
     };
-    let limits = Limits {
-        t_max_s: MAX_BLOW_S,
-        max_events: MAX_EVENTS,
-        initial_step_s: 1e-3 / plant.f_max_hz.max(1.0),
-    };
-    let stats = integrator::integrate(
-        plant,
-        opts.method,
-        &scales(plant, v0_mps, kinetic_in_j),
-        y0,
-        mode0,
-        limits,
-        &mut rec,
-    )?;
-    let (t_sep, y_sep, mode_sep) = rec.separation.ok_or(IntegrationError::NoEnd {
-        t_max_s: MAX_BLOW_S,
-    })?;
+    let limits = Limits { t_max_s: MAX_BLOW_S, max_events: MAX_EVENTS, initial_step_s: 1e-3 / plant.f_max_hz.max(1.0) };
+    let stats =
+        integrator::integrate(plant, opts.method, &scales(plant, v0_mps, kinetic_in_j), y0, mode0, limits, &mut rec)?;
+    let (t_sep, y_sep, mode_sep) = rec.separation.ok_or(IntegrationError::NoEnd { t_max_s: MAX_BLOW_S })?;
     let energy = Ledger {
         kinetic_in_j,
         plastic_j: y_sep[WP],
@@ -268,23 +264,10 @@ pub fn simulate_blow(
         damped_j: y_sep[WD],
         elastic_j: plant.mechanical_energy(&y_sep, mode_sep),
     };
-    let forming = match (&plant.billet, rec.form_end) {
-        (None, _) => None,
-        // The billet never yielded: a fully elastic blow. Forming ends at first contact
-        // (load 0), and the spring-back is the whole contact.
-        (Some(_), None) => Some(Forming {
-            h_end_m: plant.h_start_m,
-            final_load_n: 0.0,
-            forming_time_s: 0.0,
-            spring_back_time_s: rec.zero_after_form.or(Some(t_sep)),
-        }),
-        (Some(_), Some((t_end, h_end, load))) => Some(Forming {
-            h_end_m: h_end,
-            final_load_n: load,
-            forming_time_s: t_end,
-            spring_back_time_s: rec.zero_after_form.map(|t| t - t_end),
-        }),
-    };
+    let forming = plant
+        .billet
+        .as_ref()
+        .map(|_| forming_indicators(&rec.plastic_exits, &rec.sensor_zeros, plant.h_start_m, t_sep));
     Ok(BlowResult {
         v0_mps,
         h_start_m: plant.h_start_m,

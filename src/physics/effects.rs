@@ -20,34 +20,14 @@ pub const DEFAULT_FOUNDATION_DAMPING: f64 = 0.0;
 /// One effect with its parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Effect {
-    Clearance {
-        gap_m: f64,
-    },
-    ElasticRecovery {
-        k_contact_n_per_m: f64,
-    },
-    FrictionRise {
-        exponent: f64,
-    },
-    StrainRate {
-        m: f64,
-        rate_ref_per_s: f64,
-    },
-    StrainHardening {
-        n: f64,
-        eps_ref: f64,
-    },
-    Thermal {
-        q_dt: f64,
-    },
-    Foundation {
-        m3_kg: f64,
-        k3_n_per_m: f64,
-        c3_ns_per_m: f64,
-    },
-    SensorHighpass {
-        tau_s: f64,
-    },
+    Clearance { gap_m: f64 },
+    ElasticRecovery { k_contact_n_per_m: f64 },
+    FrictionRise { exponent: f64 },
+    StrainRate { m: f64, rate_ref_per_s: f64 },
+    StrainHardening { n: f64, eps_ref: f64 },
+    Thermal { q_dt: f64 },
+    Foundation { m3_kg: f64, k3_n_per_m: f64, c3_ns_per_m: f64 },
+    SensorHighpass { tau_s: f64 },
 }
 
 /// What can be wrong with an effect spec; every variant names the effect and the key.
@@ -56,29 +36,13 @@ pub enum EffectError {
     #[error("unknown effect '{name}' (known: {})", EFFECT_NAMES.join(", "))]
     UnknownEffect { name: String },
     #[error("effect '{effect}' has no parameter '{param}' (it takes: {allowed})")]
-    UnknownParam {
-        effect: &'static str,
-        param: String,
-        allowed: String,
-    },
+    UnknownParam { effect: &'static str, param: String, allowed: String },
     #[error("effect '{effect}' needs parameter '{param}'")]
-    MissingParam {
-        effect: &'static str,
-        param: &'static str,
-    },
+    MissingParam { effect: &'static str, param: &'static str },
     #[error("effect '{effect}': '{param}={value}' is not a number")]
-    NotANumber {
-        effect: &'static str,
-        param: String,
-        value: String,
-    },
+    NotANumber { effect: &'static str, param: String, value: String },
     #[error("effect '{effect}': {param} = {value} {why}")]
-    OutOfRange {
-        effect: &'static str,
-        param: &'static str,
-        value: f64,
-        why: &'static str,
-    },
+    OutOfRange { effect: &'static str, param: &'static str, value: f64, why: &'static str },
     #[error("effect spec '{spec}' is not NAME or NAME:param=value[,param=value]")]
     Malformed { spec: String },
 }
@@ -123,15 +87,9 @@ impl Effect {
             }
             Effect::StrainHardening { n, eps_ref } => vec![("n", n), ("eps_ref", eps_ref)],
             Effect::Thermal { q_dt } => vec![("q_dT", q_dt)],
-            Effect::Foundation {
-                m3_kg,
-                k3_n_per_m,
-                c3_ns_per_m,
-            } => vec![
-                ("m3_kg", m3_kg),
-                ("k3_N_per_m", k3_n_per_m),
-                ("c3_Ns_per_m", c3_ns_per_m),
-            ],
+            Effect::Foundation { m3_kg, k3_n_per_m, c3_ns_per_m } => {
+                vec![("m3_kg", m3_kg), ("k3_N_per_m", k3_n_per_m), ("c3_Ns_per_m", c3_ns_per_m)]
+            }
             Effect::SensorHighpass { tau_s } => vec![("tau_s", tau_s)],
         }
     }
@@ -142,9 +100,7 @@ impl Effect {
             .iter()
             .copied()
             .find(|n| *n == name)
-            .ok_or_else(|| EffectError::UnknownEffect {
-                name: name.to_string(),
-            })?;
+            .ok_or_else(|| EffectError::UnknownEffect { name: name.to_string() })?;
         let allowed: &[&'static str] = match effect {
             "clearance" => &["gap_m"],
             "elastic_recovery" => &["k_contact_N_per_m"],
@@ -156,46 +112,25 @@ impl Effect {
             _ => &["tau_s"],
         };
         if let Some(bad) = given.keys().find(|k| !allowed.contains(&k.as_str())) {
-            return Err(EffectError::UnknownParam {
-                effect,
-                param: bad.clone(),
-                allowed: allowed.join(", "),
-            });
+            return Err(EffectError::UnknownParam { effect, param: bad.clone(), allowed: allowed.join(", ") });
         }
-        let req = |p: &'static str| {
-            given
-                .get(p)
-                .copied()
-                .ok_or(EffectError::MissingParam { effect, param: p })
-        };
+        let req = |p: &'static str| given.get(p).copied().ok_or(EffectError::MissingParam { effect, param: p });
         let opt = |p: &'static str, d: f64| given.get(p).copied().unwrap_or(d);
         let e = match effect {
-            "clearance" => Effect::Clearance {
-                gap_m: req("gap_m")?,
-            },
-            "elastic_recovery" => Effect::ElasticRecovery {
-                k_contact_n_per_m: req("k_contact_N_per_m")?,
-            },
-            "friction_rise" => Effect::FrictionRise {
-                exponent: req("exponent")?,
-            },
-            "strain_rate" => Effect::StrainRate {
-                m: req("m")?,
-                rate_ref_per_s: opt("rate_ref_per_s", DEFAULT_RATE_REF_PER_S),
-            },
-            "strain_hardening" => Effect::StrainHardening {
-                n: req("n")?,
-                eps_ref: opt("eps_ref", DEFAULT_EPS_REF),
-            },
+            "clearance" => Effect::Clearance { gap_m: req("gap_m")? },
+            "elastic_recovery" => Effect::ElasticRecovery { k_contact_n_per_m: req("k_contact_N_per_m")? },
+            "friction_rise" => Effect::FrictionRise { exponent: req("exponent")? },
+            "strain_rate" => {
+                Effect::StrainRate { m: req("m")?, rate_ref_per_s: opt("rate_ref_per_s", DEFAULT_RATE_REF_PER_S) }
+            }
+            "strain_hardening" => Effect::StrainHardening { n: req("n")?, eps_ref: opt("eps_ref", DEFAULT_EPS_REF) },
             "thermal" => Effect::Thermal { q_dt: req("q_dT")? },
             "foundation" => Effect::Foundation {
                 m3_kg: req("m3_kg")?,
                 k3_n_per_m: req("k3_N_per_m")?,
                 c3_ns_per_m: opt("c3_Ns_per_m", DEFAULT_FOUNDATION_DAMPING),
             },
-            _ => Effect::SensorHighpass {
-                tau_s: req("tau_s")?,
-            },
+            _ => Effect::SensorHighpass { tau_s: req("tau_s")? },
         };
         e.validate()?;
         Ok(e)
@@ -206,26 +141,14 @@ impl Effect {
         let (name, rest) = spec.split_once(':').unwrap_or((spec, ""));
         let name = name.trim();
         if name.is_empty() {
-            return Err(EffectError::Malformed {
-                spec: spec.to_string(),
-            });
+            return Err(EffectError::Malformed { spec: spec.to_string() });
         }
         let mut given = BTreeMap::new();
         for pair in rest.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-            let (k, v) = pair.split_once('=').ok_or_else(|| EffectError::Malformed {
-                spec: spec.to_string(),
-            })?;
+            let (k, v) = pair.split_once('=').ok_or_else(|| EffectError::Malformed { spec: spec.to_string() })?;
             let value: f64 = v.trim().parse().map_err(|_| {
-                let effect = EFFECT_NAMES
-                    .iter()
-                    .copied()
-                    .find(|n| *n == name)
-                    .unwrap_or("?");
-                EffectError::NotANumber {
-                    effect,
-                    param: k.trim().to_string(),
-                    value: v.trim().to_string(),
-                }
+                let effect = EFFECT_NAMES.iter().copied().find(|n| *n == name).unwrap_or("?");
+                EffectError::NotANumber { effect, param: k.trim().to_string(), value: v.trim().to_string() }
             })?;
             given.insert(k.trim().to_string(), value);
         }
@@ -235,96 +158,35 @@ impl Effect {
     fn validate(&self) -> Result<(), EffectError> {
         let effect = self.name();
         let check = |param: &'static str, value: f64, ok: bool, why: &'static str| {
-            if ok && !value.is_nan() {
-                Ok(())
-            } else {
-                Err(EffectError::OutOfRange {
-                    effect,
-                    param,
-                    value,
-                    why,
-                })
-            }
+            if ok && !value.is_nan() { Ok(()) } else { Err(EffectError::OutOfRange { effect, param, value, why }) }
         };
         match *self {
-            Effect::Clearance { gap_m } => check(
-                "gap_m",
-                gap_m,
-                (0.0..f64::INFINITY).contains(&gap_m),
-                "must be finite and >= 0 m",
-            ),
-            Effect::ElasticRecovery {
-                k_contact_n_per_m: k,
-            } => check(
-                "k_contact_N_per_m",
-                k,
-                k > 0.0,
-                "must be > 0 (infinite is neutral)",
-            ),
-            Effect::FrictionRise { exponent } => {
-                check("exponent", exponent, exponent.is_finite(), "must be finite")
+            Effect::Clearance { gap_m } => {
+                check("gap_m", gap_m, (0.0..f64::INFINITY).contains(&gap_m), "must be finite and >= 0 m")
             }
+            Effect::ElasticRecovery { k_contact_n_per_m: k } => {
+                check("k_contact_N_per_m", k, k > 0.0, "must be > 0 (infinite is neutral)")
+            }
+            Effect::FrictionRise { exponent } => check("exponent", exponent, exponent.is_finite(), "must be finite"),
             Effect::StrainRate { m, rate_ref_per_s } => {
-                check(
-                    "m",
-                    m,
-                    (0.0..f64::INFINITY).contains(&m),
-                    "must be finite and >= 0",
-                )?;
+                check("m", m, (0.0..f64::INFINITY).contains(&m), "must be finite and >= 0")?;
                 let r = rate_ref_per_s;
-                check(
-                    "rate_ref_per_s",
-                    r,
-                    r > 0.0 && r.is_finite(),
-                    "must be finite and > 0",
-                )
+                check("rate_ref_per_s", r, r > 0.0 && r.is_finite(), "must be finite and > 0")
             }
             Effect::StrainHardening { n, eps_ref } => {
-                check(
-                    "n",
-                    n,
-                    (0.0..f64::INFINITY).contains(&n),
-                    "must be finite and >= 0",
-                )?;
-                check(
-                    "eps_ref",
-                    eps_ref,
-                    eps_ref > 0.0 && eps_ref.is_finite(),
-                    "must be finite and > 0",
-                )
+                check("n", n, (0.0..f64::INFINITY).contains(&n), "must be finite and >= 0")?;
+                check("eps_ref", eps_ref, eps_ref > 0.0 && eps_ref.is_finite(), "must be finite and > 0")
             }
             Effect::Thermal { q_dt } => check("q_dT", q_dt, q_dt.is_finite(), "must be finite"),
-            Effect::Foundation {
-                m3_kg,
-                k3_n_per_m,
-                c3_ns_per_m,
-            } => {
-                check(
-                    "m3_kg",
-                    m3_kg,
-                    m3_kg > 0.0 && m3_kg.is_finite(),
-                    "must be finite and > 0 kg",
-                )?;
-                check(
-                    "k3_N_per_m",
-                    k3_n_per_m,
-                    k3_n_per_m > 0.0,
-                    "must be > 0 (infinite is neutral)",
-                )?;
+            Effect::Foundation { m3_kg, k3_n_per_m, c3_ns_per_m } => {
+                check("m3_kg", m3_kg, m3_kg > 0.0 && m3_kg.is_finite(), "must be finite and > 0 kg")?;
+                check("k3_N_per_m", k3_n_per_m, k3_n_per_m > 0.0, "must be > 0 (infinite is neutral)")?;
                 let c3 = c3_ns_per_m;
-                check(
-                    "c3_Ns_per_m",
-                    c3,
-                    (0.0..f64::INFINITY).contains(&c3),
-                    "must be finite and >= 0",
-                )
+                check("c3_Ns_per_m", c3, (0.0..f64::INFINITY).contains(&c3), "must be finite and >= 0")
             }
-            Effect::SensorHighpass { tau_s } => check(
-                "tau_s",
-                tau_s,
-                tau_s > 0.0,
-                "must be > 0 s (infinite is neutral)",
-            ),
+            Effect::SensorHighpass { tau_s } => {
+                check("tau_s", tau_s, tau_s > 0.0, "must be > 0 s (infinite is neutral)")
+            }
         }
     }
 }
@@ -386,9 +248,7 @@ impl EffectSet {
     pub fn apply(&mut self, effect: &Effect) {
         match *effect {
             Effect::Clearance { gap_m } => self.clearance_gap_m = gap_m,
-            Effect::ElasticRecovery { k_contact_n_per_m } => {
-                self.k_contact_n_per_m = k_contact_n_per_m
-            }
+            Effect::ElasticRecovery { k_contact_n_per_m } => self.k_contact_n_per_m = k_contact_n_per_m,
             Effect::FrictionRise { exponent } => self.load.friction_exponent = exponent,
             Effect::StrainRate { m, rate_ref_per_s } => {
                 self.load.rate_m = m;
@@ -399,16 +259,8 @@ impl EffectSet {
                 self.load.hardening_eps_ref = eps_ref;
             }
             Effect::Thermal { q_dt } => self.load.thermal_q_dt = q_dt,
-            Effect::Foundation {
-                m3_kg,
-                k3_n_per_m,
-                c3_ns_per_m,
-            } => {
-                self.foundation = k3_n_per_m.is_finite().then_some(Foundation {
-                    m3_kg,
-                    k3_n_per_m,
-                    c3_ns_per_m,
-                })
+            Effect::Foundation { m3_kg, k3_n_per_m, c3_ns_per_m } => {
+                self.foundation = k3_n_per_m.is_finite().then_some(Foundation { m3_kg, k3_n_per_m, c3_ns_per_m })
             }
             Effect::SensorHighpass { tau_s } => self.highpass_tau_s = tau_s,
         }
@@ -447,17 +299,11 @@ mod tests {
     #[test]
     fn bad_specs_name_what_is_wrong() {
         let err = Effect::parse_spec("clearence:gap_m=1e-4").unwrap_err();
-        assert!(
-            err.to_string().contains("unknown effect 'clearence'"),
-            "{err}"
-        );
+        assert!(err.to_string().contains("unknown effect 'clearence'"), "{err}");
         let err = Effect::parse_spec("clearance:gap=1e-4").unwrap_err();
         assert!(err.to_string().contains("no parameter 'gap'"), "{err}");
         let err = Effect::parse_spec("clearance:gap_m=abc").unwrap_err();
-        assert!(
-            err.to_string().contains("'gap_m=abc' is not a number"),
-            "{err}"
-        );
+        assert!(err.to_string().contains("'gap_m=abc' is not a number"), "{err}");
         let err = Effect::parse_spec("clearance").unwrap_err();
         assert!(err.to_string().contains("needs parameter 'gap_m'"), "{err}");
         let err = Effect::parse_spec("sensor_highpass:tau_s=-1").unwrap_err();
@@ -469,13 +315,7 @@ mod tests {
     #[test]
     fn optional_parameters_take_their_named_defaults() {
         let e = Effect::parse_spec("strain_rate:m=0.1").unwrap();
-        assert_eq!(
-            e,
-            Effect::StrainRate {
-                m: 0.1,
-                rate_ref_per_s: DEFAULT_RATE_REF_PER_S
-            }
-        );
+        assert_eq!(e, Effect::StrainRate { m: 0.1, rate_ref_per_s: DEFAULT_RATE_REF_PER_S });
     }
 
     #[test]

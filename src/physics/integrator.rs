@@ -23,9 +23,9 @@ const MIN_SHRINK: f64 = 0.2;
 /// Which sign change of a guard counts as its event.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Crossing {
-    /// From strictly negative to non-negative.
+    /// From non-positive to strictly positive.
     Rising,
-    /// From strictly positive to non-positive.
+    /// From non-negative to strictly negative.
     Falling,
 }
 
@@ -41,12 +41,7 @@ pub struct Guards {
 
 impl Guards {
     pub fn new() -> Self {
-        Guards {
-            value: [0.0; MAX_GUARDS],
-            crossing: [Crossing::Rising; MAX_GUARDS],
-            id: [0; MAX_GUARDS],
-            len: 0,
-        }
+        Guards { value: [0.0; MAX_GUARDS], crossing: [Crossing::Rising; MAX_GUARDS], id: [0; MAX_GUARDS], len: 0 }
     }
 
     pub fn push(&mut self, id: u8, value: f64, crossing: Crossing) {
@@ -57,11 +52,15 @@ impl Guards {
         self.len += 1;
     }
 
+    /// A guard fires when the step ends strictly on its triggering side having started on
+    /// the other side or exactly at zero. A mode entered at a switch often starts with a
+    /// guard at exactly zero (entering `Plastic` from `Stuck`, the relative velocity is 0):
+    /// if it then moves the wrong way at once, the mode must end at once.
     fn fired(&self, i: usize, start: f64) -> bool {
         let end = self.value[i];
         match self.crossing[i] {
-            Crossing::Rising => start < 0.0 && end >= 0.0,
-            Crossing::Falling => start > 0.0 && end <= 0.0,
+            Crossing::Rising => start <= 0.0 && end > 0.0,
+            Crossing::Falling => start >= 0.0 && end < 0.0,
         }
     }
 }
@@ -127,19 +126,9 @@ pub struct Stats {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum IntegrationError {
     #[error("step size fell below {min_step_s:e} s at t = {t_s:e} s (mode {mode})")]
-    StepTooSmall {
-        t_s: f64,
-        min_step_s: f64,
-        mode: String,
-    },
-    #[error(
-        "more than {max_events} switching events by t = {t_s:e} s (the contact chatters; mode {mode})"
-    )]
-    Chatter {
-        t_s: f64,
-        max_events: u32,
-        mode: String,
-    },
+    StepTooSmall { t_s: f64, min_step_s: f64, mode: String },
+    #[error("more than {max_events} switching events by t = {t_s:e} s (the contact chatters; mode {mode})")]
+    Chatter { t_s: f64, max_events: u32, mode: String },
     #[error("the state became non-finite at t = {t_s:e} s (mode {mode})")]
     NonFinite { t_s: f64, mode: String },
     #[error("no end within {t_max_s} s of simulated time")]
@@ -195,9 +184,7 @@ where
             return if t_stop < limits.t_max_s {
                 Ok(stats)
             } else {
-                Err(IntegrationError::NoEnd {
-                    t_max_s: limits.t_max_s,
-                })
+                Err(IntegrationError::NoEnd { t_max_s: limits.t_max_s })
             };
         }
         let h_try = h.min(t_stop - t);
@@ -208,11 +195,7 @@ where
                 stats.rhs_evals += 6;
                 if !err.is_finite() || err > 1.0 {
                     stats.rejected += 1;
-                    let shrink = if err.is_finite() {
-                        (SAFETY * err.powf(-0.2)).max(MIN_SHRINK)
-                    } else {
-                        MIN_SHRINK
-                    };
+                    let shrink = if err.is_finite() { (SAFETY * err.powf(-0.2)).max(MIN_SHRINK) } else { MIN_SHRINK };
                     h = h_try * shrink;
                     if h < min_step {
                         return Err(IntegrationError::StepTooSmall {
@@ -223,11 +206,7 @@ where
                     }
                     continue;
                 }
-                let grow = if err > 0.0 {
-                    (SAFETY * err.powf(-0.2)).min(MAX_GROWTH)
-                } else {
-                    MAX_GROWTH
-                };
+                let grow = if err > 0.0 { (SAFETY * err.powf(-0.2)).min(MAX_GROWTH) } else { MAX_GROWTH };
                 h = (h_try * grow).min(h_max);
                 (ws.y_new, ws.k[6])
             }
@@ -241,10 +220,7 @@ where
             }
         };
         if y1.iter().any(|v| !v.is_finite()) {
-            return Err(IntegrationError::NonFinite {
-                t_s: t + h_try,
-                mode: format!("{mode:?}"),
-            });
+            return Err(IntegrationError::NonFinite { t_s: t + h_try, mode: format!("{mode:?}") });
         }
 
         // Did a guard fire inside this step?
@@ -253,19 +229,7 @@ where
         let mut earliest: Option<(f64, u8)> = None;
         for i in 0..guards.len.min(g1.len) {
             if g1.fired(i, guards.value[i]) {
-                let theta = locate(
-                    sys,
-                    mode,
-                    &y,
-                    &dy,
-                    &y1,
-                    &dy1,
-                    h_try,
-                    i,
-                    guards.value[i],
-                    g1.value[i],
-                    &mut stats,
-                );
+                let theta = locate(sys, mode, &y, &dy, &y1, &dy1, h_try, i, guards.value[i], g1.value[i], &mut stats);
                 if earliest.is_none_or(|(th, _)| theta < th) {
                     earliest = Some((theta, g1.id[i]));
                 }
@@ -275,9 +239,8 @@ where
         match earliest {
             None => {
                 stats.steps += 1;
-                t_stop = obs
-                    .on_step(t, &y, &dy, t + h_try, &y1, &dy1, mode)
-                    .map_or(limits.t_max_s, |ts| ts.max(t + h_try));
+                t_stop =
+                    obs.on_step(t, &y, &dy, t + h_try, &y1, &dy1, mode).map_or(limits.t_max_s, |ts| ts.max(t + h_try));
                 t += h_try;
                 y = y1;
                 dy = dy1;
@@ -305,9 +268,8 @@ where
                     (y, dy)
                 };
                 stats.steps += 1;
-                t_stop = obs
-                    .on_step(t, &y, &dy, t + h_ev, &ye, &dye, mode)
-                    .map_or(limits.t_max_s, |ts| ts.max(t + h_ev));
+                t_stop =
+                    obs.on_step(t, &y, &dy, t + h_ev, &ye, &dye, mode).map_or(limits.t_max_s, |ts| ts.max(t + h_ev));
                 t += h_ev;
                 y = ye;
                 let from = mode;
@@ -339,11 +301,7 @@ struct Workspace<const N: usize> {
 
 impl<const N: usize> Workspace<N> {
     fn new() -> Self {
-        Workspace {
-            k: [[0.0; N]; 7],
-            y_new: [0.0; N],
-            tmp: [0.0; N],
-        }
+        Workspace { k: [[0.0; N]; 7], y_new: [0.0; N], tmp: [0.0; N] }
     }
 }
 
@@ -404,12 +362,8 @@ fn dopri5_step<const N: usize, S: Hybrid<N>>(
     stage!(4, A51 => 0, A52 => 1, A53 => 2, A54 => 3);
     stage!(5, A61 => 0, A62 => 1, A63 => 2, A64 => 3, A65 => 4);
     for i in 0..N {
-        ws.y_new[i] = y[i]
-            + h * (B1 * ws.k[0][i]
-                + B3 * ws.k[2][i]
-                + B4 * ws.k[3][i]
-                + B5 * ws.k[4][i]
-                + B6 * ws.k[5][i]);
+        ws.y_new[i] =
+            y[i] + h * (B1 * ws.k[0][i] + B3 * ws.k[2][i] + B4 * ws.k[3][i] + B5 * ws.k[4][i] + B6 * ws.k[5][i]);
     }
     let (y_new, k) = (&ws.y_new, &mut ws.k);
     sys.rhs(y_new, mode, &mut k[6]);
@@ -446,8 +400,7 @@ fn rk4_step<const N: usize, S: Hybrid<N>>(
         sys.rhs(tmp, mode, &mut k[stage]);
     }
     for i in 0..N {
-        ws.y_new[i] =
-            y[i] + h / 6.0 * (ws.k[0][i] + 2.0 * ws.k[1][i] + 2.0 * ws.k[2][i] + ws.k[3][i]);
+        ws.y_new[i] = y[i] + h / 6.0 * (ws.k[0][i] + 2.0 * ws.k[1][i] + 2.0 * ws.k[2][i] + ws.k[3][i]);
     }
 }
 
@@ -590,22 +543,9 @@ mod tests {
 
     fn run(method: Method) -> f64 {
         let mut rec = Record(None);
-        let limits = Limits {
-            t_max_s: 10.0,
-            max_events: 10,
-            initial_step_s: 1e-3,
-        };
+        let limits = Limits { t_max_s: 10.0, max_events: 10, initial_step_s: 1e-3 };
         // x = cos t starts positive and first falls through zero at t = pi/2.
-        integrate(
-            &Oscillator,
-            method,
-            &[1.0, 1.0],
-            [1.0, 0.0],
-            M::Swing,
-            limits,
-            &mut rec,
-        )
-        .unwrap();
+        integrate(&Oscillator, method, &[1.0, 1.0], [1.0, 0.0], M::Swing, limits, &mut rec).unwrap();
         rec.0.unwrap()
     }
 

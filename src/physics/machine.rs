@@ -128,11 +128,7 @@ mod tests {
             c_ns_per_m: 18540.0,
             k_tool_contact_n_per_m: DEFAULT_HAMMER_TOOL_CONTACT_N_PER_M,
         });
-        assert!(
-            (m.second_mode_hz() - 2049.0).abs() < 1.0,
-            "{}",
-            m.second_mode_hz()
-        );
+        assert!((m.second_mode_hz() - 2049.0).abs() < 1.0, "{}", m.second_mode_hz());
     }
 
     #[test]

@@ -34,11 +34,7 @@ pub struct Uncertainty {
 
 impl Default for Uncertainty {
     fn default() -> Self {
-        Uncertainty {
-            v0_mps: 0.20,
-            friction: 0.05,
-            load_n: 300e3,
-        }
+        Uncertainty { v0_mps: 0.20, friction: 0.05, load_n: 300e3 }
     }
 }
 
@@ -60,11 +56,7 @@ impl Band {
             let (lo, frac) = (pos.floor() as usize, pos - pos.floor());
             xs[lo] + frac * (xs[(lo + 1).min(n - 1)] - xs[lo])
         };
-        Band {
-            mean: xs.iter().sum::<f64>() / n as f64,
-            p2_5: q(0.025),
-            p97_5: q(0.975),
-        }
+        Band { mean: xs.iter().sum::<f64>() / n as f64, p2_5: q(0.025), p97_5: q(0.975) }
     }
 }
 
@@ -113,40 +105,24 @@ pub fn monte_carlo(
     if runs < 2 {
         return Err(MonteCarloError::TooFewRuns(runs));
     }
-    for (name, b) in [
-        ("v0", unc.v0_mps),
-        ("friction", unc.friction),
-        ("load", unc.load_n),
-    ] {
+    for (name, b) in [("v0", unc.v0_mps), ("friction", unc.friction), ("load", unc.load_n)] {
         if !(b.is_finite() && b >= 0.0) {
             return Err(MonteCarloError::BadBound(name));
         }
     }
-    let normal =
-        |bound: f64| Normal::new(0.0, bound / BOUND_95_PER_SD).expect("sd checked finite and >= 0");
+    let normal = |bound: f64| Normal::new(0.0, bound / BOUND_95_PER_SD).expect("sd checked finite and >= 0");
     let (dv, dmu, dload) = (normal(unc.v0_mps), normal(unc.friction), normal(unc.load_n));
     let outcomes: Vec<Option<Vec<(f64, f64, f64)>>> = (0..runs)
         .into_par_iter()
         .map(|i| {
-            let mut rng = StdRng::seed_from_u64(
-                seed.wrapping_mul(0x9E37_79B9_7F4A_7C15)
-                    .wrapping_add(i as u64),
-            );
+            let mut rng = StdRng::seed_from_u64(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(i as u64));
             let mut p = process.clone();
             p.friction = (process.friction + dmu.sample(&mut rng)).max(0.0);
             let v0s: Vec<f64> = v0s_mps.iter().map(|v| v + dv.sample(&mut rng)).collect();
             let blows = simulate_sequence(machine, effects, &p, &v0s, opts).ok()?;
             blows
                 .iter()
-                .map(|b| {
-                    b.forming.map(|f| {
-                        (
-                            f.final_load_n + dload.sample(&mut rng),
-                            f.h_end_m,
-                            b.efficiency(),
-                        )
-                    })
-                })
+                .map(|b| b.forming.map(|f| (f.final_load_n + dload.sample(&mut rng), f.h_end_m, b.efficiency())))
                 .collect()
         })
         .collect();
@@ -162,12 +138,7 @@ pub fn monte_carlo(
             efficiency: Band::of(ok.iter().map(|r| r[j].2).collect()),
         })
         .collect();
-    Ok(MonteCarlo {
-        runs,
-        seed,
-        failed: runs - ok.len(),
-        blows,
-    })
+    Ok(MonteCarlo { runs, seed, failed: runs - ok.len(), blows })
 }
 
 #[cfg(test)]

@@ -15,6 +15,11 @@ use super::effects::{EffectSet, Foundation};
 use super::integrator::{Crossing, Guards, Hybrid};
 use super::machine::{Machine, series};
 
+/// Longest step as a fraction of the fastest local mode's period. A guard that oscillates
+/// with that mode cannot cross zero twice within a quarter period; step control usually
+/// keeps the steps shorter anyway.
+const MAX_STEP_PERIODS: f64 = 0.25;
+
 /// Length of the state vector.
 pub const N: usize = 14;
 
@@ -68,17 +73,10 @@ const G_SENSOR_ZERO: u8 = 9;
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Lower {
     /// Hammer: lower tool mass on the frame spring and damper (they carry the sensor load).
-    Mass {
-        m_kg: f64,
-        k_n_per_m: f64,
-        c_ns_per_m: f64,
-    },
+    Mass { m_kg: f64, k_n_per_m: f64, c_ns_per_m: f64 },
     /// Press: massless sensor in series with the frame. With `c_frame > 0` the node between
     /// them is a first-order state; otherwise the frame is folded into the contact series.
-    Chain {
-        k_frame_n_per_m: f64,
-        c_frame_ns_per_m: f64,
-    },
+    Chain { k_frame_n_per_m: f64, c_frame_ns_per_m: f64 },
 }
 
 /// The machine, billet and effects of one blow, ready to integrate.
@@ -125,87 +123,42 @@ pub(super) struct Eval {
 impl Plant {
     /// Build the blow of `machine` with `effects` on a billet of height `h_start_m`
     /// described by `billet` (`None`: a bare strike, tool on tool).
-    pub fn new(
-        machine: &Machine,
-        effects: &EffectSet,
-        billet: Option<BilletLaw>,
-        h_start_m: f64,
-    ) -> Plant {
+    pub fn new(machine: &Machine, effects: &EffectSet, billet: Option<BilletLaw>, h_start_m: f64) -> Plant {
         let kc_effect = effects.k_contact_n_per_m;
-        let (m_upper_kg, ram, lower, k_contact, node, gap_support_m, gap_contact_m) = match *machine
-        {
+        let (m_upper_kg, ram, lower, k_contact, node, gap_support_m, gap_contact_m) = match *machine {
             Machine::Hammer(h) => {
-                let k_contact = if billet.is_some() {
-                    kc_effect
-                } else {
-                    series(h.k_tool_contact_n_per_m, kc_effect)
-                };
-                let lower = Lower::Mass {
-                    m_kg: h.m2_kg,
-                    k_n_per_m: h.k_n_per_m,
-                    c_ns_per_m: h.c_ns_per_m,
-                };
-                (
-                    h.m1_kg,
-                    None,
-                    lower,
-                    k_contact,
-                    false,
-                    effects.clearance_gap_m,
-                    0.0,
-                )
+                let k_contact = if billet.is_some() { kc_effect } else { series(h.k_tool_contact_n_per_m, kc_effect) };
+                let lower = Lower::Mass { m_kg: h.m2_kg, k_n_per_m: h.k_n_per_m, c_ns_per_m: h.c_ns_per_m };
+                (h.m1_kg, None, lower, k_contact, false, effects.clearance_gap_m, 0.0)
             }
             Machine::ScrewPress(p) => {
                 let node = p.c_frame_ns_per_m > 0.0;
-                let mut k = series(
-                    series(p.k_sensor_n_per_m, p.k_tool_contact_n_per_m),
-                    kc_effect,
-                );
+                let mut k = series(series(p.k_sensor_n_per_m, p.k_tool_contact_n_per_m), kc_effect);
                 if !node {
                     k = series(k, p.k_frame_n_per_m);
                 }
-                let lower = Lower::Chain {
-                    k_frame_n_per_m: p.k_frame_n_per_m,
-                    c_frame_ns_per_m: p.c_frame_ns_per_m,
-                };
+                let lower = Lower::Chain { k_frame_n_per_m: p.k_frame_n_per_m, c_frame_ns_per_m: p.c_frame_ns_per_m };
                 let ram = Some((p.m_ram_kg, p.k_link_n_per_m, p.c_link_ns_per_m));
-                (
-                    p.m_tool_kg,
-                    ram,
-                    lower,
-                    k,
-                    node,
-                    0.0,
-                    effects.clearance_gap_m,
-                )
+                (p.m_tool_kg, ram, lower, k, node, 0.0, effects.clearance_gap_m)
             }
         };
         let rate_dependent = billet.as_ref().is_some_and(|b| b.is_rate_dependent());
         // Fastest local mode: each body against everything that holds it.
         let mut f2: f64 = 0.0;
-        let kc_fin = if k_contact.is_finite() {
-            k_contact
-        } else {
-            0.0
-        };
+        let kc_fin = if k_contact.is_finite() { k_contact } else { 0.0 };
         if let Some((m_r, k_l, _)) = ram {
             f2 = f2.max(k_l / m_r);
             f2 = f2.max((k_l + kc_fin) / m_upper_kg);
         } else {
             f2 = f2.max(kc_fin / m_upper_kg);
         }
-        if let Lower::Mass {
-            m_kg, k_n_per_m, ..
-        } = lower
-        {
+        if let Lower::Mass { m_kg, k_n_per_m, .. } = lower {
             f2 = f2.max((k_n_per_m + kc_fin) / m_kg);
         }
         if let Some(f) = effects.foundation {
             let k_above = match lower {
                 Lower::Mass { k_n_per_m, .. } => k_n_per_m,
-                Lower::Chain {
-                    k_frame_n_per_m, ..
-                } => k_frame_n_per_m,
+                Lower::Chain { k_frame_n_per_m, .. } => k_frame_n_per_m,
             };
             f2 = f2.max((f.k3_n_per_m + k_above) / f.m3_kg);
         }
@@ -223,7 +176,7 @@ impl Plant {
             billet,
             h_start_m,
             rate_dependent,
-            max_step_s: 1.0 / (8.0 * f_max_hz),
+            max_step_s: MAX_STEP_PERIODS / f_max_hz,
             f_max_hz,
         }
     }
@@ -245,22 +198,14 @@ impl Plant {
 
     pub(super) fn eval(&self, y: &[f64; N], mode: Mode) -> Eval {
         let mut e = Eval::default();
-        let (x3, v3) = if self.foundation.is_some() {
-            (y[X3], y[V3])
-        } else {
-            (0.0, 0.0)
-        };
+        let (x3, v3) = if self.foundation.is_some() { (y[X3], y[V3]) } else { (0.0, 0.0) };
         e.link_n = match self.ram {
             Some((_, k, c)) => k * (y[XR] - y[XU]) + c * (y[VR] - y[VU]),
             None => 0.0,
         };
         e.h_m = self.h_start_m - y[P];
         match self.lower {
-            Lower::Mass {
-                m_kg,
-                k_n_per_m,
-                c_ns_per_m,
-            } => {
+            Lower::Mass { m_kg, k_n_per_m, c_ns_per_m } => {
                 e.delta_m = y[XU] - y[XL];
                 e.ddelta_mps = y[VU] - y[VL];
                 e.support_n = if mode.engaged {
@@ -268,28 +213,32 @@ impl Plant {
                 } else {
                     0.0
                 };
-                e.stick_n = (e.link_n / self.m_upper_kg + e.support_n / m_kg)
-                    / (1.0 / self.m_upper_kg + 1.0 / m_kg);
+                e.stick_n = (e.link_n / self.m_upper_kg + e.support_n / m_kg) / (1.0 / self.m_upper_kg + 1.0 / m_kg);
             }
-            Lower::Chain {
-                k_frame_n_per_m,
-                c_frame_ns_per_m,
-            } => {
-                let xl = if self.node { y[XN] } else { x3 };
-                e.delta_m = y[XU] - xl;
-                // The node's velocity follows from its force balance once the contact force
-                // is known; the approach rate uses the base's velocity (see `consistency`).
-                e.ddelta_mps = y[VU] - v3;
-                let _ = (k_frame_n_per_m, c_frame_ns_per_m);
-            }
+            Lower::Chain { .. } => e.delta_m = y[XU] - if self.node { y[XN] } else { x3 },
         }
-        let (total, frictionless) = self.upset(e.h_m, e.ddelta_mps);
-        e.frictionless_share = if total.is_finite() && total > 0.0 {
-            frictionless / total
+        // A compliant contact's force follows from positions alone.
+        if !self.rigid() && mode.contact != Contact::Free {
+            e.contact_n = self.k_contact_n_per_m * (e.delta_m - y[P] - self.gap_contact_m).max(0.0);
+        }
+        // The press's frame node moves by its force balance; the billet is squeezed at the
+        // tool's velocity relative to it.
+        if let Lower::Chain { k_frame_n_per_m, c_frame_ns_per_m } = self.lower {
+            let v_lower = if self.node {
+                e.vn_mps = v3 + (e.contact_n - k_frame_n_per_m * (y[XN] - x3)) / c_frame_ns_per_m;
+                e.vn_mps
+            } else {
+                v3
+            };
+            e.ddelta_mps = y[VU] - v_lower;
+        }
+        // The upsetting load is needed only while the billet flows.
+        let (total, frictionless) = if mode.contact == Contact::Plastic {
+            self.upset(e.h_m, e.ddelta_mps)
         } else {
-            1.0
+            (f64::INFINITY, f64::INFINITY)
         };
-        // Contact force and plastic rate.
+        e.frictionless_share = if total.is_finite() && total > 0.0 { frictionless / total } else { 1.0 };
         if self.rigid() {
             match mode.contact {
                 Contact::Free | Contact::Elastic => {}
@@ -299,20 +248,6 @@ impl Plant {
                     e.p_rate_mps = e.ddelta_mps;
                 }
             }
-        } else {
-            let compression = e.delta_m - y[P] - self.gap_contact_m;
-            if mode.contact != Contact::Free {
-                e.contact_n = self.k_contact_n_per_m * compression.max(0.0);
-            }
-        }
-        // Node velocity (press with a damped frame).
-        if let Lower::Chain {
-            k_frame_n_per_m,
-            c_frame_ns_per_m,
-        } = self.lower
-            && self.node
-        {
-            e.vn_mps = v3 + (e.contact_n - k_frame_n_per_m * (y[XN] - x3)) / c_frame_ns_per_m;
         }
         // Accelerations of the bodies either side of the billet.
         e.acc_upper = (e.link_n - e.contact_n) / self.m_upper_kg;
@@ -320,6 +255,11 @@ impl Plant {
             Lower::Mass { m_kg, .. } => (e.contact_n - e.support_n) / m_kg,
             Lower::Chain { .. } => self.foundation_acc(y, e.contact_n),
         };
+        if mode.contact == Contact::Stuck {
+            // Stuck bodies share one acceleration, bit for bit, so the relative velocity
+            // stays exactly zero and the guards that leave the phase see a clean start.
+            e.acc_lower = e.acc_upper;
+        }
         if !self.rigid() && mode.contact == Contact::Plastic {
             e.p_rate_mps = self.consistency(&e, total);
         }
@@ -365,36 +305,24 @@ impl Plant {
 
     /// Sensor output: the raw load, or the high-passed one with `sensor_highpass`.
     pub(super) fn sensor(&self, y: &[f64; N], e: &Eval) -> f64 {
-        if self.highpass_tau_s.is_finite() {
-            e.sensor_raw_n - y[Z]
-        } else {
-            e.sensor_raw_n
-        }
+        if self.highpass_tau_s.is_finite() { e.sensor_raw_n - y[Z] } else { e.sensor_raw_n }
     }
 
     /// Mechanical energy in the machine (kinetic plus spring), J.
     pub fn mechanical_energy(&self, y: &[f64; N], mode: Mode) -> f64 {
-        let (x3, v3) = if self.foundation.is_some() {
-            (y[X3], y[V3])
-        } else {
-            (0.0, 0.0)
-        };
+        let (x3, v3) = if self.foundation.is_some() { (y[X3], y[V3]) } else { (0.0, 0.0) };
         let mut e = 0.5 * self.m_upper_kg * y[VU] * y[VU];
         if let Some((m, k, _)) = self.ram {
             e += 0.5 * m * y[VR] * y[VR] + 0.5 * k * (y[XR] - y[XU]).powi(2);
         }
         match self.lower {
-            Lower::Mass {
-                m_kg, k_n_per_m, ..
-            } => {
+            Lower::Mass { m_kg, k_n_per_m, .. } => {
                 e += 0.5 * m_kg * y[VL] * y[VL];
                 if mode.engaged {
                     e += 0.5 * k_n_per_m * (y[XL] - x3 - self.gap_support_m).powi(2);
                 }
             }
-            Lower::Chain {
-                k_frame_n_per_m, ..
-            } => {
+            Lower::Chain { k_frame_n_per_m, .. } => {
                 if self.node {
                     e += 0.5 * k_frame_n_per_m * (y[XN] - x3).powi(2);
                 }
@@ -427,10 +355,7 @@ impl Plant {
             y[VL] = v0_mps;
         }
         let engaged = self.gap_support_m == 0.0;
-        let mut mode = Mode {
-            contact: Contact::Elastic,
-            engaged,
-        };
+        let mut mode = Mode { contact: Contact::Elastic, engaged };
         if self.rigid() {
             mode.contact = Contact::Free;
             mode = self.on_event(&mut y, mode, G_TOUCH);
@@ -440,34 +365,18 @@ impl Plant {
 
     /// Energy the moving bodies bring to the blow, J.
     pub fn kinetic_in(&self, y0: &[f64; N]) -> f64 {
-        self.mechanical_energy(
-            y0,
-            Mode {
-                contact: Contact::Free,
-                engaged: false,
-            },
-        )
+        self.mechanical_energy(y0, Mode { contact: Contact::Free, engaged: false })
     }
 
     /// Where the rigid contact goes when the billet touches or the bodies stop approaching.
     fn classify_rigid(&self, y: &mut [f64; N], mode: Mode, approaching: bool) -> Contact {
-        let e = self.eval(
-            y,
-            Mode {
-                contact: Contact::Free,
-                ..mode
-            },
-        );
+        let e = self.eval(y, Mode { contact: Contact::Free, ..mode });
         let (f_l, _) = self.upset(e.h_m, e.ddelta_mps);
         if approaching || e.stick_n >= f_l {
             y[P] = e.delta_m;
             Contact::Plastic
         } else if e.stick_n > 0.0 {
-            if let Lower::Mass { m_kg, .. } = self.lower {
-                let v = (self.m_upper_kg * y[VU] + m_kg * y[VL]) / (self.m_upper_kg + m_kg);
-                y[VU] = v;
-                y[VL] = v;
-            }
+            self.common_velocity(y);
             Contact::Stuck
         } else {
             Contact::Free
@@ -497,9 +406,26 @@ impl Plant {
                     next.contact = Contact::Free;
                 }
             }
+            // Entering plastic flow where the billet would already be unloading (the rate from
+            // the consistency condition is negative) leaves no guard to end it: it is elastic.
+            Contact::Plastic if !self.rigid() => {
+                if self.eval(y, mode).p_rate_mps < 0.0 {
+                    next.contact = Contact::Elastic;
+                }
+            }
             Contact::Free | Contact::Plastic => {}
         }
         next
+    }
+
+    /// Give both bodies either side of a rigid contact their common (momentum-weighted)
+    /// velocity. Used where the relative velocity is zero up to the event's tolerance.
+    fn common_velocity(&self, y: &mut [f64; N]) {
+        if let Lower::Mass { m_kg, .. } = self.lower {
+            let v = (self.m_upper_kg * y[VU] + m_kg * y[VL]) / (self.m_upper_kg + m_kg);
+            y[VU] = v;
+            y[VL] = v;
+        }
     }
 
     /// Outputs at a state: (sensor load, billet force, upper position, lower position, height).
@@ -510,29 +436,15 @@ impl Plant {
             Lower::Chain { .. } if self.node => y[XN],
             Lower::Chain { .. } => y[X3],
         };
-        Outputs {
-            sensor_n: self.sensor(y, &e),
-            billet_n: e.contact_n,
-            upper_m: y[XU],
-            lower_m,
-            h_m: e.h_m,
-        }
+        Outputs { sensor_n: self.sensor(y, &e), billet_n: e.contact_n, upper_m: y[XU], lower_m, h_m: e.h_m }
     }
 
     /// Rate of the sensor output, for peak interpolation within a step.
     pub(super) fn sensor_rate(&self, y: &[f64; N], dy: &[f64; N], mode: Mode) -> f64 {
         let raw = match self.lower {
-            Lower::Mass {
-                k_n_per_m,
-                c_ns_per_m,
-                ..
-            } => {
+            Lower::Mass { k_n_per_m, c_ns_per_m, .. } => {
                 if mode.engaged {
-                    let (v3, a3) = if self.foundation.is_some() {
-                        (y[V3], dy[V3])
-                    } else {
-                        (0.0, 0.0)
-                    };
+                    let (v3, a3) = if self.foundation.is_some() { (y[V3], dy[V3]) } else { (0.0, 0.0) };
                     k_n_per_m * (y[VL] - v3) + c_ns_per_m * (dy[VL] - a3)
                 } else {
                     0.0
@@ -553,11 +465,7 @@ impl Plant {
                 }
             }
         };
-        if self.highpass_tau_s.is_finite() {
-            raw - dy[Z]
-        } else {
-            raw
-        }
+        if self.highpass_tau_s.is_finite() { raw - dy[Z] } else { raw }
     }
 }
 
@@ -576,11 +484,7 @@ impl Hybrid<N> for Plant {
 
     fn rhs(&self, y: &[f64; N], mode: Mode, dy: &mut [f64; N]) {
         let e = self.eval(y, mode);
-        let (x3v, v3) = if self.foundation.is_some() {
-            (y[X3], y[V3])
-        } else {
-            (0.0, 0.0)
-        };
+        let (x3v, v3) = if self.foundation.is_some() { (y[X3], y[V3]) } else { (0.0, 0.0) };
         let _ = x3v;
         dy[XU] = y[VU];
         dy[VU] = e.acc_upper;
@@ -604,9 +508,7 @@ impl Hybrid<N> for Plant {
                 down_n = e.support_n;
                 dy[XN] = 0.0;
             }
-            Lower::Chain {
-                c_frame_ns_per_m, ..
-            } => {
+            Lower::Chain { c_frame_ns_per_m, .. } => {
                 dy[XL] = 0.0;
                 dy[VL] = 0.0;
                 if self.node {
@@ -626,11 +528,7 @@ impl Hybrid<N> for Plant {
             dy[V3] = 0.0;
         }
         dy[P] = e.p_rate_mps;
-        dy[Z] = if self.highpass_tau_s.is_finite() {
-            (e.sensor_raw_n - y[Z]) / self.highpass_tau_s
-        } else {
-            0.0
-        };
+        dy[Z] = if self.highpass_tau_s.is_finite() { (e.sensor_raw_n - y[Z]) / self.highpass_tau_s } else { 0.0 };
         let work = e.contact_n * e.p_rate_mps;
         dy[WP] = work * e.frictionless_share;
         dy[WF] = work * (1.0 - e.frictionless_share);
@@ -641,9 +539,7 @@ impl Hybrid<N> for Plant {
         let e = self.eval(y, mode);
         if self.rigid() {
             match mode.contact {
-                Contact::Free | Contact::Elastic => {
-                    out.push(G_TOUCH, e.delta_m - y[P], Crossing::Rising)
-                }
+                Contact::Free | Contact::Elastic => out.push(G_TOUCH, e.delta_m - y[P], Crossing::Rising),
                 Contact::Plastic => out.push(G_REL_VEL_ZERO, e.ddelta_mps, Crossing::Falling),
                 Contact::Stuck => {
                     let (f_l, _) = self.upset(e.h_m, 0.0);
@@ -666,11 +562,7 @@ impl Hybrid<N> for Plant {
             }
         }
         if self.gap_support_m > 0.0 {
-            let x3 = if self.foundation.is_some() {
-                y[X3]
-            } else {
-                0.0
-            };
+            let x3 = if self.foundation.is_some() { y[X3] } else { 0.0 };
             let closure = y[XL] - x3 - self.gap_support_m;
             if mode.engaged {
                 out.push(G_DISENGAGE, closure, Crossing::Falling);
@@ -687,12 +579,7 @@ impl Hybrid<N> for Plant {
         let mut next = mode;
         match guard_id {
             G_TOUCH if self.rigid() => {
-                let approaching = y[VU]
-                    > if matches!(self.lower, Lower::Mass { .. }) {
-                        y[VL]
-                    } else {
-                        0.0
-                    };
+                let approaching = y[VU] > if matches!(self.lower, Lower::Mass { .. }) { y[VL] } else { 0.0 };
                 next.contact = self.classify_rigid(y, mode, approaching);
             }
             G_TOUCH => next.contact = Contact::Elastic,
@@ -701,6 +588,7 @@ impl Hybrid<N> for Plant {
             G_STICK_YIELD => {
                 let e = self.eval(y, mode);
                 y[P] = e.delta_m;
+                self.common_velocity(y);
                 next.contact = Contact::Plastic;
             }
             G_YIELD => next.contact = Contact::Plastic,

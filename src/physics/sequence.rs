@@ -20,20 +20,8 @@ pub struct SequenceError {
 }
 
 /// The plant of blow `blow` (1-based) starting at height `h_start_m`.
-pub fn blow_plant(
-    machine: &Machine,
-    effects: &EffectSet,
-    process: &Process,
-    blow: usize,
-    h_start_m: f64,
-) -> Plant {
-    let law = BilletLaw::new(
-        process.billet.clone(),
-        process.material.clone(),
-        process.friction,
-        effects.load,
-        blow,
-    );
+pub fn blow_plant(machine: &Machine, effects: &EffectSet, process: &Process, blow: usize, h_start_m: f64) -> Plant {
+    let law = BilletLaw::new(process.billet.clone(), process.material.clone(), process.friction, effects.load, blow);
     Plant::new(machine, effects, Some(law), h_start_m)
 }
 
@@ -49,11 +37,7 @@ pub fn simulate_sequence(
     let mut out = Vec::with_capacity(v0s_mps.len());
     for (i, &v0) in v0s_mps.iter().enumerate() {
         let plant = blow_plant(machine, effects, process, i + 1, h);
-        let r = simulate_blow(&plant, v0, opts).map_err(|source| SequenceError {
-            blow: i + 1,
-            v0_mps: v0,
-            source,
-        })?;
+        let r = simulate_blow(&plant, v0, opts).map_err(|source| SequenceError { blow: i + 1, v0_mps: v0, source })?;
         if let Some(f) = r.forming {
             h = f.h_end_m;
         }
