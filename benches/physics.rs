@@ -28,6 +28,9 @@ fn blows(c: &mut Criterion) {
     let (m, p) = (hammer(), steel());
     let fast = SimOptions::default();
     let no_post = SimOptions { post_s: 0.0, ..SimOptions::default() };
+    // Still converged by issue #2's test (h moves 0.6 µm when tightened tenfold), but the
+    // final load moves by 1.6 kN, which is why it is not the default.
+    let loose = SimOptions { method: Method::Dopri5 { rtol: 1e-4 }, ..SimOptions::default() };
     let rk4 = SimOptions { method: Method::Rk4 { dt_s: 1e-7 }, ..SimOptions::default() };
     let mut g = c.benchmark_group("blow");
     g.bench_function("hammer_table3_blow1", |b| {
@@ -35,6 +38,9 @@ fn blows(c: &mut Criterion) {
     });
     g.bench_function("hammer_table3_blow1_no_post_window", |b| {
         b.iter(|| simulate_sequence(&m, &EffectSet::NONE, &p, black_box(&[3.9]), &no_post).unwrap())
+    });
+    g.bench_function("hammer_table3_blow1_rtol_1e-4", |b| {
+        b.iter(|| simulate_sequence(&m, &EffectSet::NONE, &p, black_box(&[3.9]), &loose).unwrap())
     });
     let pr = press();
     g.bench_function("press_bare_strike", |b| {

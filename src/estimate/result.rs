@@ -1,0 +1,61 @@
+//! What the estimator reports for each blow: the JSON line of `forgemon replay`
+//! (CONTRACTS.md §5) and the MCAP blow-result message.
+
+use serde::Serialize;
+
+use crate::alert::Alert;
+
+/// Efficiency class of a blow (seed 000 §4.3: soft blows 80–90 %, hard 20–50 %).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BlowClass {
+    Soft,
+    Intermediate,
+    Hard,
+}
+
+impl BlowClass {
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            BlowClass::Soft => "soft",
+            BlowClass::Intermediate => "intermediate",
+            BlowClass::Hard => "hard",
+        }
+    }
+}
+
+/// One blow as measured and estimated. Field names and units are those of CONTRACTS.md §5;
+/// the extra fields are additions the contract allows.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BlowEstimate {
+    pub blow: u32,
+    /// Device time of first contact, s (the recording's own time origin).
+    pub t_contact_s: f64,
+    pub v_impact_mps: f64,
+    #[serde(rename = "kinetic_in_J")]
+    pub kinetic_in_j: f64,
+    /// Plastic work; without a process sheet, plastic plus friction work.
+    #[serde(rename = "plastic_J")]
+    pub plastic_j: f64,
+    /// `None` without a process sheet.
+    #[serde(rename = "friction_J")]
+    pub friction_j: Option<f64>,
+    #[serde(rename = "damped_J")]
+    pub damped_j: f64,
+    #[serde(rename = "elastic_J")]
+    pub elastic_j: f64,
+    pub efficiency: f64,
+    #[serde(rename = "final_load_N")]
+    pub final_load_n: f64,
+    /// Billet height after the blow, m, tracked from the process sheet; `None` without one.
+    pub h_end_m: Option<f64>,
+    pub class: BlowClass,
+    /// The alert this blow raised, if any.
+    pub alert: Option<Alert>,
+    /// Device time at which the blow's end was detected, s.
+    pub t_end_s: f64,
+    #[serde(rename = "peak_load_N")]
+    pub peak_load_n: f64,
+    /// Energy-balance residual `(in - out) / in`: the model-health figure (DESIGN.md §2.4).
+    pub residual: f64,
+}

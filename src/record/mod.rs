@@ -1,0 +1,1 @@
+//! MCAP recording and reading (placeholder; being written).

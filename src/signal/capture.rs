@@ -1,0 +1,1 @@
+//! Capture CSV files and capture directories (CONTRACTS.md §1–2) (being written).

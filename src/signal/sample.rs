@@ -1,0 +1,85 @@
+//! The one sample type (DESIGN.md §3): a batch of interleaved samples from one source, with
+//! its device sequence number, device time and host receive time. Every source (serial,
+//! CAN, Modbus, a capture file, a recording) produces these; everything after `acquire/`
+//! consumes them and cannot tell where they came from.
+
+use std::fmt;
+
+/// What a channel measures (CONTRACTS.md §1, §7).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Role {
+    /// Load at the machine's sensor, N, compressive positive.
+    Load,
+    /// Ram position from the encoder, m, down positive, arbitrary offset.
+    Disp,
+    /// Ram acceleration, m/s², down positive, gravity removed (free fall reads +9.81).
+    Acc,
+}
+
+impl Role {
+    /// The CSV column and config name of the role.
+    pub fn column(&self) -> &'static str {
+        match self {
+            Role::Load => "load_N",
+            Role::Disp => "disp_m",
+            Role::Acc => "acc_mps2",
+        }
+    }
+
+    pub fn from_column(name: &str) -> Option<Role> {
+        match name {
+            "load_N" => Some(Role::Load),
+            "disp_m" => Some(Role::Disp),
+            "acc_mps2" => Some(Role::Acc),
+            _ => None,
+        }
+    }
+
+    pub const ALL: [Role; 3] = [Role::Load, Role::Disp, Role::Acc];
+}
+
+impl fmt::Display for Role {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.column())
+    }
+}
+
+/// A block of samples from one source: `values` holds `len()` samples of `roles.len()`
+/// channels, interleaved (sample 0 of every channel, then sample 1, ...), in physical units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SampleBatch {
+    /// Which source produced it (a config name, or the file it was read from).
+    pub source: String,
+    /// Device sequence number of the batch (frame counter), +1 per batch.
+    pub seq: u64,
+    /// Device time of the first sample, ns, device clock (arbitrary origin).
+    pub device_time_ns: i64,
+    /// Host time at which the batch was received, ns (for files: the device time mapped).
+    pub host_time_ns: i64,
+    /// Sample period, ns.
+    pub period_ns: f64,
+    /// The channels, in the order they are interleaved.
+    pub roles: Vec<Role>,
+    pub values: Vec<f64>,
+}
+
+impl SampleBatch {
+    /// Number of samples per channel.
+    pub fn len(&self) -> usize {
+        if self.roles.is_empty() { 0 } else { self.values.len() / self.roles.len() }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Device time of sample `i`, s.
+    pub fn time_s(&self, i: usize) -> f64 {
+        (self.device_time_ns as f64 + self.period_ns * i as f64) * 1e-9
+    }
+
+    /// Index of a role's channel.
+    pub fn channel(&self, role: Role) -> Option<usize> {
+        self.roles.iter().position(|r| *r == role)
+    }
+}

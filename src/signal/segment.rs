@@ -1,0 +1,1 @@
+//! Blow segmentation by acceleration trigger (being written).
