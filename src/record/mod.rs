@@ -1,1 +1,34 @@
-//! MCAP recording and reading (placeholder; being written).
+//! MCAP recording and reading (DESIGN.md §3, "MCAP layout" and "Crash safety"; issue #3).
+//!
+//! A recording holds, on separate channels, the raw sample batches of each source
+//! (`/samples/<source>`), blow boundaries (`/blows`), blow results (`/results`), alerts
+//! (`/alerts`), gaps and drops (`/gaps`), transport status (`/status`) and the
+//! configuration files (`/config`). Every message is protobuf (`proto/forgemon.proto`) and
+//! every schema record carries the full FileDescriptorSet, so Foxglove and the `mcap`
+//! tools open the files with nothing from us.
+//!
+//! - [`schema`]: the generated protobuf types, the embedded descriptor set, topics.
+//! - [`message`]: the typed values a recording holds ([`Recorded`], [`Payload`]).
+//! - [`codec`]: values to bytes and back (sans-IO).
+//! - [`batch`]: joining/cutting sample batches to 10–100 ms (sans-IO).
+//! - [`writer`]: chunked zstd MCAP, `.part` then rename, sync every second of log time,
+//!   rotation.
+//! - [`reader`]: indexed reading, and recovery of files cut off by a crash.
+//!
+//! This is the one layer above the pure core that does file IO; nothing in `signal/`,
+//! `estimate/` or `alert/` depends on it.
+
+pub mod batch;
+pub mod codec;
+pub mod error;
+pub mod message;
+pub mod reader;
+pub mod schema;
+pub mod writer;
+
+pub use batch::Rebatcher;
+pub use error::{DecodeError, RecordError};
+pub use message::{BlowBoundary, ConfigFile, Gap, Payload, Recorded, Status};
+pub use reader::{ReadReport, RecordReader, Recording, read_recording};
+pub use schema::MessageKind;
+pub use writer::{ChunkCompression, RecordOptions, RecordWriter, Rotation, SyncPoint};

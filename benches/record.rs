@@ -1,0 +1,2 @@
+//! Recording throughput benchmark (being written).
+fn main() {}

@@ -1,0 +1,603 @@
+//! The MCAP recorder: chunked, zstd-compressed, crash-safe and rotating (DESIGN.md §3,
+//! "MCAP layout" and "Crash safety").
+//!
+//! - A file is written as `NAME.mcap.part` and renamed to `NAME.mcap` when finished.
+//! - Log time is the caller's: the writer reads no clock. Whenever the log time has
+//!   advanced by [`RecordOptions::sync_interval_ns`] (1 s) since the last sync, the writer
+//!   closes the current chunk and calls `sync_data`, so a crash loses at most the last
+//!   second. [`RecordWriter::flush_and_sync`] does the same on demand.
+//! - Files rotate by size and/or log-time duration; each one is finished, renamed and
+//!   carries every configuration file written so far.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::{File, OpenOptions};
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use mcap::records::MessageHeader;
+
+use crate::alert::Alert;
+use crate::estimate::BlowEstimate;
+use crate::signal::sample::SampleBatch;
+
+use super::codec;
+use super::error::RecordError;
+use super::message::{BlowBoundary, ConfigFile, Gap, Payload, Status};
+use super::schema::{FILE_DESCRIPTOR_SET, MESSAGE_ENCODING, MessageKind, SCHEMA_ENCODING, samples_topic};
+
+/// Close the chunk and `sync_data` after this much log time (DESIGN.md §3: "at least every
+/// second").
+pub const DEFAULT_SYNC_INTERVAL_NS: u64 = 1_000_000_000;
+/// Target uncompressed chunk size. A chunk also closes at every sync.
+pub const DEFAULT_CHUNK_SIZE_BYTES: u64 = 1024 * 1024;
+/// zstd level: 1 is the fastest standard level; sample doubles barely compress at any level.
+pub const DEFAULT_ZSTD_LEVEL: u32 = 1;
+/// File-name stem of the numbered files when the target is a directory.
+pub const DEFAULT_FILE_STEM: &str = "forgemon";
+/// Extension of a finished recording.
+pub const FINISHED_EXTENSION: &str = "mcap";
+/// Extension of a recording being written (or left by a crash).
+pub const PART_EXTENSION: &str = "mcap.part";
+
+/// When to start a new file. Both limits may be set; the first one reached rotates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Rotation {
+    /// Start a new file once the current one holds this many bytes (it may exceed it by
+    /// up to one chunk).
+    pub max_bytes: Option<u64>,
+    /// Start a new file once its messages span this much log time, ns.
+    pub max_duration_ns: Option<u64>,
+}
+
+impl Rotation {
+    /// One file, never rotated.
+    pub const NEVER: Rotation = Rotation { max_bytes: None, max_duration_ns: None };
+
+    pub fn by_size(max_bytes: u64) -> Rotation {
+        Rotation { max_bytes: Some(max_bytes), max_duration_ns: None }
+    }
+
+    pub fn by_duration_ns(max_duration_ns: u64) -> Rotation {
+        Rotation { max_bytes: None, max_duration_ns: Some(max_duration_ns) }
+    }
+
+    pub fn is_never(&self) -> bool {
+        self.max_bytes.is_none() && self.max_duration_ns.is_none()
+    }
+}
+
+/// Chunk compression.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChunkCompression {
+    Zstd { level: u32 },
+    Lz4,
+    None,
+}
+
+/// How to record. [`RecordOptions::default`] is zstd, 1 MiB chunks, sync every second of
+/// log time, no rotation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RecordOptions {
+    pub rotation: Rotation,
+    pub compression: ChunkCompression,
+    pub chunk_size_bytes: u64,
+    pub sync_interval_ns: u64,
+}
+
+impl Default for RecordOptions {
+    fn default() -> Self {
+        RecordOptions {
+            rotation: Rotation::NEVER,
+            compression: ChunkCompression::Zstd { level: DEFAULT_ZSTD_LEVEL },
+            chunk_size_bytes: DEFAULT_CHUNK_SIZE_BYTES,
+            sync_interval_ns: DEFAULT_SYNC_INTERVAL_NS,
+        }
+    }
+}
+
+/// The state of the current file at its last `sync_data`: everything up to `file_bytes`
+/// survives a crash, and holds `file_messages` messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SyncPoint {
+    pub file_bytes: u64,
+    pub file_messages: u64,
+    pub log_time_ns: u64,
+}
+
+/// Records forgemon messages to MCAP. See the module docs for the guarantees.
+///
+/// `create` with a `*.mcap` path writes that file (or, when rotating, `STEM-00001.mcap`,
+/// `STEM-00002.mcap`, … beside it); with any other path it creates that directory if
+/// needed and writes `forgemon-NNNNN.mcap` files in it, numbered on from the files already
+/// there. Dropping the writer without [`RecordWriter::finish`] leaves the current file
+/// as `.mcap.part`.
+pub struct RecordWriter {
+    naming: Naming,
+    options: RecordOptions,
+    current: Option<OpenFile>,
+    finished: Vec<PathBuf>,
+    /// Every configuration file written, by name, rewritten into each new file.
+    configs: BTreeMap<String, String>,
+    buf: Vec<u8>,
+}
+
+impl RecordWriter {
+    /// Start a recording at `path` with default options and the given rotation.
+    pub fn create(path: impl AsRef<Path>, rotation: Rotation) -> Result<RecordWriter, RecordError> {
+        RecordWriter::create_with(path, RecordOptions { rotation, ..RecordOptions::default() })
+    }
+
+    pub fn create_with(path: impl AsRef<Path>, options: RecordOptions) -> Result<RecordWriter, RecordError> {
+        let naming = Naming::new(path.as_ref(), options.rotation)?;
+        let mut writer = RecordWriter {
+            naming,
+            options,
+            current: None,
+            finished: Vec::new(),
+            configs: BTreeMap::new(),
+            buf: Vec::new(),
+        };
+        writer.open_next()?;
+        Ok(writer)
+    }
+
+    /// Record a batch of samples on `/samples/<source>`. Log time is its `host_time_ns`,
+    /// publish time its `device_time_ns` (or the log time when that is negative).
+    /// Batches should hold 10–100 ms of samples ([`super::Rebatcher`] makes them so).
+    pub fn write_samples(&mut self, batch: &SampleBatch) -> Result<(), RecordError> {
+        let topic_for_errors = || samples_topic(&batch.source);
+        let log_time = self.log_time(batch.host_time_ns, topic_for_errors)?;
+        let publish_time = u64::try_from(batch.device_time_ns).unwrap_or(log_time);
+        self.buf.clear();
+        if let Err(reason) = codec::encode_samples(batch, &mut self.buf) {
+            let path = self.current_path();
+            return Err(RecordError::BadBatch { path, source_name: batch.source.clone(), reason });
+        }
+        self.write_encoded(MessageKind::Samples, Some(&batch.source), log_time, publish_time)
+    }
+
+    /// Record where a blow was cut, on `/blows`.
+    pub fn write_boundary(&mut self, log_time_ns: i64, boundary: &BlowBoundary) -> Result<(), RecordError> {
+        self.write_payload(log_time_ns, &Payload::Boundary(boundary.clone()))
+    }
+
+    /// Record a blow's result, on `/results`.
+    pub fn write_result(&mut self, log_time_ns: i64, result: &BlowEstimate) -> Result<(), RecordError> {
+        self.write_payload(log_time_ns, &Payload::Result(Box::new(result.clone())))
+    }
+
+    /// Record an alert, on `/alerts`.
+    pub fn write_alert(&mut self, log_time_ns: i64, alert: &Alert) -> Result<(), RecordError> {
+        self.write_payload(log_time_ns, &Payload::Alert(alert.clone()))
+    }
+
+    /// Record lost samples, on `/gaps`.
+    pub fn write_gap(&mut self, log_time_ns: i64, gap: &Gap) -> Result<(), RecordError> {
+        self.write_payload(log_time_ns, &Payload::Gap(gap.clone()))
+    }
+
+    /// Record a source's status, on `/status`.
+    pub fn write_status(&mut self, log_time_ns: i64, status: &Status) -> Result<(), RecordError> {
+        self.write_payload(log_time_ns, &Payload::Status(status.clone()))
+    }
+
+    /// Store a configuration file on `/config`. It is also written into every later file of
+    /// a rotated recording (a later one with the same name replaces it there).
+    pub fn write_config(&mut self, log_time_ns: i64, name: &str, text: &str) -> Result<(), RecordError> {
+        self.configs.insert(name.to_string(), text.to_string());
+        self.write_payload(log_time_ns, &Payload::Config(ConfigFile { name: name.to_string(), text: text.to_string() }))
+    }
+
+    /// Record any payload on its channel. Samples go to `/samples/<source>` with their own
+    /// host time, whatever `log_time_ns` says.
+    pub fn write_payload(&mut self, log_time_ns: i64, payload: &Payload) -> Result<(), RecordError> {
+        if let Payload::Samples(batch) = payload {
+            return self.write_samples(batch);
+        }
+        let kind = payload.kind();
+        let log_time = self.log_time(log_time_ns, || kind.fixed_topic().unwrap_or_default().to_string())?;
+        self.buf.clear();
+        // Only sample batches can fail to encode.
+        if let Err(reason) = codec::encode_payload(payload, &mut self.buf) {
+            let path = self.current_path();
+            return Err(RecordError::BadBatch { path, source_name: String::new(), reason });
+        }
+        self.write_encoded(kind, None, log_time, log_time)
+    }
+
+    /// Close the current chunk, flush, and `sync_data` the current file.
+    pub fn flush_and_sync(&mut self) -> Result<(), RecordError> {
+        match self.current.as_mut() {
+            Some(file) => file.flush_and_sync(),
+            None => Ok(()),
+        }
+    }
+
+    /// The current file's last sync point, if it has synced since it was opened.
+    pub fn last_sync(&self) -> Option<SyncPoint> {
+        self.current.as_ref().and_then(|f| f.last_sync)
+    }
+
+    /// The file being written now (a `.mcap.part`).
+    pub fn current_path(&self) -> PathBuf {
+        self.current.as_ref().map(|f| f.part_path.clone()).unwrap_or_else(|| self.naming.dir.clone())
+    }
+
+    /// Bytes written to the current file so far.
+    pub fn current_bytes(&self) -> u64 {
+        self.current.as_ref().map_or(0, |f| f.bytes.load(Ordering::Relaxed))
+    }
+
+    /// Files finished (by rotation) so far, in order.
+    pub fn finished_files(&self) -> &[PathBuf] {
+        &self.finished
+    }
+
+    /// Finish the current file (summary, footer, sync, rename) and return every finished
+    /// file of the recording, in order.
+    pub fn finish(mut self) -> Result<Vec<PathBuf>, RecordError> {
+        if let Some(file) = self.current.take() {
+            self.finished.push(file.finish()?);
+        }
+        Ok(std::mem::take(&mut self.finished))
+    }
+
+    fn log_time(&self, time_ns: i64, topic: impl FnOnce() -> String) -> Result<u64, RecordError> {
+        u64::try_from(time_ns).map_err(|_| RecordError::NegativeLogTime {
+            path: self.current_path(),
+            topic: topic(),
+            time_ns,
+        })
+    }
+
+    /// Write `self.buf` as a message of `kind`, rotating first and syncing after as due.
+    fn write_encoded(
+        &mut self,
+        kind: MessageKind,
+        source: Option<&str>,
+        log_time: u64,
+        publish_time: u64,
+    ) -> Result<(), RecordError> {
+        if self.current.as_ref().is_some_and(|f| f.rotation_due(&self.options.rotation, log_time)) {
+            if let Some(file) = self.current.take() {
+                self.finished.push(file.finish()?);
+            }
+            self.open_next()?;
+            self.write_configs(log_time)?;
+        }
+        let file = match self.current.as_mut() {
+            Some(file) => file,
+            None => {
+                self.open_next()?;
+                self.current.as_mut().ok_or_else(|| RecordError::BadTarget { path: self.naming.dir.clone() })?
+            }
+        };
+        file.write(kind, source, log_time, publish_time, &self.buf)?;
+        if log_time >= file.last_sync_log_time.saturating_add(self.options.sync_interval_ns) {
+            file.flush_and_sync()?;
+        }
+        Ok(())
+    }
+
+    /// Rewrite every stored configuration file into the (new) current file.
+    fn write_configs(&mut self, log_time: u64) -> Result<(), RecordError> {
+        let configs: Vec<(String, String)> = self.configs.iter().map(|(n, t)| (n.clone(), t.clone())).collect();
+        for (name, text) in configs {
+            self.buf.clear();
+            codec::encode_payload(&Payload::Config(ConfigFile { name, text }), &mut self.buf).map_err(|reason| {
+                RecordError::BadBatch { path: self.current_path(), source_name: String::new(), reason }
+            })?;
+            if let Some(file) = self.current.as_mut() {
+                file.write(MessageKind::Config, None, log_time, log_time, &self.buf)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn open_next(&mut self) -> Result<(), RecordError> {
+        let final_path = self.naming.next_path()?;
+        self.current = Some(OpenFile::create(final_path, &self.options)?);
+        Ok(())
+    }
+}
+
+/// How the files of a recording are named.
+struct Naming {
+    dir: PathBuf,
+    stem: String,
+    /// `STEM-NNNNN.mcap` (rotating or a directory target) or exactly `STEM.mcap`.
+    numbered: bool,
+    next_index: u32,
+}
+
+impl Naming {
+    fn new(path: &Path, rotation: Rotation) -> Result<Naming, RecordError> {
+        let is_file_target = path.extension().is_some_and(|e| e == FINISHED_EXTENSION);
+        let (dir, stem, numbered) = if is_file_target {
+            let stem = path
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .ok_or_else(|| RecordError::BadTarget { path: path.to_path_buf() })?
+                .to_string();
+            let dir = match path.parent() {
+                Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+                _ => PathBuf::from("."),
+            };
+            (dir, stem, !rotation.is_never())
+        } else {
+            std::fs::create_dir_all(path).map_err(|source| RecordError::Io {
+                path: path.to_path_buf(),
+                action: "create directory",
+                source,
+            })?;
+            (path.to_path_buf(), DEFAULT_FILE_STEM.to_string(), true)
+        };
+        let mut naming = Naming { dir, stem, numbered, next_index: 1 };
+        if numbered {
+            naming.next_index = naming.first_free_index()?;
+        }
+        Ok(naming)
+    }
+
+    /// One past the highest `STEM-NNNNN.mcap[.part]` already in the directory, so a
+    /// restarted recorder never overwrites an earlier file.
+    fn first_free_index(&self) -> Result<u32, RecordError> {
+        let entries = std::fs::read_dir(&self.dir).map_err(|source| RecordError::Io {
+            path: self.dir.clone(),
+            action: "list",
+            source,
+        })?;
+        let prefix = format!("{}-", self.stem);
+        let mut highest = 0u32;
+        for entry in entries.flatten() {
+            let name = entry.file_name();
+            let Some(name) = name.to_str() else { continue };
+            let Some(rest) = name.strip_prefix(&prefix) else { continue };
+            let number = rest
+                .strip_suffix(&format!(".{PART_EXTENSION}"))
+                .or_else(|| rest.strip_suffix(&format!(".{FINISHED_EXTENSION}")));
+            if let Some(n) = number.and_then(|n| n.parse::<u32>().ok()) {
+                highest = highest.max(n);
+            }
+        }
+        Ok(highest.saturating_add(1))
+    }
+
+    fn next_path(&mut self) -> Result<PathBuf, RecordError> {
+        if !self.numbered {
+            return Ok(self.dir.join(format!("{}.{FINISHED_EXTENSION}", self.stem)));
+        }
+        let path = self.dir.join(format!("{}-{:05}.{FINISHED_EXTENSION}", self.stem, self.next_index));
+        self.next_index = self.next_index.saturating_add(1);
+        Ok(path)
+    }
+}
+
+fn part_path_of(final_path: &Path) -> PathBuf {
+    let mut name = final_path.as_os_str().to_owned();
+    name.push(".part");
+    PathBuf::from(name)
+}
+
+/// A `File` behind a `BufWriter` that counts the file's length, shared with the writer so
+/// it can rotate by size (the `mcap` writer owns the stream and hides it).
+struct CountingFile {
+    inner: BufWriter<File>,
+    pos: u64,
+    len: Arc<AtomicU64>,
+}
+
+impl Write for CountingFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.pos += n as u64;
+        self.len.fetch_max(self.pos, Ordering::Relaxed);
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+impl Seek for CountingFile {
+    fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
+        self.pos = self.inner.seek(to)?;
+        Ok(self.pos)
+    }
+
+    fn stream_position(&mut self) -> std::io::Result<u64> {
+        Ok(self.pos)
+    }
+}
+
+/// Per-channel bookkeeping inside one file.
+struct ChannelSlot {
+    id: u16,
+    sequence: u32,
+}
+
+/// One file being written.
+struct OpenFile {
+    final_path: PathBuf,
+    part_path: PathBuf,
+    mcap: mcap::Writer<CountingFile>,
+    /// A second handle on the same open file, for `sync_data`.
+    sync_handle: File,
+    bytes: Arc<AtomicU64>,
+    schemas: [Option<u16>; MessageKind::ALL.len()],
+    fixed_channels: [Option<ChannelSlot>; MessageKind::ALL.len()],
+    sample_channels: HashMap<String, ChannelSlot>,
+    first_log_time: Option<u64>,
+    /// The newest log time written: a sync covers everything up to it.
+    max_log_time: u64,
+    last_sync_log_time: u64,
+    messages: u64,
+    last_sync: Option<SyncPoint>,
+}
+
+impl OpenFile {
+    fn create(final_path: PathBuf, options: &RecordOptions) -> Result<OpenFile, RecordError> {
+        let part_path = part_path_of(&final_path);
+        let io_err = |action: &'static str| {
+            let path = part_path.clone();
+            move |source| RecordError::Io { path, action, source }
+        };
+        let file =
+            OpenOptions::new().write(true).create(true).truncate(true).open(&part_path).map_err(io_err("create"))?;
+        let sync_handle = file.try_clone().map_err(io_err("open a second handle on"))?;
+        let bytes = Arc::new(AtomicU64::new(0));
+        let sink = CountingFile { inner: BufWriter::with_capacity(256 * 1024, file), pos: 0, len: bytes.clone() };
+        let (compression, level) = match options.compression {
+            ChunkCompression::Zstd { level } => (Some(mcap::Compression::Zstd), level),
+            ChunkCompression::Lz4 => (Some(mcap::Compression::Lz4), 0),
+            ChunkCompression::None => (None, 0),
+        };
+        let mcap = mcap::WriteOptions::new()
+            .profile("")
+            .library(concat!("forgemon/", env!("CARGO_PKG_VERSION")))
+            .compression(compression)
+            .compression_level(level)
+            .compression_threads(0)
+            .chunk_size(Some(options.chunk_size_bytes))
+            .create(sink)
+            .map_err(|source| RecordError::Mcap { path: part_path.clone(), offset: None, source })?;
+        if let Some(dir) = part_path.parent() {
+            sync_dir(dir);
+        }
+        Ok(OpenFile {
+            final_path,
+            part_path,
+            mcap,
+            sync_handle,
+            bytes,
+            schemas: [None; MessageKind::ALL.len()],
+            fixed_channels: Default::default(),
+            sample_channels: HashMap::new(),
+            first_log_time: None,
+            max_log_time: 0,
+            last_sync_log_time: 0,
+            messages: 0,
+            last_sync: None,
+        })
+    }
+
+    fn mcap_err(&self, source: mcap::McapError) -> RecordError {
+        RecordError::Mcap { path: self.part_path.clone(), offset: Some(self.bytes.load(Ordering::Relaxed)), source }
+    }
+
+    fn rotation_due(&self, rotation: &Rotation, log_time: u64) -> bool {
+        let Some(first) = self.first_log_time else { return false };
+        rotation.max_bytes.is_some_and(|max| self.bytes.load(Ordering::Relaxed) >= max)
+            || rotation.max_duration_ns.is_some_and(|max| log_time.saturating_sub(first) >= max)
+    }
+
+    fn channel_id(&mut self, kind: MessageKind, source: Option<&str>) -> Result<(u16, u32), RecordError> {
+        let existing = match source {
+            Some(s) => self.sample_channels.get_mut(s),
+            None => self.fixed_channels[kind.index()].as_mut(),
+        };
+        if let Some(slot) = existing {
+            let seq = slot.sequence;
+            slot.sequence = slot.sequence.wrapping_add(1);
+            return Ok((slot.id, seq));
+        }
+        let schema_id = match self.schemas[kind.index()] {
+            Some(id) => id,
+            None => {
+                let id = self
+                    .mcap
+                    .add_schema(kind.schema_name(), SCHEMA_ENCODING, FILE_DESCRIPTOR_SET)
+                    .map_err(|e| self.mcap_err(e))?;
+                self.schemas[kind.index()] = Some(id);
+                id
+            }
+        };
+        let topic = match source {
+            Some(s) => samples_topic(s),
+            None => kind.fixed_topic().unwrap_or_default().to_string(),
+        };
+        let id = self
+            .mcap
+            .add_channel(schema_id, &topic, MESSAGE_ENCODING, &BTreeMap::new())
+            .map_err(|e| self.mcap_err(e))?;
+        let slot = ChannelSlot { id, sequence: 1 };
+        match source {
+            Some(s) => {
+                self.sample_channels.insert(s.to_string(), slot);
+            }
+            None => self.fixed_channels[kind.index()] = Some(slot),
+        }
+        Ok((id, 0))
+    }
+
+    fn write(
+        &mut self,
+        kind: MessageKind,
+        source: Option<&str>,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), RecordError> {
+        let (channel_id, sequence) = self.channel_id(kind, source)?;
+        let header = MessageHeader { channel_id, sequence, log_time, publish_time };
+        self.mcap.write_to_known_channel(&header, data).map_err(|e| self.mcap_err(e))?;
+        if self.first_log_time.is_none() {
+            self.first_log_time = Some(log_time);
+            self.last_sync_log_time = log_time;
+        }
+        self.max_log_time = self.max_log_time.max(log_time);
+        self.messages += 1;
+        Ok(())
+    }
+
+    fn flush_and_sync(&mut self) -> Result<(), RecordError> {
+        self.mcap.flush().map_err(|e| self.mcap_err(e))?;
+        self.sync_handle.sync_data().map_err(|source| RecordError::Io {
+            path: self.part_path.clone(),
+            action: "sync",
+            source,
+        })?;
+        let log_time = self.max_log_time;
+        self.last_sync_log_time = log_time;
+        self.last_sync = Some(SyncPoint {
+            file_bytes: self.bytes.load(Ordering::Relaxed),
+            file_messages: self.messages,
+            log_time_ns: log_time,
+        });
+        Ok(())
+    }
+
+    /// Summary, footer, flush, sync, rename to the final name, sync the directory.
+    fn finish(mut self) -> Result<PathBuf, RecordError> {
+        self.mcap.finish().map_err(|e| self.mcap_err(e))?;
+        let OpenFile { mcap, final_path, part_path, sync_handle, .. } = self;
+        let mut sink = mcap.into_inner();
+        sink.flush().map_err(|source| RecordError::Io { path: part_path.clone(), action: "write", source })?;
+        sync_handle.sync_data().map_err(|source| RecordError::Io {
+            path: part_path.clone(),
+            action: "sync",
+            source,
+        })?;
+        drop(sink);
+        std::fs::rename(&part_path, &final_path).map_err(|source| RecordError::Io {
+            path: part_path.clone(),
+            action: "rename",
+            source,
+        })?;
+        if let Some(dir) = final_path.parent() {
+            sync_dir(dir);
+        }
+        Ok(final_path)
+    }
+}
+
+/// Make a create or rename durable. Best effort: not every platform can open a directory.
+fn sync_dir(dir: &Path) {
+    let dir = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
+    if let Ok(d) = File::open(dir) {
+        let _ = d.sync_all();
+    }
+}
