@@ -25,7 +25,7 @@ use crate::signal::sample::SampleBatch;
 use super::codec;
 use super::error::RecordError;
 use super::message::{BlowBoundary, ConfigFile, Gap, Payload, Status};
-use super::schema::{FILE_DESCRIPTOR_SET, MESSAGE_ENCODING, MessageKind, SCHEMA_ENCODING, samples_topic};
+use super::schema::{FILE_DESCRIPTOR_SET, MESSAGE_ENCODING, MessageKind, SCHEMA_ENCODING, pb, samples_topic};
 
 /// Close the chunk and `sync_data` after this much log time (DESIGN.md §3: "at least every
 /// second").
@@ -282,16 +282,16 @@ impl RecordWriter {
     }
 
     /// Rewrite every stored configuration file into the (new) current file.
+    /// Rewrite every stored configuration file into the (new) current file. Uses its own
+    /// buffer: `self.buf` holds the message that triggered the rotation.
     fn write_configs(&mut self, log_time: u64) -> Result<(), RecordError> {
-        let configs: Vec<(String, String)> = self.configs.iter().map(|(n, t)| (n.clone(), t.clone())).collect();
-        for (name, text) in configs {
-            self.buf.clear();
-            codec::encode_payload(&Payload::Config(ConfigFile { name, text }), &mut self.buf).map_err(|reason| {
-                RecordError::BadBatch { path: self.current_path(), source_name: String::new(), reason }
-            })?;
-            if let Some(file) = self.current.as_mut() {
-                file.write(MessageKind::Config, None, log_time, log_time, &self.buf)?;
-            }
+        let Some(file) = self.current.as_mut() else { return Ok(()) };
+        let mut buf = Vec::new();
+        for (name, text) in &self.configs {
+            buf.clear();
+            let config = pb::ConfigFile { name: name.clone(), text: text.clone() };
+            prost::Message::encode_raw(&config, &mut buf);
+            file.write(MessageKind::Config, None, log_time, log_time, &buf)?;
         }
         Ok(())
     }
@@ -599,5 +599,226 @@ fn sync_dir(dir: &Path) {
     let dir = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
     if let Ok(d) = File::open(dir) {
         let _ = d.sync_all();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use prost::Message;
+
+    use super::*;
+    use crate::alert::AlertKind;
+    use crate::estimate::BlowClass;
+    use crate::record::reader::read_recording;
+    use crate::record::schema::MessageKind;
+    use crate::signal::sample::Role;
+
+    const MS: i64 = 1_000_000;
+
+    fn batch(k: i64, n: usize) -> SampleBatch {
+        SampleBatch {
+            source: "daq0".into(),
+            seq: k as u64,
+            device_time_ns: k * 50 * MS,
+            host_time_ns: 1_000 * MS + k * 50 * MS,
+            period_ns: 10_000.0,
+            roles: vec![Role::Load, Role::Disp, Role::Acc],
+            values: (0..3 * n).map(|i| (k * 1000 + i as i64) as f64).collect(),
+        }
+    }
+
+    fn estimate() -> BlowEstimate {
+        BlowEstimate {
+            blow: 1,
+            t_contact_s: 0.12,
+            v_impact_mps: 3.9,
+            kinetic_in_j: 5711.0,
+            plastic_j: 5320.0,
+            friction_j: None,
+            damped_j: 150.0,
+            elastic_j: 15.0,
+            efficiency: 0.931,
+            final_load_n: 3.25e5,
+            h_end_m: Some(0.0929),
+            class: BlowClass::Soft,
+            alert: None,
+            t_end_s: 0.14,
+            peak_load_n: 1.16e6,
+            residual: 0.004,
+        }
+    }
+
+    fn every_payload() -> Vec<(i64, Payload)> {
+        let alert = Alert {
+            kind: AlertKind::ModelHealth,
+            blow: 1,
+            reason: "energy balance residual 0.2 above 0.1".into(),
+            figures: BTreeMap::from([("residual".to_string(), 0.2)]),
+        };
+        vec![
+            (900 * MS, Payload::Config(ConfigFile { name: "machine.toml".into(), text: "kind = \"hammer\"\n".into() })),
+            (
+                1_000 * MS,
+                Payload::Status(Status { source: "daq0".into(), state: "connected".into(), ..Status::default() }),
+            ),
+            (1_000 * MS, Payload::Samples(batch(0, 5000))),
+            (1_050 * MS, Payload::Samples(batch(1, 5000))),
+            (
+                1_060 * MS,
+                Payload::Gap(Gap { source: "daq0".into(), t_s: 0.06, samples_lost: 100, reason: "crc".into() }),
+            ),
+            (
+                1_100 * MS,
+                Payload::Boundary(BlowBoundary {
+                    blow: 1,
+                    t_trigger_s: 0.11,
+                    t_contact_s: 0.12,
+                    t_end_s: 0.14,
+                    source: "daq0".into(),
+                }),
+            ),
+            (1_100 * MS, Payload::Result(Box::new(BlowEstimate { alert: Some(alert.clone()), ..estimate() }))),
+            (1_100 * MS, Payload::Alert(alert)),
+        ]
+    }
+
+    #[test]
+    fn every_message_kind_round_trips_through_a_file() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("run.mcap");
+        let mut w = RecordWriter::create(&path, Rotation::NEVER).expect("create");
+        assert!(dir.path().join("run.mcap.part").exists(), "written as .part");
+        let written = every_payload();
+        for (t, p) in &written {
+            w.write_payload(*t, p).expect("write");
+        }
+        assert_eq!(w.finish().expect("finish"), vec![path.clone()]);
+        assert!(!dir.path().join("run.mcap.part").exists(), "renamed on finish");
+
+        let rec = read_recording(&path).expect("read");
+        assert!(rec.report.complete && rec.report.indexed, "{}", rec.report);
+        assert_eq!(rec.report.messages, written.len() as u64);
+        let read: Vec<(i64, Payload)> = rec.messages.into_iter().map(|m| (m.log_time_ns, m.payload)).collect();
+        assert_eq!(read, written);
+    }
+
+    #[test]
+    fn schema_records_carry_a_descriptor_set_holding_their_message() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("s.mcap");
+        let mut w = RecordWriter::create(&path, Rotation::NEVER).expect("create");
+        for (t, p) in &every_payload() {
+            w.write_payload(*t, p).expect("write");
+        }
+        w.finish().expect("finish");
+        let bytes = std::fs::read(&path).expect("read back");
+        let summary = mcap::Summary::read(&bytes).expect("summary").expect("has a summary");
+        let mut topics: Vec<&str> = summary.channels.values().map(|c| c.topic.as_str()).collect();
+        topics.sort_unstable();
+        assert_eq!(topics, ["/alerts", "/blows", "/config", "/gaps", "/results", "/samples/daq0", "/status"]);
+        for channel in summary.channels.values() {
+            assert_eq!(channel.message_encoding, "protobuf");
+            let schema = channel.schema.as_ref().expect("every channel has a schema");
+            assert_eq!(schema.encoding, "protobuf");
+            let kind = MessageKind::from_schema_name(&schema.name).expect("a forgemon schema");
+            let fds = prost_types::FileDescriptorSet::decode(schema.data.as_ref()).expect("FileDescriptorSet");
+            let short = kind.schema_name().trim_start_matches("forgemon.");
+            assert!(
+                fds.file.iter().any(|f| f.package() == "forgemon" && f.message_type.iter().any(|m| m.name() == short))
+            );
+        }
+        // A message decodes with the generated type too (what any protobuf reader does).
+        let sample = mcap::MessageStream::new(&bytes)
+            .expect("stream")
+            .filter_map(Result::ok)
+            .find(|m| m.channel.topic == "/samples/daq0")
+            .expect("a sample message");
+        let pbatch = pb::SampleBatch::decode(sample.data.as_ref()).expect("decodes");
+        assert_eq!(pbatch.values.len(), 15_000);
+        assert_eq!(sample.publish_time, 0, "publish time = device time of the first batch");
+        assert_eq!(sample.log_time, 1_000_000_000);
+    }
+
+    #[test]
+    fn syncs_every_second_of_log_time() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let mut w = RecordWriter::create(dir.path().join("sync.mcap"), Rotation::NEVER).expect("create");
+        // 50 ms batches: the first message starts the clock, the 21st is 1 s later.
+        for k in 0..20 {
+            w.write_samples(&batch(k, 10)).expect("write");
+            assert_eq!(w.last_sync(), None, "batch {k}: less than 1 s of log time");
+        }
+        w.write_samples(&batch(20, 10)).expect("write");
+        let sync = w.last_sync().expect("synced at 1 s");
+        assert_eq!(sync.file_messages, 21);
+        assert_eq!(sync.log_time_ns, (2_000 * MS) as u64);
+        assert_eq!(sync.file_bytes, w.current_bytes(), "the chunk was closed and flushed");
+        for k in 21..40 {
+            w.write_samples(&batch(k, 10)).expect("write");
+        }
+        assert_eq!(w.last_sync().map(|s| s.file_messages), Some(21));
+        w.write_samples(&batch(40, 10)).expect("write");
+        assert_eq!(w.last_sync().map(|s| s.file_messages), Some(41));
+        w.flush_and_sync().expect("sync on demand");
+        w.finish().expect("finish");
+    }
+
+    #[test]
+    fn rotation_by_duration_numbers_files_and_repeats_the_config() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        // A file left by an earlier run: numbering continues after it.
+        std::fs::write(dir.path().join("forgemon-00007.mcap.part"), b"crashed").expect("write");
+        let mut w = RecordWriter::create(dir.path(), Rotation::by_duration_ns(500 * MS as u64)).expect("create");
+        w.write_config(1_000 * MS, "process.toml", "machine = \"hammer\"\n").expect("config");
+        for k in 0..25 {
+            w.write_samples(&batch(k, 10)).expect("write");
+        }
+        let files = w.finish().expect("finish");
+        let names: Vec<String> =
+            files.iter().map(|p| p.file_name().and_then(|n| n.to_str()).unwrap_or_default().to_string()).collect();
+        assert_eq!(names, ["forgemon-00008.mcap", "forgemon-00009.mcap", "forgemon-00010.mcap"]);
+        let mut samples = 0;
+        for f in &files {
+            let rec = read_recording(f).expect("read");
+            assert!(rec.report.complete);
+            assert!(
+                matches!(&rec.messages[0].payload, Payload::Config(c) if c.name == "process.toml"),
+                "{} starts with the config",
+                f.display()
+            );
+            samples += rec.messages.iter().filter(|m| matches!(m.payload, Payload::Samples(_))).count();
+        }
+        assert_eq!(samples, 25);
+    }
+
+    #[test]
+    fn bad_input_is_an_error_naming_the_file() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let mut w = RecordWriter::create(dir.path().join("bad.mcap"), Rotation::NEVER).expect("create");
+        let err = w.write_samples(&SampleBatch { host_time_ns: -5, ..batch(0, 1) }).expect_err("negative log time");
+        assert!(err.to_string().contains("bad.mcap.part") && err.to_string().contains("-5"), "{err}");
+        let ragged = SampleBatch { values: vec![1.0, 2.0], ..batch(0, 0) };
+        let err = w.write_samples(&ragged).expect_err("ragged");
+        assert!(err.to_string().contains("daq0"), "{err}");
+        let err = w.write_gap(-1, &Gap { source: "x".into(), t_s: 0.0, samples_lost: 1, reason: String::new() });
+        assert!(err.expect_err("negative").to_string().contains("/gaps"));
+        w.finish().expect("finish after refused writes");
+        let err = RecordWriter::create(dir.path().join("no/such/dir/x.mcap"), Rotation::NEVER).err();
+        assert!(err.is_some_and(|e| e.to_string().contains("no/such/dir/x.mcap.part")));
+    }
+
+    #[test]
+    fn a_writer_dropped_without_finish_leaves_a_readable_part_file() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let mut w = RecordWriter::create(dir.path().join("d.mcap"), Rotation::NEVER).expect("create");
+        for k in 0..3 {
+            w.write_samples(&batch(k, 10)).expect("write");
+        }
+        drop(w);
+        assert!(!dir.path().join("d.mcap").exists());
+        let rec = read_recording(dir.path().join("d.mcap.part")).expect("read .part");
+        assert_eq!(rec.messages.len(), 3);
     }
 }
