@@ -8,3 +8,4 @@ pub mod estimate;
 pub mod physics;
 pub mod record;
 pub mod signal;
+pub mod synth;

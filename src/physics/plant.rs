@@ -20,6 +20,10 @@ use super::machine::{Machine, series};
 /// keeps the steps shorter anyway.
 const MAX_STEP_PERIODS: f64 = 0.25;
 
+/// Relative margin of the yield load over the flow load for a billet at rest (1 ppm: far
+/// below any physical scatter of a flow stress).
+const YIELD_MARGIN: f64 = 1e-6;
+
 /// Length of the state vector.
 pub const N: usize = 14;
 
@@ -185,6 +189,13 @@ impl Plant {
         self.k_contact_n_per_m.is_infinite()
     }
 
+    /// The load at which a resting billet starts to flow: the upsetting load raised by
+    /// `YIELD_MARGIN`. Leaving plastic flow puts the yield guard at zero to within roundoff;
+    /// the margin puts it strictly on its armed side, so the next yield cannot be missed.
+    fn yield_load(&self, h: f64, ddelta: f64) -> f64 {
+        self.upset(h, ddelta).0 * (1.0 + YIELD_MARGIN)
+    }
+
     /// Upsetting load (total, frictionless) at height `h` and approach rate `ddelta`.
     fn upset(&self, h: f64, ddelta: f64) -> (f64, f64) {
         match &self.billet {
@@ -300,7 +311,10 @@ impl Plant {
         let dd = e.acc_upper - e.acc_lower;
         let num = k * e.ddelta_mps - f_r * dd / h;
         let den = k - f_h + f_r * e.ddelta_mps.max(0.0) / (h * h);
-        num / den
+        // Integration error lets the elastic force drift off the flow load; this term makes
+        // the drift decay with the time constant of the step cap (Baumgarte stabilisation).
+        let drift = (e.contact_n - total) / self.max_step_s;
+        (num + drift) / den
     }
 
     /// Sensor output: the raw load, or the high-passed one with `sensor_highpass`.
@@ -371,7 +385,7 @@ impl Plant {
     /// Where the rigid contact goes when the billet touches or the bodies stop approaching.
     fn classify_rigid(&self, y: &mut [f64; N], mode: Mode, approaching: bool) -> Contact {
         let e = self.eval(y, Mode { contact: Contact::Free, ..mode });
-        let (f_l, _) = self.upset(e.h_m, e.ddelta_mps);
+        let f_l = self.yield_load(e.h_m, e.ddelta_mps);
         if approaching || e.stick_n >= f_l {
             y[P] = e.delta_m;
             Contact::Plastic
@@ -392,7 +406,7 @@ impl Plant {
         match mode.contact {
             Contact::Stuck => {
                 let e = self.eval(y, mode);
-                let (f_l, _) = self.upset(e.h_m, 0.0);
+                let f_l = self.yield_load(e.h_m, 0.0);
                 if e.stick_n <= 0.0 {
                     next.contact = Contact::Free;
                 } else if e.stick_n >= f_l {
@@ -436,7 +450,20 @@ impl Plant {
             Lower::Chain { .. } if self.node => y[XN],
             Lower::Chain { .. } => y[X3],
         };
-        Outputs { sensor_n: self.sensor(y, &e), billet_n: e.contact_n, upper_m: y[XU], lower_m, h_m: e.h_m }
+        let (ram_m, ram_mps, ram_acc_mps2) = match self.ram {
+            Some((m, _, _)) => (y[XR], y[VR], -e.link_n / m),
+            None => (y[XU], y[VU], e.acc_upper),
+        };
+        Outputs {
+            sensor_n: self.sensor(y, &e),
+            billet_n: e.contact_n,
+            upper_m: y[XU],
+            lower_m,
+            h_m: e.h_m,
+            ram_m,
+            ram_mps,
+            ram_acc_mps2,
+        }
     }
 
     /// Rate of the sensor output, for peak interpolation within a step.
@@ -477,6 +504,11 @@ pub struct Outputs {
     pub upper_m: f64,
     pub lower_m: f64,
     pub h_m: f64,
+    /// The ram, which carries the encoder and the accelerometer: the upper mass of a hammer,
+    /// the heavy mass behind the link of a press. Position m, velocity m/s, acceleration m/s².
+    pub ram_m: f64,
+    pub ram_mps: f64,
+    pub ram_acc_mps2: f64,
 }
 
 impl Hybrid<N> for Plant {
@@ -542,7 +574,7 @@ impl Hybrid<N> for Plant {
                 Contact::Free | Contact::Elastic => out.push(G_TOUCH, e.delta_m - y[P], Crossing::Rising),
                 Contact::Plastic => out.push(G_REL_VEL_ZERO, e.ddelta_mps, Crossing::Falling),
                 Contact::Stuck => {
-                    let (f_l, _) = self.upset(e.h_m, 0.0);
+                    let f_l = self.yield_load(e.h_m, 0.0);
                     out.push(G_STICK_ZERO, e.stick_n, Crossing::Falling);
                     out.push(G_STICK_YIELD, e.stick_n - f_l, Crossing::Rising);
                 }
@@ -554,7 +586,7 @@ impl Hybrid<N> for Plant {
                 Contact::Elastic => {
                     out.push(G_OPEN, compression, Crossing::Falling);
                     if self.billet.is_some() {
-                        let (f_l, _) = self.upset(e.h_m, e.ddelta_mps);
+                        let f_l = self.yield_load(e.h_m, e.ddelta_mps);
                         out.push(G_YIELD, e.contact_n - f_l, Crossing::Rising);
                     }
                 }
@@ -592,7 +624,15 @@ impl Hybrid<N> for Plant {
                 next.contact = Contact::Plastic;
             }
             G_YIELD => next.contact = Contact::Plastic,
-            G_UNLOAD => next.contact = Contact::Elastic,
+            G_UNLOAD => {
+                // Leave the yield surface exactly: shift the plastic compression so that the
+                // elastic force equals the flow load (a sub-micrometre correction of the
+                // stabilised drift), which keeps the next yield guard armed.
+                let e = self.eval(y, mode);
+                let f_l = self.upset(e.h_m, e.ddelta_mps).0;
+                y[P] += (e.contact_n - f_l) / self.k_contact_n_per_m;
+                next.contact = Contact::Elastic;
+            }
             G_ENGAGE => next.engaged = true,
             G_DISENGAGE => next.engaged = false,
             _ => {}

@@ -354,3 +354,40 @@ fn a_damped_press_frame_converges_to_the_undamped_one() {
         }
     }
 }
+
+/// Regression: on a press whose tool stops early in the blow (light tool, heavy ram behind a
+/// soft link), the contact force drifted off the rate-sensitive flow load during plastic flow
+/// (integration error, ~8 N a step); on unloading the yield guard started past its zero and
+/// never fired again, so blow 2 stayed elastic up to 4.6 MN (efficiency 0.02 instead of 0.77).
+#[test]
+fn a_press_whose_tool_stops_early_yields_again_at_every_tolerance() {
+    let m = Machine::ScrewPress(super::machine::ScrewPress {
+        m_tool_kg: 2500.0,
+        m_ram_kg: 80000.0,
+        k_link_n_per_m: 2.0e9,
+        c_link_ns_per_m: 3.0e5,
+        k_frame_n_per_m: 8e9,
+        c_frame_ns_per_m: 0.0,
+        k_sensor_n_per_m: 3e10,
+        k_tool_contact_n_per_m: f64::INFINITY,
+    });
+    let mut p = copper();
+    p.billet.diameter_m = 0.045;
+    p.billet.height_m = 0.028;
+    p.friction = 0.08;
+    let h = |rtol: f64| -> Vec<f64> {
+        let o = SimOptions { method: Method::Dopri5 { rtol }, ..SimOptions::default() };
+        simulate_sequence(&m, &EffectSet::NONE, &p, &[0.4; 3], &o)
+            .unwrap()
+            .iter()
+            .map(|b| b.forming.unwrap().h_end_m)
+            .collect()
+    };
+    let reference = h(1e-7);
+    for rtol in [1e-4, 1e-5, 1e-6] {
+        for (a, b) in h(rtol).iter().zip(&reference) {
+            // Issue #2's convergence bound, 0.01 mm.
+            assert!((a - b).abs() < 1e-5, "rtol {rtol}: {a} vs {b}");
+        }
+    }
+}
