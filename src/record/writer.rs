@@ -186,7 +186,6 @@ impl RecordWriter {
     /// Store a configuration file on `/config`. It is also written into every later file of
     /// a rotated recording (a later one with the same name replaces it there).
     pub fn write_config(&mut self, log_time_ns: i64, name: &str, text: &str) -> Result<(), RecordError> {
-        self.configs.insert(name.to_string(), text.to_string());
         self.write_payload(log_time_ns, &Payload::Config(ConfigFile { name: name.to_string(), text: text.to_string() }))
     }
 
@@ -198,6 +197,9 @@ impl RecordWriter {
         }
         let kind = payload.kind();
         let log_time = self.log_time(log_time_ns, || kind.fixed_topic().unwrap_or_default().to_string())?;
+        if let Payload::Config(c) = payload {
+            self.configs.insert(c.name.clone(), c.text.clone());
+        }
         self.buf.clear();
         // Only sample batches can fail to encode.
         if let Err(reason) = codec::encode_payload(payload, &mut self.buf) {
@@ -464,10 +466,7 @@ impl OpenFile {
             .chunk_size(Some(options.chunk_size_bytes))
             .create(sink)
             .map_err(|source| RecordError::Mcap { path: part_path.clone(), offset: None, source })?;
-        if let Some(dir) = part_path.parent() {
-            sync_dir(dir);
-        }
-        Ok(OpenFile {
+        let mut file = OpenFile {
             final_path,
             part_path,
             mcap,
@@ -481,7 +480,19 @@ impl OpenFile {
             last_sync_log_time: 0,
             messages: 0,
             last_sync: None,
-        })
+        };
+        // Magic and header on disk from the start: a crash before the first sync leaves
+        // an empty recording, not an empty file.
+        file.mcap.flush().map_err(|e| file.mcap_err(e))?;
+        file.sync_handle.sync_data().map_err(|source| RecordError::Io {
+            path: file.part_path.clone(),
+            action: "sync",
+            source,
+        })?;
+        if let Some(dir) = file.part_path.parent() {
+            sync_dir(dir);
+        }
+        Ok(file)
     }
 
     fn mcap_err(&self, source: mcap::McapError) -> RecordError {
