@@ -6,6 +6,7 @@ pub mod cli;
 pub mod config;
 pub mod estimate;
 pub mod physics;
+pub mod pipeline;
 pub mod record;
 pub mod signal;
 pub mod synth;

@@ -1,18 +1,31 @@
-//! Alerts: rules with debounce over the stream of blow results. Pure code.
+//! Alerts: rules with debounce over the stream of blow results. A hard blow, or k of the
+//! last n blows below an efficiency threshold, means the blows have turned elastic (the part
+//! is finished or too cold: further blows only load the machine); an energy balance that no
+//! longer closes means the model does not describe the machine. Pure code.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 
 use serde::Serialize;
+
+use crate::estimate::{BlowClass, BlowEstimate};
 
 /// Which rule fired.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum AlertKind {
-    /// A hard blow, or k of the last n blows below the efficiency threshold: the blows have
-    /// turned elastic (the part is done or cold).
+    /// The blows have turned elastic (CONTRACTS.md §5 `"elastic_blow"`).
     ElasticBlow,
     /// The energy balance no longer closes: the model does not describe the machine.
     ModelHealth,
+}
+
+impl AlertKind {
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            AlertKind::ElasticBlow => "elastic_blow",
+            AlertKind::ModelHealth => "model_health",
+        }
+    }
 }
 
 /// An alert with the blow, the figures and a plain-language reason.
@@ -23,4 +36,186 @@ pub struct Alert {
     pub reason: String,
     /// The figures behind it, by name (e.g. "efficiency": 0.31).
     pub figures: BTreeMap<String, f64>,
+}
+
+/// The rules' thresholds, with the defaults named.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AlertConfig {
+    /// Alert on any hard blow.
+    pub on_hard_blow: bool,
+    /// Alert when `k_low` of the last `n_window` blows are below `low_efficiency`.
+    pub k_low: usize,
+    pub n_window: usize,
+    pub low_efficiency: f64,
+    /// Alert when |energy-balance residual| exceeds this.
+    pub residual_limit: f64,
+    /// After an alert of a kind, the same kind stays quiet for this many blows.
+    pub debounce_blows: u32,
+}
+
+impl Default for AlertConfig {
+    fn default() -> Self {
+        AlertConfig {
+            on_hard_blow: true,
+            k_low: 3,
+            n_window: 4,
+            low_efficiency: 0.6,
+            residual_limit: 0.10,
+            debounce_blows: 3,
+        }
+    }
+}
+
+/// The rules and their memory.
+#[derive(Debug, Clone)]
+pub struct AlertRules {
+    cfg: AlertConfig,
+    recent: VecDeque<f64>,
+    last_fired: BTreeMap<&'static str, u32>,
+}
+
+impl AlertRules {
+    pub fn new(cfg: AlertConfig) -> Self {
+        AlertRules { cfg, recent: VecDeque::new(), last_fired: BTreeMap::new() }
+    }
+
+    /// Replace the thresholds (SIGHUP reload); the memory of recent blows is kept.
+    pub fn set_config(&mut self, cfg: AlertConfig) {
+        self.cfg = cfg;
+    }
+
+    /// A new billet: forget the recent blows and the debounce.
+    pub fn reset(&mut self) {
+        self.recent.clear();
+        self.last_fired.clear();
+    }
+
+    /// Judge one blow; at most one alert (elastic blows first, then model health).
+    pub fn on_blow(&mut self, b: &BlowEstimate) -> Option<Alert> {
+        let c = self.cfg;
+        self.recent.push_back(b.efficiency);
+        while self.recent.len() > c.n_window.max(1) {
+            self.recent.pop_front();
+        }
+        let low = self.recent.iter().filter(|e| **e < c.low_efficiency).count();
+        let mut figures = BTreeMap::from([
+            ("efficiency".to_string(), b.efficiency),
+            ("plastic_J".to_string(), b.plastic_j),
+            ("kinetic_in_J".to_string(), b.kinetic_in_j),
+            ("elastic_J".to_string(), b.elastic_j),
+        ]);
+        let candidate = if c.on_hard_blow && b.class == BlowClass::Hard {
+            Some((
+                AlertKind::ElasticBlow,
+                format!(
+                    "blow {} was hard: only {:.0} % of its {:.0} J went into the billet and {:.0} J came back as elastic energy; \
+                     the part is finished or too cold, and further blows only load the dies and the machine",
+                    b.blow,
+                    100.0 * b.efficiency,
+                    b.kinetic_in_j,
+                    b.elastic_j
+                ),
+            ))
+        } else if c.k_low > 0 && low >= c.k_low {
+            figures.insert("blows_below_threshold".to_string(), low as f64);
+            Some((
+                AlertKind::ElasticBlow,
+                format!(
+                    "{low} of the last {} blows forged with efficiency below {:.0} % (blow {}: {:.0} %): the blows are turning elastic",
+                    self.recent.len(),
+                    100.0 * c.low_efficiency,
+                    b.blow,
+                    100.0 * b.efficiency
+                ),
+            ))
+        } else if b.residual.abs() > c.residual_limit {
+            figures.insert("residual".to_string(), b.residual);
+            Some((
+                AlertKind::ModelHealth,
+                format!(
+                    "blow {}: the energy balance misses by {:.1} % of the energy in (limit {:.0} %): the machine no longer behaves like its identified model",
+                    b.blow,
+                    100.0 * b.residual,
+                    100.0 * c.residual_limit
+                ),
+            ))
+        } else {
+            None
+        };
+        let (kind, reason) = candidate?;
+        if let Some(&last) = self.last_fired.get(kind.as_str())
+            && b.blow <= last + c.debounce_blows
+        {
+            return None;
+        }
+        self.last_fired.insert(kind.as_str(), b.blow);
+        Some(Alert { kind, blow: b.blow, reason, figures })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn blow(n: u32, efficiency: f64, residual: f64) -> BlowEstimate {
+        let cfg = crate::estimate::EstimatorConfig::for_kind(crate::physics::MachineKind::Hammer);
+        BlowEstimate {
+            blow: n,
+            t_contact_s: n as f64,
+            v_impact_mps: 4.0,
+            kinetic_in_j: 6000.0,
+            plastic_j: 6000.0 * efficiency,
+            friction_j: None,
+            damped_j: 100.0,
+            elastic_j: 6000.0 * (1.0 - efficiency) - 100.0,
+            efficiency,
+            final_load_n: 1e6,
+            h_end_m: None,
+            class: cfg.classify(efficiency),
+            alert: None,
+            t_end_s: n as f64 + 0.01,
+            peak_load_n: 1e6,
+            residual,
+        }
+    }
+
+    #[test]
+    fn soft_blows_raise_nothing() {
+        let mut r = AlertRules::new(AlertConfig::default());
+        for n in 1..10 {
+            assert_eq!(r.on_blow(&blow(n, 0.9, 0.0)), None);
+        }
+    }
+
+    #[test]
+    fn a_hard_blow_alerts_once_then_debounces() {
+        let mut r = AlertRules::new(AlertConfig::default());
+        let a = r.on_blow(&blow(1, 0.3, 0.0)).unwrap();
+        assert_eq!(a.kind, AlertKind::ElasticBlow);
+        assert!(a.reason.contains("blow 1 was hard") && a.reason.contains("30 %"), "{}", a.reason);
+        // Blows 2–4 are within the debounce of 3; blow 5 alerts again.
+        for n in 2..=4 {
+            assert_eq!(r.on_blow(&blow(n, 0.3, 0.0)), None, "blow {n}");
+        }
+        assert!(r.on_blow(&blow(5, 0.3, 0.0)).is_some());
+    }
+
+    #[test]
+    fn three_of_four_intermediate_blows_alert() {
+        let mut r = AlertRules::new(AlertConfig::default());
+        assert_eq!(r.on_blow(&blow(1, 0.55, 0.0)), None);
+        assert_eq!(r.on_blow(&blow(2, 0.8, 0.0)), None);
+        assert_eq!(r.on_blow(&blow(3, 0.58, 0.0)), None);
+        let a = r.on_blow(&blow(4, 0.57, 0.0)).unwrap();
+        assert!(a.reason.starts_with("3 of the last 4 blows"), "{}", a.reason);
+        assert_eq!(a.figures["blows_below_threshold"], 3.0);
+    }
+
+    #[test]
+    fn a_broken_energy_balance_is_a_model_health_alert() {
+        let mut r = AlertRules::new(AlertConfig::default());
+        let a = r.on_blow(&blow(1, 0.9, -0.15)).unwrap();
+        assert_eq!(a.kind, AlertKind::ModelHealth);
+        assert_eq!(a.figures["residual"], -0.15);
+    }
 }

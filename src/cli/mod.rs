@@ -6,6 +6,7 @@ use std::path::Path;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 
+pub mod replay;
 pub mod simulate;
 
 /// forgemon: blow-by-blow monitoring of gravity drop hammers and screw presses.
@@ -20,12 +21,15 @@ pub struct Cli {
 pub enum Command {
     /// Simulate consecutive blows on a billet (or bare strikes) with the machine model.
     Simulate(simulate::SimulateArgs),
+    /// Run a recording, capture CSV or capture directory through the live pipeline.
+    Replay(replay::ReplayArgs),
 }
 
 impl Cli {
     pub fn run(self) -> anyhow::Result<std::process::ExitCode> {
         match self.command {
             Command::Simulate(args) => simulate::run(args),
+            Command::Replay(args) => replay::run(args),
         }
     }
 }

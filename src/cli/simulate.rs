@@ -335,7 +335,7 @@ mod tests {
             "--json",
         ])
         .unwrap();
-        let Command::Simulate(a) = cli.command;
+        let Command::Simulate(a) = cli.command else { panic!("not simulate") };
         assert_eq!(a.v0, vec![3.9, 5.3]);
         assert!(a.json && !a.bare);
     }

@@ -1,0 +1,251 @@
+//! `forgemon replay` (CONTRACTS.md §5): a recording, a capture CSV or a capture directory
+//! through exactly the live pipeline; one JSON line per blow; `--out` records the replay.
+
+use std::io::{BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, bail};
+use clap::Args;
+
+use super::read_text;
+use crate::config::{parse_machine, parse_process};
+use crate::physics::process::Process;
+use crate::pipeline::{Pipeline, PipelineConfig, PipelineEvent};
+use crate::record::{BlowBoundary, Payload, RecordWriter, Rotation, read_recording};
+use crate::signal::capture::{CaptureReader, DEFAULT_BATCH_S, blow_files};
+use crate::signal::sample::SampleBatch;
+
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// A recording (.mcap), a capture CSV, or a capture directory (blow_01.csv, ...).
+    pub input: PathBuf,
+    /// The machine model (machine.toml).
+    #[arg(long)]
+    pub machine: PathBuf,
+    /// The process sheet; defaults to the capture directory's process.toml, or the one
+    /// stored in the recording.
+    #[arg(long)]
+    pub process: Option<PathBuf>,
+    /// Record the replay (samples, blows, results, alerts, configuration) to this MCAP file.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// One JSON object per blow (CONTRACTS.md §5) instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// A source of sample batches, whatever the input.
+enum Input {
+    Files(Vec<PathBuf>),
+    Recording(Vec<SampleBatch>),
+}
+
+/// Feeds batches to the pipeline, ending the stream wherever a batch does not continue the
+/// previous one (a new triggered capture, a gap): the same rule for every kind of input.
+struct Feeder {
+    pipeline: Pipeline,
+    last: Option<(String, f64, f64)>, // source, device time after the last sample (ns), period (ns)
+    samples: u64,
+}
+
+impl Feeder {
+    fn push(&mut self, batch: &SampleBatch, out: &mut Vec<PipelineEvent>) {
+        if let Some((source, next_ns, period_ns)) = &self.last {
+            let jump = (batch.device_time_ns as f64 - next_ns).abs();
+            if *source != batch.source || jump > 0.5 * period_ns {
+                self.pipeline.end_of_stream(out);
+            }
+        }
+        self.samples += batch.len() as u64;
+        self.pipeline.push(batch, out);
+        self.last = Some((
+            batch.source.clone(),
+            batch.device_time_ns as f64 + batch.period_ns * batch.len() as f64,
+            batch.period_ns,
+        ));
+    }
+}
+
+pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
+    let machine_text = read_text(&args.machine)?;
+    let machine = parse_machine(&args.machine.display().to_string(), &machine_text)?.machine;
+    let (input, stored_process) = open_input(&args.input)?;
+    let process_text = match (&args.process, &input) {
+        (Some(p), _) => Some((p.display().to_string(), read_text(p)?)),
+        (None, Input::Files(_)) if args.input.is_dir() => {
+            let p = args.input.join("process.toml");
+            p.exists().then(|| read_text(&p).map(|t| (p.display().to_string(), t))).transpose()?
+        }
+        _ => stored_process.map(|t| (format!("{} (process.toml stored in it)", args.input.display()), t)),
+    };
+    let process: Option<Process> = match &process_text {
+        Some((origin, text)) => {
+            let p = parse_process(origin, text)?;
+            if p.machine != machine.kind() {
+                bail!(
+                    "{origin}: key 'machine' is \"{}\" but {} has kind \"{}\"",
+                    p.machine.as_str(),
+                    args.machine.display(),
+                    machine.kind().as_str()
+                );
+            }
+            Some(p)
+        }
+        None => None,
+    };
+    let mut writer = match &args.out {
+        Some(path) => {
+            let mut w = RecordWriter::create(path, Rotation::default())
+                .with_context(|| format!("{}: cannot record", path.display()))?;
+            w.write_config(0, "machine.toml", &machine_text)?;
+            if let Some((_, text)) = &process_text {
+                w.write_config(0, "process.toml", text)?;
+            }
+            Some(w)
+        }
+        None => None,
+    };
+    let mut feeder = Feeder {
+        pipeline: Pipeline::new(machine, process, PipelineConfig::for_machine(&machine)),
+        last: None,
+        samples: 0,
+    };
+    let stdout = std::io::stdout();
+    let mut w = std::io::BufWriter::new(stdout.lock());
+    if !args.json {
+        writeln!(
+            w,
+            "blow  t_contact s     v m/s  kinetic J  plastic J  elastic J  efficiency  class         final kN  h_end mm  alert"
+        )?;
+    }
+    let mut events = Vec::new();
+    let (mut blows, mut rejected) = (0u64, 0u64);
+    let mut handle = |events: &mut Vec<PipelineEvent>,
+                      writer: &mut Option<RecordWriter>,
+                      w: &mut dyn Write|
+     -> anyhow::Result<()> {
+        for ev in events.drain(..) {
+            match ev {
+                PipelineEvent::Blow { cut, estimate } => {
+                    blows += 1;
+                    if let Some(rec) = writer.as_mut() {
+                        let t_ns = (cut.t_end_s * 1e9).round() as i64;
+                        let boundary = BlowBoundary {
+                            blow: estimate.blow,
+                            t_trigger_s: cut.t_trigger_s,
+                            t_contact_s: cut.t_contact_s,
+                            t_end_s: cut.t_end_s,
+                            source: String::new(),
+                        };
+                        rec.write_payload(t_ns, &Payload::Boundary(boundary))?;
+                        rec.write_result(t_ns, &estimate)?;
+                        if let Some(a) = &estimate.alert {
+                            rec.write_alert(t_ns, a)?;
+                        }
+                    }
+                    if args.json {
+                        writeln!(w, "{}", serde_json::to_string(&estimate)?)?;
+                    } else {
+                        writeln!(
+                            w,
+                            "{:>4}  {:>12.4}  {:>6.3}  {:>9.0}  {:>9.0}  {:>9.0}  {:>10.3}  {:<12}  {:>8.0}  {:>8}  {}",
+                            estimate.blow,
+                            estimate.t_contact_s,
+                            estimate.v_impact_mps,
+                            estimate.kinetic_in_j,
+                            estimate.plastic_j,
+                            estimate.elastic_j,
+                            estimate.efficiency,
+                            estimate.class.as_str(),
+                            estimate.final_load_n / 1e3,
+                            estimate.h_end_m.map_or("-".to_string(), |h| format!("{:.2}", h * 1e3)),
+                            estimate.alert.as_ref().map_or(String::new(), |a| a.reason.clone()),
+                        )?;
+                    }
+                }
+                PipelineEvent::Rejected { cut, error } => {
+                    rejected += 1;
+                    eprintln!("forgemon: blow at t = {:.6} s not estimated: {error}", cut.t_contact_s);
+                }
+            }
+        }
+        Ok(())
+    };
+    match input {
+        Input::Files(files) => {
+            for path in files {
+                let file = std::fs::File::open(&path).with_context(|| format!("{}: cannot read", path.display()))?;
+                let mut reader = CaptureReader::new(path.display().to_string(), BufReader::new(file), DEFAULT_BATCH_S)?;
+                while let Some(mut batch) = reader.next_batch()? {
+                    // One source per input: the captures of a directory are one machine.
+                    batch.source = "capture".to_string();
+                    if let Some(rec) = writer.as_mut() {
+                        rec.write_samples(&batch)?;
+                    }
+                    feeder.push(&batch, &mut events);
+                    handle(&mut events, &mut writer, &mut w)?;
+                }
+            }
+        }
+        Input::Recording(batches) => {
+            for batch in &batches {
+                if let Some(rec) = writer.as_mut() {
+                    rec.write_samples(batch)?;
+                }
+                feeder.push(batch, &mut events);
+                handle(&mut events, &mut writer, &mut w)?;
+            }
+        }
+    }
+    feeder.pipeline.end_of_stream(&mut events);
+    handle(&mut events, &mut writer, &mut w)?;
+    w.flush()?;
+    if let Some(rec) = writer {
+        let files = rec.finish()?;
+        for f in files {
+            eprintln!("forgemon: recorded {}", f.display());
+        }
+    }
+    let s = feeder.pipeline.segment_stats();
+    eprintln!(
+        "forgemon: replayed {} samples: {blows} blows, {rejected} not estimated, {} triggers without contact, {} batches dropped",
+        feeder.samples, s.triggers_without_contact, s.batches_dropped
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Classify the input and, for a recording, read its samples and stored process sheet.
+fn open_input(path: &Path) -> anyhow::Result<(Input, Option<String>)> {
+    if path.is_dir() {
+        let names = std::fs::read_dir(path)
+            .with_context(|| format!("{}: cannot list", path.display()))?
+            .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()));
+        let files: Vec<PathBuf> = blow_files(names).into_iter().map(|n| path.join(n)).collect();
+        if files.is_empty() {
+            bail!("{}: no blow_NN.csv files: not a capture directory", path.display());
+        }
+        return Ok((Input::Files(files), None));
+    }
+    let name = path.to_string_lossy();
+    if name.ends_with(".mcap") || name.ends_with(".mcap.part") {
+        let rec = read_recording(path)?;
+        if !rec.report.complete {
+            eprintln!("forgemon: {}", rec.report);
+        }
+        let mut process = None;
+        let mut batches = Vec::new();
+        for m in rec.messages {
+            match m.payload {
+                Payload::Samples(b) => batches.push(b),
+                Payload::Config(c) if c.name == "process.toml" => process = Some(c.text),
+                _ => {}
+            }
+        }
+        return Ok((Input::Recording(batches), process));
+    }
+    if !path.exists() {
+        bail!("{}: no such file or directory", path.display());
+    }
+    Ok((Input::Files(vec![path.to_path_buf()]), None))
+}
