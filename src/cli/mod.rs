@@ -6,6 +6,8 @@ use std::path::Path;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 
+pub mod import;
+pub mod inspect;
 pub mod replay;
 pub mod simulate;
 
@@ -23,6 +25,10 @@ pub enum Command {
     Simulate(simulate::SimulateArgs),
     /// Run a recording, capture CSV or capture directory through the live pipeline.
     Replay(replay::ReplayArgs),
+    /// Turn capture CSV files or a capture directory into an MCAP recording.
+    Import(import::ImportArgs),
+    /// Say what a recording holds: sources, rates, duration, blows, gaps, drops, alerts.
+    Inspect(inspect::InspectArgs),
 }
 
 impl Cli {
@@ -30,6 +36,8 @@ impl Cli {
         match self.command {
             Command::Simulate(args) => simulate::run(args),
             Command::Replay(args) => replay::run(args),
+            Command::Import(args) => import::run(args),
+            Command::Inspect(args) => inspect::run(args),
         }
     }
 }

@@ -133,6 +133,10 @@ pub enum IntegrationError {
     NonFinite { t_s: f64, mode: String },
     #[error("no end within {t_max_s} s of simulated time")]
     NoEnd { t_max_s: f64 },
+    #[error(
+        "more than {max_steps} steps by t = {t_s:e} s (a mode far faster than the blow: check the masses and stiffnesses)"
+    )]
+    TooManySteps { t_s: f64, max_steps: u64 },
 }
 
 /// Limits of one integration run.
@@ -141,6 +145,8 @@ pub struct Limits {
     pub t_max_s: f64,
     pub max_events: u32,
     pub initial_step_s: f64,
+    /// Most steps (accepted and rejected) before giving up.
+    pub max_steps: u64,
 }
 
 /// Integrate from `(0, y0)` in `mode0` until the observer asks to stop.
@@ -180,6 +186,9 @@ where
     let mut ws = Workspace::<N>::new();
 
     loop {
+        if u64::from(stats.steps) + u64::from(stats.rejected) > limits.max_steps {
+            return Err(IntegrationError::TooManySteps { t_s: t, max_steps: limits.max_steps });
+        }
         if t >= t_stop {
             return if t_stop < limits.t_max_s {
                 Ok(stats)
@@ -543,7 +552,7 @@ mod tests {
 
     fn run(method: Method) -> f64 {
         let mut rec = Record(None);
-        let limits = Limits { t_max_s: 10.0, max_events: 10, initial_step_s: 1e-3 };
+        let limits = Limits { t_max_s: 10.0, max_events: 10, initial_step_s: 1e-3, max_steps: 1_000_000 };
         // x = cos t starts positive and first falls through zero at t = pi/2.
         integrate(&Oscillator, method, &[1.0, 1.0], [1.0, 0.0], M::Swing, limits, &mut rec).unwrap();
         rec.0.unwrap()

@@ -11,7 +11,7 @@ use super::process::Process;
 
 /// A blow of a sequence that failed, with its number.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("blow {blow} (v0 {v0_mps} m/s): {source}")]
+#[error("blow {blow} (v0 {v0_mps} m/s)")]
 pub struct SequenceError {
     pub blow: usize,
     pub v0_mps: f64,
