@@ -15,9 +15,12 @@ use crate::physics::blow::{BlowResult, DEFAULT_RTOL, POST_WINDOW_S, SimOptions};
 use crate::physics::effects::{Effect, EffectSet};
 use crate::physics::integrator::Method;
 use crate::physics::ledger::Ledger;
+use crate::physics::machine::MachineKind;
 use crate::physics::montecarlo::{Uncertainty, monte_carlo};
 use crate::physics::process::Process;
 use crate::physics::sequence::{simulate_bare, simulate_sequence};
+use crate::signal::capture::write_capture;
+use crate::synth::{CaptureSpec, synth_blows};
 
 /// Default sample period of `--trace`, s (100 kHz, the DAQ rate of the service).
 pub const DEFAULT_TRACE_DT_S: f64 = 1e-5;
@@ -66,6 +69,13 @@ pub struct SimulateArgs {
     /// Sample period of the trace, s.
     #[arg(long, default_value_t = DEFAULT_TRACE_DT_S, requires = "trace")]
     pub trace_dt: f64,
+    /// Also write the blows as a capture directory (blow_01.csv, ..., process.toml), the way a
+    /// DAQ would have recorded them: approach, sensor offset and noise, 10 µm encoder.
+    #[arg(long, value_name = "DIR", conflicts_with = "bare")]
+    pub captures: Option<PathBuf>,
+    /// Seed of the capture noise.
+    #[arg(long, default_value_t = DEFAULT_SEED, requires = "captures")]
+    pub capture_seed: u64,
     /// Relative tolerance of the adaptive integrator.
     #[arg(long, default_value_t = DEFAULT_RTOL)]
     pub rtol: f64,
@@ -145,6 +155,10 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
         let process_path = args.process.as_ref().context("--process is required without --bare")?;
         let process = load_process(process_path, &inputs.machine, &args.machine)?;
         results = simulate_sequence(&inputs.machine.machine, &inputs.set, &process, &args.v0, &opts)?;
+        if let Some(dir) = &args.captures {
+            write_captures(dir, &inputs, &process, process_path, &args)
+                .with_context(|| format!("{}: cannot write the capture directory", dir.display()))?;
+        }
         out["blows"] = results
             .iter()
             .enumerate()
@@ -220,6 +234,28 @@ fn strike_json(n: usize, r: &BlowResult) -> Value {
         "energy": energy_json(&r.energy),
         "ledger_closure": r.energy.closure_error(),
     })
+}
+
+fn write_captures(
+    dir: &Path,
+    inputs: &Inputs,
+    process: &Process,
+    process_path: &Path,
+    args: &SimulateArgs,
+) -> anyhow::Result<()> {
+    let spec = match inputs.machine.machine.kind() {
+        MachineKind::Hammer => CaptureSpec::hammer(args.capture_seed),
+        MachineKind::ScrewPress => CaptureSpec::press(args.capture_seed),
+    };
+    let blows = synth_blows(&inputs.machine.machine, &inputs.set, process, &args.v0, &spec)?;
+    std::fs::create_dir_all(dir)?;
+    for (i, b) in blows.iter().enumerate() {
+        let mut w = std::io::BufWriter::new(std::fs::File::create(dir.join(format!("blow_{:02}.csv", i + 1)))?);
+        write_capture(&mut w, &b.rows)?;
+        w.flush()?;
+    }
+    std::fs::copy(process_path, dir.join("process.toml"))?;
+    Ok(())
 }
 
 fn write_trace(path: &Path, results: &[BlowResult]) -> anyhow::Result<()> {
