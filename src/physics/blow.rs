@@ -235,6 +235,11 @@ fn scales(plant: &Plant, v0_mps: f64, kinetic_in_j: f64) -> [f64; N] {
     for i in [WP, WF, WD] {
         s[i] = kinetic_in_j;
     }
+    for (i, used) in plant.used_states().into_iter().enumerate() {
+        if !used {
+            s[i] = f64::INFINITY;
+        }
+    }
     s
 }
 

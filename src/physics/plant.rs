@@ -450,6 +450,30 @@ impl Plant {
         next
     }
 
+    /// Which state components this plant uses (the others stay zero).
+    pub(super) fn used_states(&self) -> [bool; N] {
+        let mut u = [true; N];
+        if self.ram.is_none() {
+            u[XR] = false;
+            u[VR] = false;
+        }
+        if matches!(self.lower, Lower::Chain { .. }) {
+            u[XL] = false;
+            u[VL] = false;
+        }
+        if self.foundation.is_none() {
+            u[X3] = false;
+            u[V3] = false;
+        }
+        if !self.node {
+            u[XN] = false;
+        }
+        if !self.highpass_tau_s.is_finite() {
+            u[Z] = false;
+        }
+        u
+    }
+
     /// Give both bodies either side of a rigid contact their common (momentum-weighted)
     /// velocity. Used where the relative velocity is zero up to the event's tolerance.
     fn common_velocity(&self, y: &mut [f64; N]) {
