@@ -44,7 +44,7 @@ fn batch(k: i64, rng: &mut Lcg) -> SampleBatch {
 }
 
 fn result(blow: u32) -> BlowEstimate {
-    let hard = blow % 4 == 0;
+    let hard = blow.is_multiple_of(4);
     BlowEstimate {
         blow,
         t_contact_s: 0.7 * f64::from(blow),

@@ -94,7 +94,7 @@ pub fn decode_samples(mut bytes: &[u8]) -> Result<SampleBatch, DecodeError> {
             (6, wire::VARINT) => batch.roles.push(role_from_pb(wire::get_varint(buf)? as i32)?),
             (7, wire::LEN) => {
                 let packed = wire::get_len_delimited(buf)?;
-                if packed.len() % 8 != 0 {
+                if !packed.len().is_multiple_of(8) {
                     return Err(DecodeError::Wire { what: "packed doubles not a multiple of 8 bytes".into() });
                 }
                 batch.values.reserve(packed.len() / 8);
@@ -114,8 +114,8 @@ pub fn decode_samples(mut bytes: &[u8]) -> Result<SampleBatch, DecodeError> {
 }
 
 fn check_batch_shape(values: usize, channels: usize) -> Result<(), DecodeError> {
-    let whole = if channels == 0 { values == 0 } else { values % channels == 0 };
-    if whole { Ok(()) } else { Err(DecodeError::RaggedBatch { values, channels }) }
+    // `n.is_multiple_of(0)` only for n = 0: no channels, no values.
+    if values.is_multiple_of(channels) { Ok(()) } else { Err(DecodeError::RaggedBatch { values, channels }) }
 }
 
 fn role_to_pb(role: Role) -> pb::Role {
