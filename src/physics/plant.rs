@@ -25,9 +25,10 @@ const MAX_STEP_PERIODS: f64 = 0.25;
 const YIELD_MARGIN: f64 = 1e-6;
 
 /// Shortest time constant of the press's frame node that is integrated as a state, s.
-/// Below it (c_frame under ~4e3 N s/m on the SPR 400) the node is folded into the series
-/// springs: its damper then takes under 0.1 % of a blow's energy.
-const NODE_MIN_TAU_S: f64 = 1e-7;
+/// Below it (c_frame under ~1.3e5 N s/m on the SPR 400) the node is folded into the series
+/// springs: its damper then takes under 0.2 % of a copper blow's energy, and resolving it
+/// would take steps of its time constant.
+const NODE_MIN_TAU_S: f64 = 3e-6;
 
 /// Length of the state vector.
 pub const N: usize = 14;
