@@ -1,5 +1,6 @@
 //! Speed of the pipeline (issue #3 targets): replay of a 100 kHz, 3-channel recording
-//! (decode + segment + estimate; target ≥ 20 M samples/s on one core), the pipeline alone
+//! (decode + segment + estimate + results as JSON, the recording streamed as `replay` does;
+//! target ≥ 20 M samples/s on one core), the pipeline alone
 //! on samples in memory, and the compute latency of one blow's result after its end is
 //! detected (target ≤ 5 ms).
 
@@ -10,7 +11,7 @@ use forgemon::config::{parse_machine, parse_process};
 use forgemon::estimate::{Estimator, EstimatorConfig};
 use forgemon::physics::EffectSet;
 use forgemon::pipeline::{Pipeline, PipelineConfig};
-use forgemon::record::{Payload, RecordWriter, Rotation, read_recording};
+use forgemon::record::{Payload, RecordReader, RecordWriter, Rotation};
 use forgemon::signal::capture::CaptureRow;
 use forgemon::signal::sample::{Role, SampleBatch};
 use forgemon::signal::segment::{SegmentConfig, Segmenter};
@@ -64,12 +65,12 @@ fn pipeline(c: &mut Criterion) {
     g.sample_size(10);
     g.bench_function("mcap_100kHz_3ch_decode_segment_estimate", |bch| {
         bch.iter(|| {
-            let rec = read_recording(&path).unwrap();
+            let reader = RecordReader::open(&path).unwrap();
             let mut pl = Pipeline::new(m, Some(p.clone()), PipelineConfig::for_machine(&m));
             let mut ev = Vec::new();
             let mut out = Vec::new();
-            for msg in &rec.messages {
-                if let Payload::Samples(b) = &msg.payload {
+            for msg in reader {
+                if let Payload::Samples(b) = &msg.unwrap().payload {
                     pl.push(b, &mut ev);
                     for e in ev.drain(..) {
                         if let forgemon::pipeline::PipelineEvent::Blow { estimate, .. } = e {

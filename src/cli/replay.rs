@@ -12,7 +12,7 @@ use super::read_text;
 use crate::config::{parse_machine, parse_process};
 use crate::physics::process::Process;
 use crate::pipeline::{Pipeline, PipelineConfig, PipelineEvent};
-use crate::record::{BlowBoundary, Payload, RecordWriter, Rotation, read_recording};
+use crate::record::{BlowBoundary, Payload, RecordReader, RecordWriter, Rotation};
 use crate::signal::capture::{CaptureReader, DEFAULT_BATCH_S, blow_files};
 use crate::signal::sample::SampleBatch;
 
@@ -38,7 +38,12 @@ pub struct ReplayArgs {
 /// A source of sample batches, whatever the input.
 enum Input {
     Files(Vec<PathBuf>),
-    Recording(Vec<SampleBatch>),
+    /// A recording, streamed in file order (the writer stores each source's samples in
+    /// time order), with the samples read ahead while looking for the stored process sheet.
+    Recording {
+        reader: RecordReader,
+        ahead: Vec<SampleBatch>,
+    },
 }
 
 /// Feeds batches to the pipeline, ending the stream wherever a batch does not continue the
@@ -188,13 +193,29 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
                 }
             }
         }
-        Input::Recording(batches) => {
-            for batch in &batches {
+        Input::Recording { mut reader, ahead } => {
+            let mut feed = |batch: &SampleBatch,
+                            writer: &mut Option<RecordWriter>,
+                            events: &mut Vec<PipelineEvent>|
+             -> anyhow::Result<()> {
                 if let Some(rec) = writer.as_mut() {
                     rec.write_samples(batch)?;
                 }
-                feeder.push(batch, &mut events);
+                feeder.push(batch, events);
+                Ok(())
+            };
+            for batch in &ahead {
+                feed(batch, &mut writer, &mut events)?;
                 handle(&mut events, &mut writer, &mut w)?;
+            }
+            for m in reader.by_ref() {
+                if let Payload::Samples(batch) = m?.payload {
+                    feed(&batch, &mut writer, &mut events)?;
+                    handle(&mut events, &mut writer, &mut w)?;
+                }
+            }
+            if !reader.report().complete {
+                eprintln!("forgemon: {}", reader.report());
             }
         }
     }
@@ -229,20 +250,21 @@ fn open_input(path: &Path) -> anyhow::Result<(Input, Option<String>)> {
     }
     let name = path.to_string_lossy();
     if name.ends_with(".mcap") || name.ends_with(".mcap.part") {
-        let rec = read_recording(path)?;
-        if !rec.report.complete {
-            eprintln!("forgemon: {}", rec.report);
-        }
+        let mut reader = RecordReader::open(path)?;
         let mut process = None;
-        let mut batches = Vec::new();
-        for m in rec.messages {
-            match m.payload {
-                Payload::Samples(b) => batches.push(b),
+        let mut ahead = Vec::new();
+        // Configuration is written before the samples; read up to the first batch of them.
+        for m in reader.by_ref() {
+            match m?.payload {
+                Payload::Samples(b) => {
+                    ahead.push(b);
+                    break;
+                }
                 Payload::Config(c) if c.name == "process.toml" => process = Some(c.text),
                 _ => {}
             }
         }
-        return Ok((Input::Recording(batches), process));
+        return Ok((Input::Recording { reader, ahead }, process));
     }
     if !path.exists() {
         bail!("{}: no such file or directory", path.display());
