@@ -4,9 +4,9 @@
 
 use std::collections::BTreeMap;
 
-use super::{ConfigError, Keys, parse_table};
+use super::{ConfigError, Keys, machine_kind, parse_table};
 use crate::physics::effects::Effect;
-use crate::physics::machine::{DEFAULT_HAMMER_TOOL_CONTACT_N_PER_M, Hammer, Machine, ScrewPress};
+use crate::physics::machine::{DEFAULT_HAMMER_TOOL_CONTACT_N_PER_M, Hammer, Machine, MachineKind, ScrewPress};
 
 /// A machine file: the model and the effects it switches on by default.
 #[derive(Debug, Clone, PartialEq)]
@@ -19,9 +19,8 @@ pub struct MachineFile {
 pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigError> {
     let table = parse_table(origin, text)?;
     let keys = Keys::root(origin, &table);
-    let kind = keys.string("kind")?;
-    let machine = match kind {
-        "hammer" => Machine::Hammer(Hammer {
+    let machine = match machine_kind(&keys, "kind")? {
+        MachineKind::Hammer => Machine::Hammer(Hammer {
             m1_kg: keys.positive("m1_kg")?,
             m2_kg: keys.positive("m2_kg")?,
             k_n_per_m: keys.positive("k_N_per_m")?,
@@ -31,7 +30,7 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
                 None => DEFAULT_HAMMER_TOOL_CONTACT_N_PER_M,
             },
         }),
-        "screw_press" => Machine::ScrewPress(ScrewPress {
+        MachineKind::ScrewPress => Machine::ScrewPress(ScrewPress {
             m_tool_kg: keys.positive("m_tool_kg")?,
             m_ram_kg: keys.positive("m_ram_kg")?,
             k_link_n_per_m: keys.positive("k_link_N_per_m")?,
@@ -44,9 +43,6 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
                 None => f64::INFINITY,
             },
         }),
-        other => {
-            return Err(keys.invalid("kind", format!("must be \"hammer\" or \"screw_press\", got \"{other}\"")));
-        }
     };
     let mut effects = Vec::new();
     if table.contains_key("effects") {

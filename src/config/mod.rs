@@ -10,6 +10,8 @@ pub mod process;
 pub use machine::{MachineFile, parse_machine};
 pub use process::parse_process;
 
+use crate::physics::machine::MachineKind;
+
 /// What is wrong with a configuration file. The message names the file and the key.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ConfigError {
@@ -100,6 +102,15 @@ impl<'a> Keys<'a> {
     pub fn finite(&self, key: &str) -> Result<f64, ConfigError> {
         let x = self.number(key)?;
         if x.is_finite() { Ok(x) } else { Err(self.invalid(key, format!("must be finite, got {x}"))) }
+    }
+}
+
+/// The machine kind under `key` ("hammer" | "screw_press"), as both files spell it.
+pub(crate) fn machine_kind(keys: &Keys<'_>, key: &str) -> Result<MachineKind, ConfigError> {
+    match keys.string(key)? {
+        "hammer" => Ok(MachineKind::Hammer),
+        "screw_press" => Ok(MachineKind::ScrewPress),
+        other => Err(keys.invalid(key, format!("must be \"hammer\" or \"screw_press\", got \"{other}\""))),
     }
 }
 

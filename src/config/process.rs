@@ -1,22 +1,15 @@
 //! `process.toml` (CONTRACTS.md §2): the billet, its material and interface, and the
 //! measured heights after each blow.
 
-use super::{ConfigError, Keys, parse_table};
+use super::{ConfigError, Keys, machine_kind, parse_table};
 use crate::physics::billet::{BilletGeometry, FlowStress};
-use crate::physics::machine::MachineKind;
 use crate::physics::process::Process;
 
 /// Parse and validate the text of a `process.toml` named `origin`.
 pub fn parse_process(origin: &str, text: &str) -> Result<Process, ConfigError> {
     let table = parse_table(origin, text)?;
     let keys = Keys::root(origin, &table);
-    let machine = match keys.string("machine")? {
-        "hammer" => MachineKind::Hammer,
-        "screw_press" => MachineKind::ScrewPress,
-        other => {
-            return Err(keys.invalid("machine", format!("must be \"hammer\" or \"screw_press\", got \"{other}\"")));
-        }
-    };
+    let machine = machine_kind(&keys, "machine")?;
     let b = keys.table("billet")?;
     let billet = BilletGeometry { diameter_m: b.positive("diameter_m")?, height_m: b.positive("height_m")? };
     let m = keys.table("material")?;
@@ -64,6 +57,7 @@ pub fn parse_process(origin: &str, text: &str) -> Result<Process, ConfigError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::physics::machine::MachineKind;
 
     const STEEL: &str = "machine = \"hammer\"\n[billet]\ndiameter_m = 0.060\nheight_m = 0.112\n\
                          [material]\nmodel = \"constant\"\nsigma0_Pa = 90e6\n[interface]\nfriction = 0.2\n";

@@ -69,16 +69,10 @@ fn hammer(h: &Hammer, blow: &Blow, v0: f64) -> Observed {
     // Lower tool velocity from the filter; with no damper, from the load's slope.
     let x2dot = |f: f64, x2: f64, x2_prev: f64| if c > 0.0 { (f - k * x2) / c } else { (x2 - x2_prev) / dt };
     let mut v2 = x2dot(fs(0), 0.0, 0.0);
-    let (mut max_comp, mut i_max) = (f64::MIN, 0);
     for i in 0..n {
         let f = fs(i);
         o.peak_load_n = o.peak_load_n.max(f);
-        let comp = x1 - x2;
-        if comp > max_comp {
-            max_comp = comp;
-            i_max = i;
-        }
-        o.compression_m.push(comp);
+        o.compression_m.push(x1 - x2);
         if i + 1 == n {
             o.work_j.push(0.0);
             break;
@@ -101,7 +95,7 @@ fn hammer(h: &Hammer, blow: &Blow, v0: f64) -> Observed {
     }
     o.deform_j = o.work_j.iter().sum();
     o.elastic_j = 0.5 * m1 * v1 * v1 + 0.5 * m2 * v2 * v2 + 0.5 * k * x2 * x2;
-    o.final_load_n = fs(end_of_forming(&o.compression_m, max_comp, i_max));
+    o.final_load_n = fs(end_of_forming(&o.compression_m));
     o
 }
 
@@ -130,17 +124,11 @@ fn press(p: &ScrewPress, blow: &Blow, v0: f64) -> Observed {
     let x_ram0 = s[0].disp_m;
     let (mut vr, mut st, mut xn) = (v0, 0.0, 0.0);
     let mut sd = stretch_rate(link(0), 0.0, 0.0);
-    let (mut max_comp, mut i_max) = (f64::MIN, 0);
     for i in 0..n {
         let f = fs(i);
         o.peak_load_n = o.peak_load_n.max(f);
         let xu = (s[i].disp_m - x_ram0) - st;
-        let comp = xu - (f / k_series + xn);
-        if comp > max_comp {
-            max_comp = comp;
-            i_max = i;
-        }
-        o.compression_m.push(comp);
+        o.compression_m.push(xu - (f / k_series + xn));
         if i + 1 == n {
             o.work_j.push(0.0);
             break;
@@ -174,7 +162,7 @@ fn press(p: &ScrewPress, blow: &Blow, v0: f64) -> Observed {
         + 0.5 * kl * st * st
         + 0.5 * f_end * f_end / k_series
         + 0.5 * p.k_frame_n_per_m * xn * xn;
-    o.final_load_n = fs(end_of_forming(&o.compression_m, max_comp, i_max));
+    o.final_load_n = fs(end_of_forming(&o.compression_m));
     o
 }
 
@@ -184,6 +172,7 @@ fn press(p: &ScrewPress, blow: &Blow, v0: f64) -> Observed {
 pub const FORMING_PLATEAU_M: f64 = 5e-6;
 
 /// The end of forming: the first sample on the compression's plateau.
-fn end_of_forming(compression: &[f64], max_comp: f64, i_max: usize) -> usize {
-    compression.iter().position(|c| *c >= max_comp - FORMING_PLATEAU_M).unwrap_or(i_max)
+fn end_of_forming(compression: &[f64]) -> usize {
+    let max_comp = compression.iter().copied().fold(f64::MIN, f64::max);
+    compression.iter().position(|c| *c >= max_comp - FORMING_PLATEAU_M).unwrap_or(0)
 }
