@@ -1,6 +1,7 @@
 //! forgemon: blow-by-blow monitoring of energy-driven forging machines (gravity drop
 //! hammers and screw presses). See ARCHITECTURE.md for the map of the crate.
 
+pub mod acquire;
 pub mod alert;
 pub mod cli;
 pub mod config;

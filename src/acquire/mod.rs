@@ -1,0 +1,92 @@
+//! Acquisition: the transports that turn a DAQ's bytes into `SampleBatch`es (DESIGN.md §4).
+//! Each transport is a sans-IO decoder (fed bytes or frames, returns samples or "need
+//! more", resyncs after garbage, counts what it drops) plus a thin tokio driver that
+//! reconnects with backoff, reports its status and never blocks the pipeline.
+//!
+//! The drivers all speak the same language to the service: `SourceEvent`s on a bounded
+//! channel. A full channel drops the event and counts it; acquisition never waits.
+
+use crate::record::{Gap, Status};
+use crate::signal::sample::{Role, SampleBatch};
+
+/// What a transport hands the service.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SourceEvent {
+    /// Samples, in physical units, with the device's sequence and time.
+    Batch(SampleBatch),
+    /// Samples known lost (a sequence jump, a dropped frame, a link down).
+    Gap(Gap),
+    /// The source's state and counters changed (connected, reconnecting, ...).
+    Status(Status),
+}
+
+/// How one channel's raw value becomes a physical one: `offset + gain * raw`
+/// (CONTRACTS.md §7), and which role it plays.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChannelSpec {
+    pub role: Role,
+    pub gain: f64,
+    pub offset: f64,
+}
+
+impl ChannelSpec {
+    pub fn physical(&self, raw: f64) -> f64 {
+        self.offset + self.gain * raw
+    }
+}
+
+/// Counters every transport keeps (they go into `Status`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Counters {
+    pub samples: u64,
+    pub frames: u64,
+    /// Events dropped because the pipeline's channel was full.
+    pub drops: u64,
+    /// Sequence gaps (or missing frames) seen.
+    pub gaps: u64,
+    pub crc_errors: u64,
+    /// Frames or lines that did not decode (garbage, bad lengths, malformed text).
+    pub decode_errors: u64,
+    pub reconnects: u64,
+}
+
+impl Counters {
+    /// The status message of source `source` in state `state`.
+    pub fn status(&self, source: &str, state: &str, detail: impl Into<String>) -> Status {
+        Status {
+            source: source.to_string(),
+            state: state.to_string(),
+            samples: self.samples,
+            frames: self.frames,
+            drops: self.drops,
+            gaps: self.gaps,
+            crc_errors: self.crc_errors,
+            decode_errors: self.decode_errors,
+            reconnects: self.reconnects,
+            detail: detail.into(),
+        }
+    }
+}
+
+/// Send without waiting: a full channel drops the event and counts it (DESIGN.md §4:
+/// backpressure never stalls acquisition). Returns false once the receiver is gone.
+pub fn offer(tx: &tokio::sync::mpsc::Sender<SourceEvent>, event: SourceEvent, counters: &mut Counters) -> bool {
+    match tx.try_send(event) {
+        Ok(()) => true,
+        Err(tokio::sync::mpsc::error::TrySendError::Full(_)) => {
+            counters.drops += 1;
+            true
+        }
+        Err(tokio::sync::mpsc::error::TrySendError::Closed(_)) => false,
+    }
+}
+
+/// Reconnect backoff: doubles from `BACKOFF_START_MS` up to `BACKOFF_MAX_MS`, so a
+/// returning link is picked up within 2 s (issue #4).
+pub const BACKOFF_START_MS: u64 = 50;
+pub const BACKOFF_MAX_MS: u64 = 1000;
+
+/// The next backoff after `current_ms`.
+pub fn next_backoff_ms(current_ms: u64) -> u64 {
+    (current_ms * 2).clamp(BACKOFF_START_MS, BACKOFF_MAX_MS)
+}
