@@ -105,3 +105,46 @@ impl Pipeline {
         }
     }
 }
+
+/// Feeds batches to a pipeline, ending the stream wherever a batch does not continue the
+/// previous one (a new triggered capture, a gap, a reconnected link): one rule for every
+/// kind of input, live or replayed, so a recording replays as it was processed live.
+#[derive(Debug)]
+pub struct Feeder {
+    pipeline: Pipeline,
+    /// Source, device time after the last sample (ns), period (ns).
+    last: Option<(String, f64, f64)>,
+    samples: u64,
+}
+
+impl Feeder {
+    pub fn new(pipeline: Pipeline) -> Self {
+        Feeder { pipeline, last: None, samples: 0 }
+    }
+
+    /// Feed a batch, closing the stream first if it does not continue the last one.
+    pub fn push(&mut self, batch: &SampleBatch, out: &mut Vec<PipelineEvent>) {
+        if let Some((source, next_ns, period_ns)) = &self.last {
+            let jump = (batch.device_time_ns as f64 - next_ns).abs();
+            if *source != batch.source || jump > 0.5 * period_ns {
+                self.pipeline.end_of_stream(out);
+            }
+        }
+        self.samples += batch.len() as u64;
+        self.pipeline.push(batch, out);
+        self.last = Some((
+            batch.source.clone(),
+            batch.device_time_ns as f64 + batch.period_ns * batch.len() as f64,
+            batch.period_ns,
+        ));
+    }
+
+    /// Samples fed so far.
+    pub fn samples(&self) -> u64 {
+        self.samples
+    }
+
+    pub fn pipeline_mut(&mut self) -> &mut Pipeline {
+        &mut self.pipeline
+    }
+}

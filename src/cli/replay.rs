@@ -11,7 +11,7 @@ use clap::Args;
 use super::read_text;
 use crate::config::{parse_machine, parse_process};
 use crate::physics::process::Process;
-use crate::pipeline::{Pipeline, PipelineConfig, PipelineEvent};
+use crate::pipeline::{Feeder, Pipeline, PipelineConfig, PipelineEvent};
 use crate::record::{BlowBoundary, Payload, RecordReader, RecordWriter, Rotation};
 use crate::signal::capture::{CaptureReader, DEFAULT_BATCH_S, blow_files};
 use crate::signal::sample::SampleBatch;
@@ -44,32 +44,6 @@ enum Input {
         reader: RecordReader,
         ahead: Vec<SampleBatch>,
     },
-}
-
-/// Feeds batches to the pipeline, ending the stream wherever a batch does not continue the
-/// previous one (a new triggered capture, a gap): the same rule for every kind of input.
-struct Feeder {
-    pipeline: Pipeline,
-    last: Option<(String, f64, f64)>, // source, device time after the last sample (ns), period (ns)
-    samples: u64,
-}
-
-impl Feeder {
-    fn push(&mut self, batch: &SampleBatch, out: &mut Vec<PipelineEvent>) {
-        if let Some((source, next_ns, period_ns)) = &self.last {
-            let jump = (batch.device_time_ns as f64 - next_ns).abs();
-            if *source != batch.source || jump > 0.5 * period_ns {
-                self.pipeline.end_of_stream(out);
-            }
-        }
-        self.samples += batch.len() as u64;
-        self.pipeline.push(batch, out);
-        self.last = Some((
-            batch.source.clone(),
-            batch.device_time_ns as f64 + batch.period_ns * batch.len() as f64,
-            batch.period_ns,
-        ));
-    }
 }
 
 pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
@@ -111,11 +85,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         }
         None => None,
     };
-    let mut feeder = Feeder {
-        pipeline: Pipeline::new(machine, process, PipelineConfig::for_machine(&machine)),
-        last: None,
-        samples: 0,
-    };
+    let mut feeder = Feeder::new(Pipeline::new(machine, process, PipelineConfig::for_machine(&machine)));
     let stdout = std::io::stdout();
     let mut w = std::io::BufWriter::new(stdout.lock());
     if !args.json {
@@ -219,7 +189,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             }
         }
     }
-    feeder.pipeline.end_of_stream(&mut events);
+    feeder.pipeline_mut().end_of_stream(&mut events);
     handle(&mut events, &mut writer, &mut w)?;
     w.flush()?;
     if let Some(rec) = writer {
@@ -228,10 +198,12 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             eprintln!("forgemon: recorded {}", f.display());
         }
     }
-    let s = feeder.pipeline.segment_stats();
+    let s = feeder.pipeline_mut().segment_stats();
     eprintln!(
         "forgemon: replayed {} samples: {blows} blows, {rejected} not estimated, {} triggers without contact, {} batches dropped",
-        feeder.samples, s.triggers_without_contact, s.batches_dropped
+        feeder.samples(),
+        s.triggers_without_contact,
+        s.batches_dropped
     );
     Ok(ExitCode::SUCCESS)
 }

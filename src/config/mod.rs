@@ -6,6 +6,7 @@
 
 pub mod machine;
 pub mod process;
+pub mod service;
 
 pub use machine::{MachineFile, parse_machine};
 pub use process::parse_process;
