@@ -1,0 +1,225 @@
+//! The always-on service (DESIGN.md §5): source events in; everything recorded to MCAP;
+//! the live pipeline (the same `pipeline::Feeder` replay uses) on the samples; results and
+//! alerts to the log, the recording, the status/metrics endpoint, the webhook and the PLC
+//! coil. systemd `Type=notify`: READY once listening, WATCHDOG pings, STOPPING on the way
+//! out; SIGTERM finishes the recording cleanly; SIGHUP reloads the alert rules.
+//!
+//! The sources are spawned by the caller and speak `acquire::SourceEvent` on one channel,
+//! so the service neither knows nor cares which transport (or simulated device) feeds it.
+
+pub mod sinks;
+pub mod status;
+
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use anyhow::Context;
+use tokio::sync::{mpsc, watch};
+
+use crate::acquire::SourceEvent;
+use crate::config::service::{ServiceConfig, parse_service};
+use crate::estimate::BlowEstimate;
+use crate::physics::machine::Machine;
+use crate::physics::process::Process;
+use crate::pipeline::{Feeder, Pipeline, PipelineConfig, PipelineEvent};
+use crate::record::{BlowBoundary, Payload, RecordOptions, RecordWriter, Rotation};
+use crate::signal::sample::{Role, SampleBatch};
+use status::{SharedStatus, StatusSnapshot};
+
+/// Capacity of the channel from the sources to the service; a full channel drops events
+/// at the source and counts them (acquisition never waits).
+pub const SOURCE_CHANNEL_CAPACITY: usize = 1024;
+
+/// Everything the service needs, read and validated.
+pub struct ServiceParts {
+    pub config: ServiceConfig,
+    pub config_path: PathBuf,
+    pub machine: Machine,
+    pub machine_text: String,
+    pub process: Option<Process>,
+    pub process_text: Option<String>,
+}
+
+/// Callbacks for a front end (the demo prints each blow).
+#[derive(Default)]
+pub struct Hooks {
+    pub on_blow: Option<Box<dyn FnMut(&BlowEstimate) + Send>>,
+    pub on_rejected: Option<Box<dyn FnMut(&str) + Send>>,
+}
+
+/// What the service did, when it stops.
+#[derive(Debug, Clone, Default)]
+pub struct Summary {
+    pub samples: u64,
+    pub blows: u64,
+    pub alerts: u64,
+    pub files: Vec<PathBuf>,
+}
+
+/// Wall-clock time in ns since the epoch (the service is the one place that reads it).
+pub fn host_now_ns() -> i64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_nanos() as i64).unwrap_or(0)
+}
+
+/// Whether a batch carries the three roles the pipeline needs (the others are recorded).
+pub fn feeds_pipeline(batch: &SampleBatch) -> bool {
+    Role::ALL.iter().all(|r| batch.channel(*r).is_some())
+}
+
+/// Run the service until SIGTERM/SIGINT, until `stop` turns true, or until every source
+/// has hung up. `shutdown` tells the sources to stop.
+pub async fn serve(
+    parts: ServiceParts,
+    mut rx: mpsc::Receiver<SourceEvent>,
+    shutdown: watch::Sender<bool>,
+    mut stop: watch::Receiver<bool>,
+    mut hooks: Hooks,
+) -> anyhow::Result<Summary> {
+    let cfg = &parts.config;
+    std::fs::create_dir_all(&cfg.recording_dir)
+        .with_context(|| format!("{}: cannot create the recording directory", cfg.recording_dir.display()))?;
+    let rotation =
+        Rotation { max_bytes: Some(cfg.rotate_bytes), max_duration_ns: Some(cfg.rotate_seconds * 1_000_000_000) };
+    let mut writer =
+        RecordWriter::create_with(&cfg.recording_dir, RecordOptions { rotation, ..RecordOptions::default() })
+            .with_context(|| format!("{}: cannot record", cfg.recording_dir.display()))?;
+    let t0 = host_now_ns();
+    writer.write_config(t0, "machine.toml", &parts.machine_text)?;
+    if let Some(t) = &parts.process_text {
+        writer.write_config(t0, "process.toml", t)?;
+    }
+    writer.write_config(t0, "service.toml", &std::fs::read_to_string(&parts.config_path).unwrap_or_default())?;
+
+    let status: SharedStatus = Arc::new(Mutex::new(StatusSnapshot::new(parts.machine.kind().as_str())));
+    let listener = tokio::net::TcpListener::bind(cfg.http_listen)
+        .await
+        .with_context(|| format!("http.listen {}: cannot listen", cfg.http_listen))?;
+    let http = tokio::spawn(status::serve_http(listener, status.clone()));
+    let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
+
+    let mut feeder = Feeder::new(Pipeline::new(
+        parts.machine,
+        parts.process.clone(),
+        PipelineConfig { alerts: cfg.alerts, ..PipelineConfig::for_machine(&parts.machine) },
+    ));
+    let mut summary = Summary::default();
+    let mut events = Vec::new();
+    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
+    // systemd's watchdog wants a ping at least every WATCHDOG_USEC; ping at half of it.
+    let watchdog = sd_notify::watchdog_enabled();
+    let mut tick = tokio::time::interval(watchdog.map_or(Duration::from_secs(1), |d| d / 2));
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
+    tracing::info!(listen = %cfg.http_listen, dir = %cfg.recording_dir.display(), "forgemon service ready");
+
+    loop {
+        tokio::select! {
+            ev = rx.recv() => {
+                let Some(ev) = ev else { break };
+                match ev {
+                    SourceEvent::Batch(batch) => {
+                        if let Err(e) = writer.write_samples(&batch) {
+                            tracing::error!("recording samples: {e}");
+                        }
+                        status.lock().map(|mut s| s.on_samples(&batch)).ok();
+                        if feeds_pipeline(&batch) {
+                            feeder.push(&batch, &mut events);
+                        }
+                        for e in events.drain(..) {
+                            on_event(e, batch.host_time_ns, &mut writer, &status, &sinks, &mut hooks, &mut summary);
+                        }
+                    }
+                    SourceEvent::Gap(g) => {
+                        tracing::warn!(source = %g.source, lost = g.samples_lost, reason = %g.reason, "gap");
+                        let _ = writer.write_gap(host_now_ns(), &g);
+                        status.lock().map(|mut s| s.on_gap(&g)).ok();
+                    }
+                    SourceEvent::Status(st) => {
+                        let _ = writer.write_status(host_now_ns(), &st);
+                        status.lock().map(|mut s| s.on_status(st)).ok();
+                    }
+                }
+            }
+            _ = sigterm.recv() => { tracing::info!("SIGTERM: finishing the recording"); break; }
+            _ = tokio::signal::ctrl_c() => { tracing::info!("interrupted: finishing the recording"); break; }
+            _ = stop.changed() => { if *stop.borrow() { break; } }
+            _ = sighup.recv() => {
+                match std::fs::read_to_string(&parts.config_path).map_err(anyhow::Error::from)
+                    .and_then(|t| parse_service(&parts.config_path.display().to_string(), parts.config_path.parent().unwrap_or(std::path::Path::new(".")), &t).map_err(anyhow::Error::from)) {
+                    Ok(new) => {
+                        feeder.pipeline_mut().set_alert_config(new.alerts);
+                        tracing::info!("SIGHUP: alert rules reloaded");
+                    }
+                    Err(e) => tracing::error!("SIGHUP: keeping the old alert rules: {e:#}"),
+                }
+            }
+            _ = tick.tick() => {
+                if watchdog.is_some() {
+                    let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
+                }
+                status.lock().map(|mut s| s.recording = writer.current_path().display().to_string()).ok();
+            }
+        }
+    }
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
+    let _ = shutdown.send(true);
+    feeder.pipeline_mut().end_of_stream(&mut events);
+    for e in events.drain(..) {
+        on_event(e, host_now_ns(), &mut writer, &status, &sinks, &mut hooks, &mut summary);
+    }
+    summary.samples = feeder.samples();
+    summary.files = writer.finish()?;
+    http.abort();
+    Ok(summary)
+}
+
+fn on_event(
+    e: PipelineEvent,
+    log_time_ns: i64,
+    writer: &mut RecordWriter,
+    status: &SharedStatus,
+    sinks: &sinks::Sinks,
+    hooks: &mut Hooks,
+    summary: &mut Summary,
+) {
+    match e {
+        PipelineEvent::Blow { cut, estimate } => {
+            summary.blows += 1;
+            let boundary = BlowBoundary {
+                blow: estimate.blow,
+                t_trigger_s: cut.t_trigger_s,
+                t_contact_s: cut.t_contact_s,
+                t_end_s: cut.t_end_s,
+                source: String::new(),
+            };
+            let _ = writer.write_payload(log_time_ns, &Payload::Boundary(boundary));
+            if let Err(err) = writer.write_result(log_time_ns, &estimate) {
+                tracing::error!("recording the result of blow {}: {err}", estimate.blow);
+            }
+            tracing::info!(
+                blow = estimate.blow,
+                efficiency = estimate.efficiency,
+                class = estimate.class.as_str(),
+                "blow"
+            );
+            status.lock().map(|mut s| s.on_blow(&estimate)).ok();
+            if let Some(alert) = &estimate.alert {
+                summary.alerts += 1;
+                tracing::warn!(kind = alert.kind.as_str(), blow = alert.blow, "{}", alert.reason);
+                let _ = writer.write_alert(log_time_ns, alert);
+                sinks.fire(alert);
+            }
+            if let Some(f) = hooks.on_blow.as_mut() {
+                f(&estimate);
+            }
+        }
+        PipelineEvent::Rejected { cut, error } => {
+            let msg = format!("blow at t = {:.6} s not estimated: {error}", cut.t_contact_s);
+            tracing::warn!("{msg}");
+            if let Some(f) = hooks.on_rejected.as_mut() {
+                f(&msg);
+            }
+        }
+    }
+}

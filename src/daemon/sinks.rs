@@ -1,0 +1,56 @@
+//! Alert sinks beyond the log and the recording: an HTTP webhook (the alert as JSON) and a
+//! Modbus coil on the PLC. Each alert is sent from its own task under a timeout, so a slow
+//! or absent receiver never holds up the service; failures are logged, not fatal.
+
+use std::time::Duration;
+
+use crate::alert::Alert;
+use crate::config::service::PlcCoil;
+
+/// Longest a webhook call or a coil write may take.
+pub const SINK_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Where alerts go besides the log and the recording.
+#[derive(Debug, Clone)]
+pub struct Sinks {
+    webhook: Option<String>,
+    coil: Option<PlcCoil>,
+}
+
+impl Sinks {
+    pub fn new(webhook: Option<String>, coil: Option<PlcCoil>) -> Self {
+        Sinks { webhook, coil }
+    }
+
+    /// Send `alert` to every sink, without waiting.
+    pub fn fire(&self, alert: &Alert) {
+        if let Some(url) = self.webhook.clone() {
+            let body = serde_json::to_string(alert).unwrap_or_default();
+            tokio::task::spawn_blocking(move || {
+                let agent: ureq::Agent =
+                    ureq::Agent::config_builder().timeout_global(Some(SINK_TIMEOUT)).build().into();
+                if let Err(e) = agent.post(&url).header("content-type", "application/json").send(body.as_bytes()) {
+                    tracing::error!("webhook {url}: {e}");
+                }
+            });
+        }
+        if let Some(c) = self.coil {
+            tokio::spawn(async move {
+                let write = async {
+                    let mut ctx =
+                        tokio_modbus::client::tcp::connect_slave(c.address, tokio_modbus::Slave(c.unit)).await?;
+                    use tokio_modbus::client::Writer;
+                    ctx.write_single_coil(c.coil, true).await??;
+                    Ok::<(), Box<dyn std::error::Error + Send + Sync>>(())
+                };
+                match tokio::time::timeout(SINK_TIMEOUT, write).await {
+                    Ok(Ok(())) => {}
+                    Ok(Err(e)) => tracing::error!("PLC coil {} at {}: {e}", c.coil, c.address),
+                    Err(_) => {
+                        tracing::error!("PLC coil {} at {}: no answer within {SINK_TIMEOUT:?}", c.coil, c.address)
+                    }
+                }
+            });
+        }
+    }
+}

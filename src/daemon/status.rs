@@ -1,0 +1,155 @@
+//! The service's live state, served on loopback: `/status` (JSON) and `/metrics`
+//! (Prometheus text format): samples, drops, gaps, transport states, blows, the last
+//! efficiency and class, alerts.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::sync::{Arc, Mutex};
+
+use axum::Router;
+use axum::extract::State;
+use axum::http::header;
+use axum::response::IntoResponse;
+use axum::routing::get;
+use serde::Serialize;
+
+use crate::estimate::BlowEstimate;
+use crate::record::{Gap, Status};
+use crate::signal::sample::SampleBatch;
+
+/// Shared between the service loop and the HTTP handlers.
+pub type SharedStatus = Arc<Mutex<StatusSnapshot>>;
+
+/// One source as the status endpoint shows it.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct SourceState {
+    pub state: String,
+    pub samples: u64,
+    pub drops: u64,
+    pub gaps: u64,
+    pub samples_lost: u64,
+    pub crc_errors: u64,
+    pub decode_errors: u64,
+    pub reconnects: u64,
+    pub detail: String,
+}
+
+/// What `/status` returns.
+#[derive(Debug, Clone, Serialize)]
+pub struct StatusSnapshot {
+    pub machine: String,
+    pub samples: u64,
+    pub blows: u64,
+    pub alerts: u64,
+    pub last_efficiency: Option<f64>,
+    pub last_class: Option<String>,
+    pub last_blow: Option<BlowEstimate>,
+    pub sources: BTreeMap<String, SourceState>,
+    pub recording: String,
+}
+
+impl StatusSnapshot {
+    pub fn new(machine: &str) -> Self {
+        StatusSnapshot {
+            machine: machine.to_string(),
+            samples: 0,
+            blows: 0,
+            alerts: 0,
+            last_efficiency: None,
+            last_class: None,
+            last_blow: None,
+            sources: BTreeMap::new(),
+            recording: String::new(),
+        }
+    }
+
+    pub fn on_samples(&mut self, b: &SampleBatch) {
+        self.samples += b.len() as u64;
+        self.sources.entry(b.source.clone()).or_default().samples += b.len() as u64;
+    }
+
+    pub fn on_gap(&mut self, g: &Gap) {
+        let s = self.sources.entry(g.source.clone()).or_default();
+        s.gaps += 1;
+        s.samples_lost += g.samples_lost;
+    }
+
+    pub fn on_status(&mut self, st: Status) {
+        let s = self.sources.entry(st.source.clone()).or_default();
+        s.state = st.state;
+        s.drops = st.drops;
+        s.crc_errors = st.crc_errors;
+        s.decode_errors = st.decode_errors;
+        s.reconnects = st.reconnects;
+        s.detail = st.detail;
+    }
+
+    pub fn on_blow(&mut self, e: &BlowEstimate) {
+        self.blows += 1;
+        self.alerts += u64::from(e.alert.is_some());
+        self.last_efficiency = Some(e.efficiency);
+        self.last_class = Some(e.class.as_str().to_string());
+        self.last_blow = Some(e.clone());
+    }
+
+    /// Prometheus text exposition (version 0.0.4).
+    pub fn metrics(&self) -> String {
+        let mut m = String::new();
+        let mut metric = |name: &str, kind: &str, help: &str, rows: Vec<(String, f64)>| {
+            let _ = writeln!(m, "# HELP forgemon_{name} {help}\n# TYPE forgemon_{name} {kind}");
+            for (labels, v) in rows {
+                let _ = writeln!(m, "forgemon_{name}{labels} {v}");
+            }
+        };
+        let per_source = |f: &dyn Fn(&SourceState) -> f64| -> Vec<(String, f64)> {
+            self.sources.iter().map(|(k, s)| (format!("{{source=\"{k}\"}}"), f(s))).collect()
+        };
+        metric("samples_total", "counter", "Samples received.", per_source(&|s| s.samples as f64));
+        metric("drops_total", "counter", "Events dropped at a full pipeline channel.", per_source(&|s| s.drops as f64));
+        metric("gaps_total", "counter", "Gaps in the sample stream.", per_source(&|s| s.gaps as f64));
+        metric("samples_lost_total", "counter", "Samples lost in gaps.", per_source(&|s| s.samples_lost as f64));
+        metric("crc_errors_total", "counter", "Frames with a bad CRC.", per_source(&|s| s.crc_errors as f64));
+        metric(
+            "decode_errors_total",
+            "counter",
+            "Frames or lines that did not decode.",
+            per_source(&|s| s.decode_errors as f64),
+        );
+        metric("reconnects_total", "counter", "Transport reconnections.", per_source(&|s| s.reconnects as f64));
+        metric(
+            "source_up",
+            "gauge",
+            "1 when the source is connected.",
+            per_source(&|s| f64::from(u8::from(s.state == "connected"))),
+        );
+        metric("blows_total", "counter", "Blows estimated.", vec![(String::new(), self.blows as f64)]);
+        metric("alerts_total", "counter", "Alerts raised.", vec![(String::new(), self.alerts as f64)]);
+        if let Some(e) = self.last_efficiency {
+            metric(
+                "last_efficiency",
+                "gauge",
+                "Efficiency of the last blow (plastic / kinetic in).",
+                vec![(String::new(), e)],
+            );
+        }
+        m
+    }
+}
+
+async fn status_json(State(s): State<SharedStatus>) -> impl IntoResponse {
+    let body = s.lock().map(|s| serde_json::to_string(&*s).unwrap_or_default()).unwrap_or_default();
+    ([(header::CONTENT_TYPE, "application/json")], body)
+}
+
+async fn metrics_text(State(s): State<SharedStatus>) -> impl IntoResponse {
+    let body = s.lock().map(|s| s.metrics()).unwrap_or_default();
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], body)
+}
+
+/// Serve `/status` and `/metrics` on an already bound listener.
+pub async fn serve_http(listener: tokio::net::TcpListener, status: SharedStatus) {
+    let app = Router::new().route("/status", get(status_json)).route("/metrics", get(metrics_text)).with_state(status);
+    if let Err(e) = axum::serve(listener, app).await {
+        tracing::error!("status endpoint stopped: {e}");
+    }
+}
