@@ -6,6 +6,8 @@
 //! The drivers all speak the same language to the service: `SourceEvent`s on a bounded
 //! channel. A full channel drops the event and counts it; acquisition never waits.
 
+pub mod can;
+
 use crate::record::{Gap, Status};
 use crate::signal::sample::{Role, SampleBatch};
 
