@@ -1,0 +1,390 @@
+//! The tokio side of the serial transport: open the port (tokio-serial), feed what it reads
+//! to the sans-IO decoder of the configured format, and hand batches, gaps and status to
+//! the service through `acquire::offer`, never waiting on a full channel. A read error or
+//! end of file closes the port; it is reopened with backoff, and the sequence numbers of
+//! the frames that follow record the samples lost meanwhile as a `Gap`.
+
+use std::future::Future;
+use std::io;
+use std::time::Duration;
+
+use tokio::io::{AsyncRead, AsyncReadExt};
+use tokio::sync::{mpsc, watch};
+
+use super::ascii::{AsciiEvent, DEFAULT_ASCII_BATCH_S, LineDecoder};
+use super::frame::{FrameDecoder, FrameTracker};
+use crate::acquire::{BACKOFF_START_MS, ChannelSpec, Counters, SourceEvent, next_backoff_ms, offer};
+
+/// Interval between periodic status reports, ms.
+pub const DEFAULT_STATUS_INTERVAL_MS: u64 = 1000;
+/// An ASCII batch in progress is closed after the line has been quiet this long, ms.
+pub const ASCII_IDLE_FLUSH_MS: u64 = 50;
+/// Read buffer size, bytes.
+pub const READ_BUF_BYTES: usize = 64 * 1024;
+
+/// Which of the two §7 encodings the device speaks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SerialFormat {
+    /// COBS frames with CRC-32C (the default).
+    Binary,
+    /// `t_s,v0,v1,...` lines in physical units.
+    Ascii,
+}
+
+/// One serial source.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SerialConfig {
+    /// The source id (config name) stamped on every batch, gap and status.
+    pub source: String,
+    /// Device path, for example `/dev/ttyUSB0`.
+    pub path: String,
+    pub baud: u32,
+    pub format: SerialFormat,
+    /// The channels in wire order (binary: gain and offset apply; ASCII: only the roles).
+    pub channels: Vec<ChannelSpec>,
+    pub status_interval_ms: u64,
+    /// ASCII only: batch length, s.
+    pub ascii_batch_s: f64,
+}
+
+impl SerialConfig {
+    /// A config with the default status interval and ASCII batch length.
+    pub fn new(
+        source: impl Into<String>,
+        path: impl Into<String>,
+        baud: u32,
+        format: SerialFormat,
+        channels: Vec<ChannelSpec>,
+    ) -> Self {
+        SerialConfig {
+            source: source.into(),
+            path: path.into(),
+            baud,
+            format,
+            channels,
+            status_interval_ms: DEFAULT_STATUS_INTERVAL_MS,
+            ascii_batch_s: DEFAULT_ASCII_BATCH_S,
+        }
+    }
+}
+
+/// The host clock, ns since the Unix epoch. Passed in so tests can fix it.
+pub type HostClock = fn() -> i64;
+
+/// `SystemTime::now()` in ns since the Unix epoch (the driver is IO code: it may read it).
+pub fn system_clock_ns() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
+        .unwrap_or(0)
+}
+
+/// Why reading one stream stopped.
+#[derive(Debug)]
+pub enum StreamEnd {
+    /// The reader returned end of file.
+    Eof,
+    /// The reader failed.
+    Error(io::Error),
+    /// The shutdown signal was raised.
+    Shutdown,
+    /// The service dropped its receiver.
+    ReceiverGone,
+}
+
+enum Decoder {
+    Binary { frames: FrameDecoder, tracker: FrameTracker },
+    Ascii(LineDecoder),
+}
+
+/// One serial source's decoding state and counters; it outlives each connection, so the
+/// sequence after a reconnect is compared with the one before it.
+pub struct SerialSource {
+    cfg: SerialConfig,
+    clock: HostClock,
+    decoder: Decoder,
+    counters: Counters,
+    /// Well-formed frames the tracker could not use (wrong channel count, zero period).
+    refused: u64,
+}
+
+impl SerialSource {
+    pub fn new(cfg: SerialConfig, clock: HostClock) -> Self {
+        let decoder = match cfg.format {
+            SerialFormat::Binary => Decoder::Binary {
+                frames: FrameDecoder::new(),
+                tracker: FrameTracker::new(cfg.source.clone(), cfg.channels.clone()),
+            },
+            SerialFormat::Ascii => Decoder::Ascii(LineDecoder::new(
+                cfg.source.clone(),
+                cfg.channels.iter().map(|c| c.role).collect(),
+                cfg.ascii_batch_s,
+            )),
+        };
+        SerialSource { cfg, clock, decoder, counters: Counters::default(), refused: 0 }
+    }
+
+    pub fn counters(&self) -> Counters {
+        self.counters
+    }
+
+    pub fn config(&self) -> &SerialConfig {
+        &self.cfg
+    }
+
+    /// Send the source's status in `state`; false once the receiver is gone.
+    pub fn status(&mut self, tx: &mpsc::Sender<SourceEvent>, state: &str, detail: impl Into<String>) -> bool {
+        let status = self.counters.status(&self.cfg.source, state, detail);
+        offer(tx, SourceEvent::Status(status), &mut self.counters)
+    }
+
+    /// Decode `bytes`, sending what they complete; false once the receiver is gone.
+    pub fn feed(&mut self, bytes: &[u8], tx: &mpsc::Sender<SourceEvent>) -> bool {
+        let host_ns = (self.clock)();
+        let mut open = true;
+        match &mut self.decoder {
+            Decoder::Binary { frames, tracker } => {
+                frames.push(bytes);
+                while let Some(result) = frames.next_frame() {
+                    let frame = match result {
+                        Ok(frame) => frame,
+                        Err(e) => {
+                            tracing::debug!(source = %self.cfg.source, "dropped: {e}");
+                            continue;
+                        }
+                    };
+                    match tracker.track(&frame, host_ns) {
+                        Ok(t) => {
+                            if let Some(gap) = t.gap {
+                                self.counters.gaps += 1;
+                                open &= offer(tx, SourceEvent::Gap(gap), &mut self.counters);
+                            }
+                            self.counters.samples += t.batch.len() as u64;
+                            open &= offer(tx, SourceEvent::Batch(t.batch), &mut self.counters);
+                        }
+                        Err(e) => {
+                            self.refused += 1;
+                            tracing::debug!(source = %self.cfg.source, "frame not usable: {e}");
+                        }
+                    }
+                }
+                let s = frames.stats();
+                self.counters.frames = s.frames;
+                self.counters.crc_errors = s.crc_errors;
+                self.counters.decode_errors = s.decode_errors + self.refused;
+            }
+            Decoder::Ascii(lines) => {
+                lines.push(bytes, host_ns);
+                open &= self.drain_ascii(tx);
+            }
+        }
+        open
+    }
+
+    /// Close an ASCII batch in progress (the line went quiet); false once the receiver is gone.
+    pub fn flush(&mut self, tx: &mpsc::Sender<SourceEvent>) -> bool {
+        let host_ns = (self.clock)();
+        if let Decoder::Ascii(lines) = &mut self.decoder {
+            lines.flush(host_ns);
+            return self.drain_ascii(tx);
+        }
+        true
+    }
+
+    /// The link closed: forget a partial frame or line.
+    pub fn reset(&mut self, tx: &mpsc::Sender<SourceEvent>) -> bool {
+        let host_ns = (self.clock)();
+        match &mut self.decoder {
+            Decoder::Binary { frames, .. } => {
+                frames.reset();
+                true
+            }
+            Decoder::Ascii(lines) => {
+                lines.reset(host_ns);
+                self.drain_ascii(tx)
+            }
+        }
+    }
+
+    fn drain_ascii(&mut self, tx: &mpsc::Sender<SourceEvent>) -> bool {
+        let Decoder::Ascii(lines) = &mut self.decoder else { return true };
+        let mut open = true;
+        while let Some(ev) = lines.next_event() {
+            match ev {
+                AsciiEvent::Batch(b) => {
+                    self.counters.frames += 1;
+                    open &= offer(tx, SourceEvent::Batch(b), &mut self.counters);
+                }
+                AsciiEvent::Gap(g) => {
+                    self.counters.gaps += 1;
+                    open &= offer(tx, SourceEvent::Gap(g), &mut self.counters);
+                }
+            }
+        }
+        let s = lines.stats();
+        self.counters.samples = s.samples;
+        self.counters.decode_errors = s.malformed;
+        open
+    }
+
+    /// Read `reader` until it ends, fails, the shutdown signal rises or the receiver goes
+    /// away, sending status every `status_interval_ms`.
+    pub async fn read_stream<R: AsyncRead + Unpin>(
+        &mut self,
+        mut reader: R,
+        tx: &mpsc::Sender<SourceEvent>,
+        shutdown: &mut watch::Receiver<bool>,
+    ) -> StreamEnd {
+        let mut buf = vec![0u8; READ_BUF_BYTES];
+        let period = Duration::from_millis(self.cfg.status_interval_ms.max(1));
+        let mut status_tick = tokio::time::interval_at(tokio::time::Instant::now() + period, period);
+        status_tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        let idle = Duration::from_millis(ASCII_IDLE_FLUSH_MS);
+        let is_ascii = matches!(self.decoder, Decoder::Ascii(_));
+        let mut pending_flush = false;
+        loop {
+            if *shutdown.borrow() {
+                return StreamEnd::Shutdown;
+            }
+            tokio::select! {
+                read = reader.read(&mut buf) => match read {
+                    Ok(0) => return StreamEnd::Eof,
+                    Ok(n) => {
+                        pending_flush = is_ascii;
+                        if !self.feed(&buf[..n], tx) {
+                            return StreamEnd::ReceiverGone;
+                        }
+                    }
+                    Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                    Err(e) => return StreamEnd::Error(e),
+                },
+                _ = tokio::time::sleep(idle), if pending_flush => {
+                    pending_flush = false;
+                    if !self.flush(tx) {
+                        return StreamEnd::ReceiverGone;
+                    }
+                }
+                _ = status_tick.tick() => {
+                    if !self.status(tx, "connected", self.cfg.path.clone()) {
+                        return StreamEnd::ReceiverGone;
+                    }
+                }
+                changed = shutdown.changed() => {
+                    if changed.is_err() || *shutdown.borrow() {
+                        return StreamEnd::Shutdown;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Read one stream (a pty, a socket, a file) with no reconnect: status "connected" at the
+/// start and "stopped" at the end. Returns why it stopped and the final counters.
+pub async fn run_on_stream<R: AsyncRead + Unpin>(
+    cfg: SerialConfig,
+    reader: R,
+    clock: HostClock,
+    tx: mpsc::Sender<SourceEvent>,
+    mut shutdown: watch::Receiver<bool>,
+) -> (StreamEnd, Counters) {
+    let mut src = SerialSource::new(cfg, clock);
+    let detail = src.cfg.path.clone();
+    if !src.status(&tx, "connected", detail) {
+        return (StreamEnd::ReceiverGone, src.counters());
+    }
+    let end = src.read_stream(reader, &tx, &mut shutdown).await;
+    src.reset(&tx);
+    let detail = match &end {
+        StreamEnd::Eof => "end of stream".to_string(),
+        StreamEnd::Error(e) => e.to_string(),
+        StreamEnd::Shutdown => "shutdown".to_string(),
+        StreamEnd::ReceiverGone => "receiver gone".to_string(),
+    };
+    src.status(&tx, "stopped", detail);
+    (end, src.counters())
+}
+
+/// Read the streams `open` hands out, reopening with backoff after every end of file or
+/// error, until shutdown or until the receiver goes away. Status "connected" on every
+/// open (with `reconnects` counted after the first), "reconnecting" on every loss or
+/// failed open, "stopped" at the end. Returns the final counters.
+pub async fn run_with<R, F, Fut>(
+    cfg: SerialConfig,
+    clock: HostClock,
+    mut open: F,
+    tx: mpsc::Sender<SourceEvent>,
+    mut shutdown: watch::Receiver<bool>,
+) -> Counters
+where
+    R: AsyncRead + Unpin,
+    F: FnMut() -> Fut,
+    Fut: Future<Output = io::Result<R>>,
+{
+    let mut src = SerialSource::new(cfg, clock);
+    let mut backoff_ms = 0;
+    let mut connected_before = false;
+    loop {
+        if *shutdown.borrow() {
+            break;
+        }
+        if backoff_ms > 0 {
+            tokio::select! {
+                _ = tokio::time::sleep(Duration::from_millis(backoff_ms)) => {}
+                _ = shutdown.changed() => continue,
+            }
+        }
+        let reader = match open().await {
+            Ok(r) => r,
+            Err(e) => {
+                backoff_ms = next_backoff_ms(backoff_ms);
+                let detail = format!("{}: {e}", src.cfg.path);
+                if !src.status(&tx, "reconnecting", detail) {
+                    break;
+                }
+                continue;
+            }
+        };
+        if connected_before {
+            src.counters.reconnects += 1;
+        }
+        connected_before = true;
+        let detail = src.cfg.path.clone();
+        if !src.status(&tx, "connected", detail) {
+            break;
+        }
+        let end = src.read_stream(reader, &tx, &mut shutdown).await;
+        let open_rx = src.reset(&tx);
+        match end {
+            StreamEnd::Shutdown => break,
+            StreamEnd::ReceiverGone => return src.counters(),
+            StreamEnd::Eof | StreamEnd::Error(_) => {
+                let detail = match end {
+                    StreamEnd::Error(e) => format!("{}: {e}", src.cfg.path),
+                    _ => format!("{}: end of stream", src.cfg.path),
+                };
+                tracing::warn!(source = %src.cfg.source, "link lost: {detail}");
+                if !open_rx || !src.status(&tx, "reconnecting", detail) {
+                    return src.counters();
+                }
+                backoff_ms = BACKOFF_START_MS;
+            }
+        }
+    }
+    src.status(&tx, "stopped", "shutdown");
+    src.counters()
+}
+
+/// Open `cfg.path` with tokio-serial at `cfg.baud`.
+pub fn open_port(cfg: &SerialConfig) -> io::Result<tokio_serial::SerialStream> {
+    use tokio_serial::SerialPortBuilderExt;
+    tokio_serial::new(&cfg.path, cfg.baud).open_native_async().map_err(io::Error::from)
+}
+
+/// The serial transport: open the port named in `cfg`, decode, reconnect with backoff,
+/// stamp host time from the system clock. Runs until `shutdown` turns true or the
+/// receiver is dropped.
+pub async fn run(cfg: SerialConfig, tx: mpsc::Sender<SourceEvent>, shutdown: watch::Receiver<bool>) -> Counters {
+    let port_cfg = cfg.clone();
+    run_with(cfg, system_clock_ns, move || std::future::ready(open_port(&port_cfg)), tx, shutdown).await
+}
