@@ -7,6 +7,7 @@
 //! channel. A full channel drops the event and counts it; acquisition never waits.
 
 pub mod can;
+pub mod modbus;
 pub mod serial;
 
 use crate::record::{Gap, Status};
