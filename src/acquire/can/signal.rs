@@ -93,7 +93,7 @@ impl SignalLayout {
                 for i in 0..self.length {
                     out.push(pos);
                     if i + 1 < self.length {
-                        pos = if pos % 8 == 0 { pos.checked_add(15)? } else { pos - 1 };
+                        pos = if pos.is_multiple_of(8) { pos.checked_add(15)? } else { pos - 1 };
                     }
                 }
             }
@@ -143,7 +143,7 @@ impl SignalLayout {
                     let bit = (*data.get(pos / 8)? >> (pos % 8)) & 1;
                     value = (value << 1) | bit as u64;
                     if i + 1 < self.length {
-                        pos = if pos % 8 == 0 { pos + 15 } else { pos - 1 };
+                        pos = if pos.is_multiple_of(8) { pos + 15 } else { pos - 1 };
                     }
                 }
             }

@@ -1,0 +1,359 @@
+//! CAN acquisition at the file and socket boundary (issue #4): the committed candump log
+//! of a simulated hammer session (`fixtures/can/`), decoded with the committed DBC file,
+//! runs through the pipeline and finds every blow as the expected JSON beside it says and
+//! as the simulated truth says; the log is what its generator writes; malformed lines
+//! and lost frames are reported; the live SocketCAN driver runs where AF_CAN exists and
+//! otherwise says plainly that it was skipped.
+//!
+//! Regenerate the fixtures with
+//! `cargo test --test acquire_can -- --ignored regenerate_can_fixtures`.
+
+use std::path::{Path, PathBuf};
+
+use forgemon::acquire::SourceEvent;
+use forgemon::acquire::can::candump::BadLines;
+use forgemon::acquire::can::{
+    CanDecoder, CanDevice, CanMapping, CanSourceConfig, CanTiming, CandumpReader, DEFAULT_IFACE, DbcNames,
+    forgemon_mapping, mapping_from_dbc, read_candump,
+};
+use forgemon::config::{parse_machine, parse_process};
+use forgemon::physics::EffectSet;
+use forgemon::physics::machine::Machine;
+use forgemon::physics::process::Process;
+use forgemon::pipeline::{Pipeline, PipelineConfig, PipelineEvent};
+use forgemon::signal::capture::CaptureRow;
+use forgemon::synth::{CaptureSpec, idle_rows, synth_blows};
+use serde_json::{Value, json};
+use socketcan::Socket;
+
+const MACHINE: &str = "config/hammer-lg1000.machine.toml";
+const PROCESS: &str = "config/steel-16NiCrMo13.process.toml";
+const DBC: &str = "fixtures/can/hammer.dbc";
+const LOG: &str = "fixtures/can/hammer_blows.log";
+const EXPECTED: &str = "fixtures/can/hammer_blows.expected.json";
+const REGENERATE: &str = "cargo test --test acquire_can -- --ignored regenerate_can_fixtures";
+
+/// The session: blow 1 of the paper at 3.9 m/s, then two at 5.3 m/s (seed 000 §3.1), at
+/// 5 kHz (the module docs: 68 % of a 1 Mbit/s bus), the machine idle between blows.
+const V0S_MPS: [f64; 3] = [3.9, 5.3, 5.3];
+const SAMPLE_RATE_HZ: f64 = 5000.0;
+const IDLE_SAMPLES: usize = 750; // 0.15 s before each blow and after the last
+const SEED: u64 = 4004;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn read(rel: &str) -> String {
+    std::fs::read_to_string(root().join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+fn machine() -> Machine {
+    parse_machine(MACHINE, &read(MACHINE)).expect("machine file").machine
+}
+
+fn process() -> Process {
+    parse_process(PROCESS, &read(PROCESS)).expect("process file")
+}
+
+fn spec() -> CaptureSpec {
+    CaptureSpec { sample_rate_hz: SAMPLE_RATE_HZ, pre_s: 0.05, post_s: 0.03, ..CaptureSpec::hammer(SEED) }
+}
+
+/// The truth of one simulated blow, in the log's clock.
+struct Truth {
+    v0_mps: f64,
+    efficiency: f64,
+    t_contact_s: f64,
+}
+
+/// The session as one continuous stream of rows, and the truth of each blow.
+fn session() -> (Vec<CaptureRow>, Vec<Truth>) {
+    let spec = spec();
+    let blows = synth_blows(&machine(), &EffectSet::NONE, &process(), &V0S_MPS, &spec).expect("simulate");
+    let n_pre = (spec.pre_s * spec.sample_rate_hz).round() as usize;
+    let mut rows = Vec::new();
+    let mut contact_index = Vec::new();
+    for (i, b) in blows.iter().enumerate() {
+        rows.extend(idle_rows(IDLE_SAMPLES, 0.0, &spec, b.rows[0].disp_m, SEED + 1 + i as u64));
+        contact_index.push(rows.len() + n_pre);
+        rows.extend_from_slice(&b.rows);
+    }
+    let last = rows.last().map_or(0.0, |r| r.disp_m);
+    rows.extend(idle_rows(IDLE_SAMPLES, 0.0, &spec, last, SEED + 99));
+    // One clock for the whole stream.
+    let dt = 1.0 / spec.sample_rate_hz;
+    let t0 = spec.t_origin_s;
+    for (k, r) in rows.iter_mut().enumerate() {
+        r.t_s = t0 + k as f64 * dt;
+    }
+    let truth = blows
+        .iter()
+        .zip(contact_index)
+        .map(|(b, k)| Truth {
+            v0_mps: b.truth.v0_mps,
+            efficiency: b.truth.efficiency(),
+            t_contact_s: t0 + k as f64 * dt,
+        })
+        .collect();
+    (rows, truth)
+}
+
+/// The log the simulated device writes for the session.
+fn generate_log() -> (String, Vec<Truth>) {
+    let (rows, truth) = session();
+    let mut dev = CanDevice::new(forgemon_mapping());
+    let mut log = Vec::new();
+    dev.write_log(&mut log, DEFAULT_IFACE, &rows).expect("write to memory");
+    assert_eq!(dev.saturated, 0, "every value fits its signal");
+    (String::from_utf8(log).expect("ASCII"), truth)
+}
+
+fn fixture_mapping() -> CanMapping {
+    mapping_from_dbc(DBC, &read(DBC), &DbcNames::forgemon()).expect("fixture DBC")
+}
+
+fn decoder() -> CanDecoder {
+    CanDecoder::new("can", fixture_mapping(), CanTiming::new(SAMPLE_RATE_HZ, 0.05, true))
+}
+
+/// Decoded events through the pipeline, ending the stream at each gap as the service does.
+fn run_pipeline(events: &[SourceEvent]) -> Vec<Value> {
+    let m = machine();
+    let mut p = Pipeline::new(m, Some(process()), PipelineConfig::for_machine(&m));
+    let mut out = Vec::new();
+    for e in events {
+        match e {
+            SourceEvent::Batch(b) => p.push(b, &mut out),
+            SourceEvent::Gap(_) => p.end_of_stream(&mut out),
+            SourceEvent::Status(_) => {}
+        }
+    }
+    p.end_of_stream(&mut out);
+    out.into_iter()
+        .map(|e| match e {
+            PipelineEvent::Blow { estimate, .. } => serde_json::to_value(&estimate).expect("serialise"),
+            PipelineEvent::Rejected { cut, error } => panic!("blow at {} rejected: {error}", cut.t_contact_s),
+        })
+        .collect()
+}
+
+fn decode(text: &str, origin: &str, bad: BadLines) -> (Vec<SourceEvent>, CanDecoder) {
+    let mut dec = decoder();
+    let events = read_candump(&mut CandumpReader::new(origin, text.as_bytes()), &mut dec, bad).expect("decode");
+    (events, dec)
+}
+
+fn f(v: &Value, k: &str) -> f64 {
+    v[k].as_f64().unwrap_or_else(|| panic!("{k} in {v}"))
+}
+
+/// Numbers equal to 1e-9 relative (the same code on another CPU), the rest exactly.
+fn assert_same(got: &Value, want: &Value, at: &str) {
+    match (got, want) {
+        (Value::Number(a), Value::Number(b)) => {
+            let (a, b) = (a.as_f64().unwrap_or(f64::NAN), b.as_f64().unwrap_or(f64::NAN));
+            assert!((a - b).abs() <= 1e-9 * b.abs().max(1e-6), "{at}: {a} vs expected {b}");
+        }
+        (Value::Object(a), Value::Object(b)) => {
+            assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>(), "{at}: fields");
+            for (k, v) in b {
+                assert_same(&a[k], v, &format!("{at}.{k}"));
+            }
+        }
+        (Value::Array(a), Value::Array(b)) => {
+            assert_eq!(a.len(), b.len(), "{at}: length");
+            for (i, (x, y)) in a.iter().zip(b).enumerate() {
+                assert_same(x, y, &format!("{at}[{i}]"));
+            }
+        }
+        _ => assert_eq!(got, want, "{at}"),
+    }
+}
+
+fn expected_json(text: &str, truth: &[Truth]) -> Value {
+    let (events, dec) = decode(text, LOG, BadLines::Fail);
+    let blows = run_pipeline(&events);
+    json!({
+        "regenerate": REGENERATE,
+        "log": {"lines": text.lines().count(), "frames": dec.counters().frames, "samples": dec.counters().samples,
+                "gaps": dec.counters().gaps, "decode_errors": dec.counters().decode_errors,
+                "unknown_frames": dec.stats().unknown_frames},
+        "truth": truth.iter().enumerate().map(|(i, t)| json!({"blow": i + 1, "v0_mps": t.v0_mps,
+                 "efficiency": t.efficiency, "t_contact_s": t.t_contact_s})).collect::<Vec<_>>(),
+        "blows": blows,
+    })
+}
+
+#[test]
+#[ignore = "writes fixtures/can/; run to regenerate them"]
+fn regenerate_can_fixtures() {
+    let (text, truth) = generate_log();
+    std::fs::write(root().join(LOG), &text).expect("write log");
+    let expected = expected_json(&text, &truth);
+    std::fs::write(root().join(EXPECTED), serde_json::to_string_pretty(&expected).expect("json") + "\n")
+        .expect("write expected");
+    eprintln!("wrote {LOG} ({} bytes) and {EXPECTED}", text.len());
+}
+
+#[test]
+fn the_fixture_dbc_describes_the_simulated_daq_frame() {
+    assert_eq!(fixture_mapping(), forgemon_mapping());
+}
+
+#[test]
+fn every_blow_of_the_candump_fixture_is_found_as_expected_and_as_simulated() {
+    let text = read(LOG);
+    assert!(text.len() < 5_000_000);
+    let expected: Value = serde_json::from_str(&read(EXPECTED)).expect("expected JSON");
+    let (events, dec) = decode(&text, LOG, BadLines::Fail);
+    assert_eq!(dec.counters().samples, expected["log"]["samples"].as_u64().unwrap());
+    assert_eq!(dec.counters().gaps, 0);
+    assert_eq!(dec.counters().decode_errors, 0);
+    let found = run_pipeline(&events);
+    assert_same(&Value::Array(found.clone()), &expected["blows"], "blows");
+    // Against the simulated truth, with issue #3's tolerances: every blow, impact speed
+    // within 1 %, contact within 1 ms. Efficiency is not compared: at the 5 kHz a classic
+    // CAN bus carries, the estimator reads it low (0.69 / 0.67 / 0.64 against the true
+    // 0.93 / 0.91 / 0.87; the same stream without CAN at 10, 20 and 100 kHz gives 0.77,
+    // 0.85 and 0.926 for blow 1), a limit of the estimator at low rates, not of the bus.
+    let truth = expected["truth"].as_array().unwrap();
+    assert_eq!(found.len(), V0S_MPS.len(), "every blow, no extra");
+    for (v, t) in found.iter().zip(truth) {
+        let b = v["blow"].clone();
+        assert!((f(v, "v_impact_mps") / f(t, "v0_mps") - 1.0).abs() < 0.01, "blow {b}: {v} vs {t}");
+        assert!((f(v, "t_contact_s") - f(t, "t_contact_s")).abs() < 1e-3, "blow {b}: {v} vs {t}");
+        assert!(f(v, "efficiency") > 0.0 && f(v, "efficiency") < f(t, "efficiency"), "blow {b}: {v} vs {t}");
+    }
+}
+
+#[test]
+fn the_committed_log_is_what_the_generator_writes() {
+    let (text, truth) = generate_log();
+    assert!(text == read(LOG), "{LOG} differs from the simulated device's output: regenerate with `{REGENERATE}`");
+    let expected: Value = serde_json::from_str(&read(EXPECTED)).expect("expected JSON");
+    assert_same(&expected["truth"], &expected_json(&text, &truth)["truth"], "truth");
+}
+
+#[test]
+fn a_malformed_line_names_the_file_and_line_or_is_counted() {
+    let text = read(LOG);
+    let mut lines: Vec<&str> = text.lines().collect();
+    // Line 100 lies in the idle stretch before the first blow.
+    lines[99] = "(79.981800) can0 120#00F";
+    let bad = lines.join("\n");
+    let mut dec = decoder();
+    let err = read_candump(&mut CandumpReader::new(LOG, bad.as_bytes()), &mut dec, BadLines::Fail).unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.starts_with(&format!("{LOG}:100:")), "{msg}");
+
+    let mut lines: Vec<&str> = text.lines().collect();
+    lines[99] = "this is not candump";
+    lines[199] = "(79.9818) can0 120#00";
+    let bad = lines.join("\n");
+    let (events, dec) = decode(&bad, LOG, BadLines::Count);
+    assert_eq!(dec.counters().decode_errors, 2);
+    // Each lost line is a one-sample gap the counter reveals.
+    let lost: Vec<u64> =
+        events.iter().filter_map(|e| if let SourceEvent::Gap(g) = e { Some(g.samples_lost) } else { None }).collect();
+    assert_eq!(lost, vec![1, 1]);
+    assert_eq!(run_pipeline(&events).len(), V0S_MPS.len(), "no blow lost");
+}
+
+#[test]
+fn frames_lost_from_the_log_are_gaps_of_that_many_samples_and_other_traffic_is_ignored() {
+    let text = read(LOG);
+    let mut out = String::new();
+    for (i, l) in text.lines().enumerate() {
+        if (300..303).contains(&i) || (400..700).contains(&i) {
+            continue; // 3 lost, then 300 (more than the 8-bit counter's wrap)
+        }
+        out.push_str(l);
+        out.push('\n');
+        if i % 50 == 0 {
+            out.push_str("(79.000000) can0 7DF#0201000000000000\n(79.000000) can0 120##1AABB\n");
+        }
+    }
+    let (events, dec) = decode(&out, "edited.log", BadLines::Fail);
+    let lost: Vec<u64> =
+        events.iter().filter_map(|e| if let SourceEvent::Gap(g) = e { Some(g.samples_lost) } else { None }).collect();
+    assert_eq!(lost, vec![3, 300]);
+    assert_eq!(dec.stats().unknown_frames, dec.stats().unsupported_frames);
+    assert!(dec.stats().unknown_frames > 0);
+    assert_eq!(run_pipeline(&events).len(), V0S_MPS.len(), "the gaps lie before the first blow");
+}
+
+/// The errno of `socket(PF_CAN, ...)` on a kernel without CAN support.
+const EAFNOSUPPORT: i32 = 97;
+
+#[tokio::test]
+async fn live_socketcan_reads_frames_or_says_it_was_skipped() {
+    use std::time::Duration;
+    let iface = std::env::var("FORGEMON_VCAN").unwrap_or_else(|_| "vcan0".to_string());
+    let (tx, mut rx) = tokio::sync::mpsc::channel(1024);
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let cfg = CanSourceConfig {
+        name: "can".into(),
+        iface: iface.clone(),
+        mapping: forgemon_mapping(),
+        timing: CanTiming::new(SAMPLE_RATE_HZ, 0.01, true),
+    };
+    match socketcan::CanSocket::open(&iface) {
+        Err(e) => {
+            let why = if e.raw_os_error() == Some(EAFNOSUPPORT) {
+                "no AF_CAN on this kernel".to_string()
+            } else {
+                format!("cannot open {iface}: {e}")
+            };
+            eprintln!("SKIPPED: live SocketCAN test: {why}");
+            // What the driver does meanwhile: it reports the failure and keeps retrying
+            // with backoff, and stops when told.
+            let task = tokio::spawn(forgemon::acquire::can::run(cfg, tx, stop_rx));
+            let first = tokio::time::timeout(Duration::from_secs(5), rx.recv()).await.expect("a status").expect("open");
+            let SourceEvent::Status(s) = first else { panic!("{first:?}") };
+            assert_eq!(s.state, "reconnecting");
+            assert!(s.detail.contains(&iface), "{}", s.detail);
+            let second = tokio::time::timeout(Duration::from_secs(5), rx.recv()).await.expect("a retry").expect("open");
+            assert!(matches!(second, SourceEvent::Status(ref s) if s.state == "reconnecting"), "{second:?}");
+            stop_tx.send(true).expect("driver alive");
+            tokio::time::timeout(Duration::from_secs(5), task).await.expect("stops when told").expect("no panic");
+        }
+        Ok(sender) => {
+            use socketcan::{EmbeddedFrame, StandardId};
+            let task = tokio::spawn(forgemon::acquire::can::run(cfg, tx, stop_rx));
+            // Wait for the driver to connect, then send 100 samples.
+            loop {
+                let e = tokio::time::timeout(Duration::from_secs(5), rx.recv()).await.expect("status").expect("open");
+                if matches!(e, SourceEvent::Status(ref s) if s.state == "connected") {
+                    break;
+                }
+            }
+            let mut dev = CanDevice::new(forgemon_mapping());
+            for k in 0..100 {
+                for (f, d) in dev.encode(|_| k as f64) {
+                    let id = StandardId::new(f.id as u16).expect("11 bits");
+                    let frame = socketcan::CanFrame::new(id, &d).expect("8 bytes");
+                    sender.write_frame(&frame).expect("send on the bus");
+                }
+            }
+            let mut samples = 0;
+            while samples < 100 {
+                match tokio::time::timeout(Duration::from_secs(5), rx.recv()).await.expect("samples").expect("open") {
+                    SourceEvent::Batch(b) => samples += b.len(),
+                    SourceEvent::Gap(g) => panic!("no gap on a local bus: {g:?}"),
+                    SourceEvent::Status(_) => {}
+                }
+            }
+            assert_eq!(samples, 100);
+            stop_tx.send(true).expect("driver alive");
+            tokio::time::timeout(Duration::from_secs(5), task).await.expect("stops").expect("no panic");
+        }
+    }
+}
+
+#[test]
+fn fixture_paths_exist() {
+    for p in [DBC, LOG, EXPECTED, "fixtures/can/README.md"] {
+        assert!(Path::new(&root().join(p)).exists(), "{p}");
+    }
+}
