@@ -184,9 +184,10 @@ impl LineDecoder {
         self.n += 1;
         self.t_last_s = Some(t_s);
         self.stats.samples += 1;
-        let span_s = t_s - self.t_first_s;
-        let half_period = 0.5 * self.period_s.unwrap_or(0.0);
-        if span_s + half_period >= self.batch_s || self.n >= MAX_BATCH_SAMPLES {
+        // n samples cover n periods: close once that reaches the batch length (to half a period).
+        let period = self.period_s.unwrap_or(0.0);
+        let covered_s = t_s - self.t_first_s + period;
+        if covered_s + 0.5 * period >= self.batch_s || self.n >= MAX_BATCH_SAMPLES {
             self.close_batch(host_time_ns);
         }
     }
@@ -232,5 +233,115 @@ impl LineDecoder {
             values,
         }));
         self.n = 0;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn roles() -> Vec<Role> {
+        vec![Role::Load, Role::Disp]
+    }
+
+    fn events(dec: &mut LineDecoder) -> Vec<AsciiEvent> {
+        std::iter::from_fn(|| dec.next_event()).collect()
+    }
+
+    fn batches(ev: &[AsciiEvent]) -> Vec<&SampleBatch> {
+        ev.iter()
+            .filter_map(|e| match e {
+                AsciiEvent::Batch(b) => Some(b),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn good_lines_become_batches_of_the_configured_length() {
+        // 1 kHz, 10 ms batches: 10 lines per batch.
+        let mut dec = LineDecoder::new("daq", roles(), 0.01);
+        let text: String = (0..25).map(|k| format!("{:.4},{},{}\n", 80.0 + k as f64 * 1e-3, k * 10, 0.5)).collect();
+        dec.push(text.as_bytes(), 7);
+        let ev = events(&mut dec);
+        let b = batches(&ev);
+        assert_eq!(b.len(), 2);
+        assert_eq!(b[0].len(), 10);
+        assert_eq!((b[0].seq, b[0].host_time_ns, b[0].device_time_ns), (1, 7, 80_000_000_000));
+        assert!((b[0].period_ns - 1e6).abs() < 1.0);
+        assert_eq!(b[0].roles, roles());
+        assert_eq!(&b[0].values[..4], &[0.0, 0.5, 10.0, 0.5]);
+        assert_eq!(b[1].device_time_ns, 80_010_000_000);
+        // The remaining 5 lines come out on flush.
+        dec.flush(8);
+        let ev = events(&mut dec);
+        assert_eq!(batches(&ev)[0].len(), 5);
+        assert_eq!(dec.stats(), LineStats { lines: 25, malformed: 0, samples: 25, restarts: 0 });
+    }
+
+    #[test]
+    fn malformed_lines_are_counted_and_skipped() {
+        let mut dec = LineDecoder::new("daq", roles(), 1.0);
+        let text = b"t_s,load_N,disp_m\n\
+                    1.000,10,0.5\n\
+                    1.001,11\n\
+                    1.002,12,0.5,9\n\
+                    1.003,abc,0.5\n\
+                    1.004,NaN,0.5\n\
+                    \xff\xfe,1,2\n\
+                    \r\n\
+                    1.005,15,0.5\r\n";
+        dec.push(text, 0);
+        // Split a line across pushes: partial input waits for its newline.
+        dec.push(b"1.00", 0);
+        dec.push(b"6,16,0.", 0);
+        dec.push(b"5\n", 0);
+        dec.flush(0);
+        let ev = events(&mut dec);
+        let b = batches(&ev);
+        assert_eq!(b.len(), 1);
+        assert_eq!(b[0].values, vec![10.0, 0.5, 15.0, 0.5, 16.0, 0.5]);
+        // header, short, long, text, NaN, not UTF-8; the blank line is not counted
+        assert_eq!(dec.stats().malformed, 6);
+        assert_eq!(dec.stats().samples, 3);
+    }
+
+    #[test]
+    fn empty_input_and_an_overlong_line_of_garbage() {
+        let mut dec = LineDecoder::new("daq", roles(), 1.0);
+        dec.push(b"", 0);
+        dec.flush(0);
+        assert_eq!(dec.next_event(), None);
+        dec.push(&vec![b'7'; MAX_LINE_BYTES + 10], 0);
+        dec.push(&vec![b'7'; 3000], 0);
+        dec.push(b"\n2.0,1,1\n", 0);
+        dec.flush(0);
+        let ev = events(&mut dec);
+        assert_eq!(batches(&ev)[0].values, vec![1.0, 1.0]);
+        assert_eq!(dec.stats().malformed, 1);
+    }
+
+    #[test]
+    fn a_step_in_time_is_a_gap() {
+        let mut dec = LineDecoder::new("daq", roles(), 1.0);
+        let mut text = String::new();
+        for k in (0..10).chain(15..20) {
+            text.push_str(&format!("{:.6},1,2\n", 5.0 + k as f64 * 1e-4));
+        }
+        dec.push(text.as_bytes(), 0);
+        dec.flush(0);
+        let ev = events(&mut dec);
+        assert_eq!(ev.len(), 3);
+        match &ev[1] {
+            AsciiEvent::Gap(g) => {
+                assert_eq!(g.samples_lost, 5); // samples 10..=14
+                assert_eq!(g.reason, "time_jump");
+                assert!((g.t_s - 5.001).abs() < 1e-9);
+            }
+            other => panic!("expected a gap, got {other:?}"),
+        }
+        let b = batches(&ev);
+        assert_eq!((b[0].len(), b[1].len()), (10, 5));
+        assert_eq!(b[1].device_time_ns, 5_001_500_000);
     }
 }

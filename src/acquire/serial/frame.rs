@@ -429,3 +429,315 @@ impl FrameTracker {
         Ok(Tracked { gap, batch })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::signal::sample::Role;
+
+    /// The hand-built frame below: 2 channels, 2 samples, sequence 5, t = 1000 ns,
+    /// period 10 µs, counts [[1, -1], [256, 2]].
+    fn small_frame() -> Frame {
+        Frame {
+            channel_count: 2,
+            sample_count: 2,
+            sequence: 5,
+            device_time_ns: 1000,
+            sample_period_ns: 10_000,
+            counts: vec![1, -1, 256, 2],
+        }
+    }
+
+    /// `small_frame()` on the wire, built by hand. The payload is
+    /// `01 02 0200 05000000 E803000000000000 10270000 01000000 FFFFFFFF 00010000 02000000`
+    /// followed by its CRC-32C 0xA5152FE3 (LE `E3 2F 15 A5`); COBS replaces each zero by
+    /// the distance to the next one.
+    #[rustfmt::skip]
+    const SMALL_WIRE: [u8; 42] = [
+        0x04,                   // COBS code 4: 3 bytes, then a zero (sample_count high byte)
+        0x01,                   //   version = 1
+        0x02,                   //   channel_count = 2
+        0x02,                   //   sample_count low byte = 2
+        0x02,                   // COBS code 2: 1 byte, then a zero (sequence byte 1)
+        0x05,                   //   sequence low byte = 5
+        0x01,                   // COBS code 1: a zero (sequence byte 2)
+        0x01,                   // COBS code 1: a zero (sequence byte 3)
+        0x03,                   // COBS code 3: 2 bytes, then a zero (device_time_ns byte 2)
+        0xE8, 0x03,             //   device_time_ns = 1000 = 0x03E8, bytes 0..=1
+        0x01, 0x01, 0x01,       // COBS codes 1: zeros (device_time_ns bytes 3..=5)
+        0x01, 0x01,             // COBS codes 1: zeros (device_time_ns bytes 6..=7)
+        0x03,                   // COBS code 3: 2 bytes, then a zero (sample_period_ns byte 2)
+        0x10, 0x27,             //   sample_period_ns = 10000 = 0x2710, bytes 0..=1
+        0x01,                   // COBS code 1: a zero (sample_period_ns byte 3)
+        0x02,                   // COBS code 2: 1 byte, then a zero (counts[0][0] byte 1)
+        0x01,                   //   counts[0][0] = 1, byte 0
+        0x01, 0x01,             // COBS codes 1: zeros (counts[0][0] bytes 2..=3)
+        0x05,                   // COBS code 5: 4 bytes, then a zero (counts[1][0] byte 0)
+        0xFF, 0xFF, 0xFF, 0xFF, //   counts[0][1] = -1
+        0x02,                   // COBS code 2: 1 byte, then a zero (counts[1][0] byte 2)
+        0x01,                   //   counts[1][0] = 256 = 0x100, byte 1
+        0x01,                   // COBS code 1: a zero (counts[1][0] byte 3)
+        0x02,                   // COBS code 2: 1 byte, then a zero (counts[1][1] byte 1)
+        0x02,                   //   counts[1][1] = 2, byte 0
+        0x01, 0x01,             // COBS codes 1: zeros (counts[1][1] bytes 2..=3)
+        0x05,                   // COBS code 5: 4 bytes, and the end of the data
+        0xE3, 0x2F, 0x15, 0xA5, //   CRC-32C of the payload = 0xA5152FE3, LE
+        0x00,                   // delimiter
+    ];
+
+    fn decode_all(dec: &mut FrameDecoder) -> Vec<Result<Frame, FrameError>> {
+        std::iter::from_fn(|| dec.next_frame()).collect()
+    }
+
+    fn big_frame(seq: u32) -> Frame {
+        let counts = (0..300).map(|k| (k * 7919 - 100_000) * if k % 2 == 0 { 1 } else { -1 }).collect();
+        Frame {
+            channel_count: 3,
+            sample_count: 100,
+            sequence: seq,
+            device_time_ns: 1_000_000 * seq as u64,
+            sample_period_ns: 10_000,
+            counts,
+        }
+    }
+
+    #[test]
+    fn crc32c_is_castagnoli() {
+        // The standard check value of CRC-32C over "123456789".
+        assert_eq!(CRC32C.checksum(b"123456789"), 0xE306_9283);
+    }
+
+    #[test]
+    fn the_hand_built_frame_matches_the_encoder_and_decodes() {
+        assert_eq!(encode_frame(&small_frame()), SMALL_WIRE.to_vec());
+        let mut dec = FrameDecoder::new();
+        dec.push(&SMALL_WIRE);
+        assert_eq!(decode_all(&mut dec), vec![Ok(small_frame())]);
+        assert_eq!(dec.stats(), DecoderStats { frames: 1, ..DecoderStats::default() });
+        assert_eq!(dec.buffered(), 0);
+    }
+
+    #[test]
+    fn round_trip_of_many_frames_fed_one_byte_at_a_time() {
+        let frames: Vec<Frame> = (0..5).map(big_frame).collect();
+        let wire: Vec<u8> = frames.iter().flat_map(encode_frame).collect();
+        let mut dec = FrameDecoder::new();
+        let mut got = Vec::new();
+        for b in &wire {
+            dec.push(std::slice::from_ref(b));
+            while let Some(r) = dec.next_frame() {
+                got.push(r.unwrap());
+            }
+        }
+        assert_eq!(got, frames);
+        assert_eq!(dec.stats().frames, 5);
+    }
+
+    #[test]
+    fn partial_input_needs_more_and_empty_input_is_nothing() {
+        let mut dec = FrameDecoder::new();
+        dec.push(&[]);
+        assert_eq!(dec.next_frame(), None);
+        dec.push(&SMALL_WIRE[..41]); // everything but the delimiter
+        assert_eq!(dec.next_frame(), None);
+        dec.push(&[]);
+        assert_eq!(dec.next_frame(), None);
+        dec.push(&SMALL_WIRE[41..]); // the delimiter
+        assert_eq!(dec.next_frame(), Some(Ok(small_frame())));
+        assert_eq!(dec.next_frame(), None);
+        // Lone delimiters (an idle line) are not errors.
+        dec.push(&[0x00, 0x00, 0x00]);
+        assert_eq!(dec.next_frame(), None);
+        assert_eq!(dec.stats().decode_errors, 0);
+    }
+
+    #[test]
+    fn garbage_ended_by_a_delimiter_is_counted_and_the_next_frame_decodes() {
+        let mut dec = FrameDecoder::new();
+        dec.push(&[0x13, 0x37, 0x42, 0x00]); // line noise, then a delimiter
+        dec.push(&SMALL_WIRE);
+        let got = decode_all(&mut dec);
+        assert_eq!(got.len(), 2);
+        assert!(got[0].is_err());
+        assert_eq!(got[1], Ok(small_frame()));
+        assert_eq!(dec.stats().decode_errors, 1);
+        assert_eq!(dec.stats().crc_errors, 0);
+    }
+
+    #[test]
+    fn garbage_glued_in_front_of_a_frame_is_cut_off() {
+        // No delimiter between the noise and the frame: the resync search finds the frame.
+        let mut wire = encode_frame(&big_frame(1));
+        wire.extend_from_slice(&[0xAA, 0x03, 0x55, 0x10, 0xFE, 0x07, 0x99]); // noise
+        wire.extend(encode_frame(&big_frame(2)));
+        wire.extend([0x31, 0x32, 0x33]); // noise between frames
+        wire.extend(encode_frame(&big_frame(3)));
+        let mut dec = FrameDecoder::new();
+        dec.push(&wire);
+        let got = decode_all(&mut dec);
+        let frames: Vec<u32> = got.iter().filter_map(|r| r.as_ref().ok()).map(|f| f.sequence).collect();
+        assert_eq!(frames, vec![1, 2, 3]);
+        assert_eq!(dec.stats().decode_errors, 2);
+        assert_eq!(dec.stats().bytes_discarded, 10);
+    }
+
+    #[test]
+    fn a_corrupt_crc_is_counted_and_the_next_frame_still_decodes() {
+        let mut bad = SMALL_WIRE;
+        bad[37] ^= 0x01; // flip a bit of the CRC's first byte (0xE3 -> 0xE2)
+        let mut dec = FrameDecoder::new();
+        dec.push(&bad);
+        dec.push(&SMALL_WIRE);
+        let got = decode_all(&mut dec);
+        assert_eq!(got.len(), 2);
+        match &got[0] {
+            Err(FrameError::BadCrc { expected, computed }) => {
+                assert_eq!(*expected, 0xA515_2FE2);
+                assert_eq!(*computed, 0xA515_2FE3);
+            }
+            other => panic!("expected a CRC error, got {other:?}"),
+        }
+        assert_eq!(got[1], Ok(small_frame()));
+        // A flipped sample bit is a CRC error too.
+        let mut wire = encode_frame(&big_frame(9));
+        wire[200] ^= 0x40;
+        dec.push(&wire);
+        assert!(matches!(dec.next_frame(), Some(Err(FrameError::BadCrc { .. }))));
+        assert_eq!(dec.stats().crc_errors, 2);
+        assert_eq!(dec.stats().decode_errors, 0);
+        assert_eq!(dec.stats().frames, 1);
+    }
+
+    /// The wire bytes of a payload given as is (limits not checked), with a correct CRC.
+    fn raw_wire(payload: &[u8]) -> Vec<u8> {
+        let mut p = payload.to_vec();
+        p.extend_from_slice(&CRC32C.checksum(payload).to_le_bytes());
+        let mut wire = cobs::encode_vec(&p);
+        wire.push(0);
+        wire
+    }
+
+    fn header(version: u8, channels: u8, samples: u16) -> Vec<u8> {
+        let mut p = vec![version, channels];
+        p.extend_from_slice(&samples.to_le_bytes());
+        p.extend_from_slice(&[0; 16]); // sequence, time, period
+        p
+    }
+
+    #[test]
+    fn limits_violated_are_decode_errors() {
+        let cases: Vec<(Vec<u8>, FrameError)> = vec![
+            // channel_count 0, one (ignored) count
+            ([header(1, 0, 1), vec![0; 4]].concat(), FrameError::BadChannelCount { count: 0 }),
+            // channel_count 17
+            ([header(1, 17, 1), vec![0; 68]].concat(), FrameError::BadChannelCount { count: 17 }),
+            // sample_count 0
+            ([header(1, 1, 0), vec![0; 4]].concat(), FrameError::BadSampleCount { count: 0 }),
+            // sample_count 4097
+            ([header(1, 1, 4097), vec![0; 4]].concat(), FrameError::BadSampleCount { count: 4097 }),
+            // version 2
+            ([header(2, 1, 1), vec![0; 4]].concat(), FrameError::BadVersion { version: 2 }),
+            // 1 channel × 2 samples announced, 1 sample sent
+            ([header(1, 1, 2), vec![0; 4]].concat(), FrameError::BadLength { expected: 32, actual: 28 }),
+            // header cut short
+            (vec![1, 1, 1, 0], FrameError::TooShort { len: 8, min: 28 }),
+        ];
+        let mut dec = FrameDecoder::new();
+        for (payload, want) in &cases {
+            dec.push(&raw_wire(payload));
+            assert_eq!(dec.next_frame(), Some(Err(want.clone())), "{payload:02X?}");
+        }
+        assert_eq!(dec.stats().decode_errors, cases.len() as u64);
+        assert_eq!(dec.stats().crc_errors, 0);
+        // The limits themselves decode: 16 channels × 1 sample, 1 channel × 4096 samples.
+        for (c, n) in [(16u8, 1u16), (1, 4096)] {
+            let f = Frame {
+                channel_count: c,
+                sample_count: n,
+                sequence: 0,
+                device_time_ns: 0,
+                sample_period_ns: 1,
+                counts: vec![-7; c as usize * n as usize],
+            };
+            dec.push(&encode_frame(&f));
+            assert_eq!(dec.next_frame(), Some(Ok(f)));
+        }
+    }
+
+    #[test]
+    fn an_overlong_run_without_delimiter_is_dropped_and_the_buffer_stays_bounded() {
+        let mut dec = FrameDecoder::new();
+        let noise = vec![0x5Au8; 64 * 1024];
+        let mut errors = 0;
+        for _ in 0..8 {
+            dec.push(&noise);
+            while let Some(r) = dec.next_frame() {
+                assert!(matches!(r, Err(FrameError::TooLong { .. })));
+                errors += 1;
+            }
+            assert!(dec.buffered() <= MAX_ENCODED_LEN + noise.len());
+        }
+        assert_eq!(errors, 1);
+        // The delimiter ends the garbage; the next frame decodes.
+        dec.push(&[0x00]);
+        dec.push(&SMALL_WIRE);
+        assert_eq!(decode_all(&mut dec), vec![Ok(small_frame())]);
+        assert_eq!(dec.stats().decode_errors, 1);
+    }
+
+    fn specs() -> Vec<ChannelSpec> {
+        vec![
+            ChannelSpec { role: Role::Load, gain: 10.0, offset: -5.0 },
+            ChannelSpec { role: Role::Disp, gain: 1e-6, offset: 0.5 },
+        ]
+    }
+
+    #[test]
+    fn tracker_applies_gain_and_offset() {
+        let mut t = FrameTracker::new("daq", specs());
+        let out = t.track(&small_frame(), 42).unwrap();
+        assert_eq!(out.gap, None);
+        let b = out.batch;
+        assert_eq!((b.source.as_str(), b.seq, b.device_time_ns, b.host_time_ns), ("daq", 5, 1000, 42));
+        assert_eq!(b.period_ns, 10_000.0);
+        assert_eq!(b.roles, vec![Role::Load, Role::Disp]);
+        // [[1, -1], [256, 2]] -> load -5 + 10 c, disp 0.5 + 1e-6 c
+        assert_eq!(b.values, vec![5.0, 0.5 - 1e-6, 2555.0, 0.5 + 2e-6]);
+    }
+
+    #[test]
+    fn sequence_jumps_become_gaps_across_the_wrap() {
+        let mut t = FrameTracker::new("daq", specs());
+        let mut f = small_frame();
+        let mut gaps = Vec::new();
+        let mut seqs = Vec::new();
+        // u32::MAX - 1, u32::MAX, 0 (wrap, no gap), 3 (frames 1 and 2 lost), 4
+        for s in [u32::MAX - 1, u32::MAX, 0, 3, 4] {
+            f.sequence = s;
+            f.device_time_ns = 20_000 * s as u64;
+            let out = t.track(&f, 0).unwrap();
+            seqs.push(out.batch.seq);
+            gaps.extend(out.gap);
+        }
+        let base = (u32::MAX - 1) as u64;
+        assert_eq!(seqs, vec![base, base + 1, base + 2, base + 5, base + 6]);
+        assert_eq!(gaps.len(), 1);
+        assert_eq!(gaps[0].samples_lost, 2 * 2); // (jump 3 - 1) frames × 2 samples
+        assert_eq!(gaps[0].reason, "sequence_jump");
+        assert!((gaps[0].t_s - 20e-6).abs() < 1e-12, "the gap starts where frame 0 ended");
+        // Backwards: a restarted device, not a gap.
+        f.sequence = 1;
+        assert_eq!(t.track(&f, 0).unwrap().gap, None);
+        assert_eq!(t.restarts(), 1);
+    }
+
+    #[test]
+    fn tracker_refuses_a_channel_mismatch_and_a_zero_period() {
+        let mut t = FrameTracker::new("daq", specs());
+        let f = big_frame(1); // 3 channels against 2 configured
+        assert_eq!(t.track(&f, 0), Err(TrackError::ChannelMismatch { expected: 2, got: 3 }));
+        let mut f = small_frame();
+        f.sample_period_ns = 0;
+        assert_eq!(t.track(&f, 0), Err(TrackError::ZeroPeriod));
+    }
+}
