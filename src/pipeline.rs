@@ -79,6 +79,12 @@ impl Pipeline {
         self.drain(out);
     }
 
+    /// A new billet is in the dies: the height tracking and the alert memory start over.
+    pub fn new_billet(&mut self) {
+        self.estimator.new_billet();
+        self.alerts.reset();
+    }
+
     /// New alert thresholds (SIGHUP).
     pub fn set_alert_config(&mut self, cfg: AlertConfig) {
         self.alerts.set_config(cfg);

@@ -35,6 +35,8 @@ pub struct SimMachine {
     t0_s: f64,
     last_disp_m: f64,
     seed: u64,
+    /// Stream sample index at which each billet started.
+    billet_starts: Vec<u64>,
 }
 
 impl SimMachine {
@@ -58,6 +60,7 @@ impl SimMachine {
             emitted: 0,
             last_disp_m: 0.4375,
             seed,
+            billet_starts: Vec::new(),
         }
     }
 
@@ -70,15 +73,16 @@ impl SimMachine {
         self.next_billet >= self.plans.len() && self.queue.is_empty()
     }
 
-    /// Billets started so far.
-    pub fn billets_started(&self) -> usize {
-        self.next_billet
+    /// How many billets the samples handed out so far reach into (1 from the first sample).
+    pub fn billet_of_emitted(&self) -> usize {
+        self.billet_starts.iter().filter(|&&s| s < self.emitted.max(1)).count()
     }
 
     /// Forge the next billet into the queue: for each blow, a pause, then the blow.
     fn forge_next_billet(&mut self) -> Result<(), SequenceError> {
         let plan = &self.plans[self.next_billet];
         self.next_billet += 1;
+        self.billet_starts.push(self.emitted + self.queue.len() as u64);
         let mut spec = self.spec;
         spec.seed = self.seed.wrapping_add(self.next_billet as u64);
         let blows = synth_blows(&self.machine, &self.effects, &plan.process, &plan.v0s_mps, &spec)?;
@@ -130,4 +134,120 @@ mod tests {
         let peaks = rows.windows(2).filter(|w| w[0].load_n < 200e3 && w[1].load_n >= 200e3).count();
         assert!(peaks >= 4, "{peaks}");
     }
+}
+
+/// Fault switches of a simulated serial device.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SerialFaults {
+    /// Write this many garbage bytes before every `garbage_every`-th frame (0: never).
+    pub garbage_every: u64,
+    pub garbage_bytes: usize,
+    /// Flip a byte inside every `corrupt_every`-th frame, so its CRC fails (0: never).
+    pub corrupt_every: u64,
+    /// Skip every `drop_every`-th frame (its sequence number is used up: a gap) (0: never).
+    pub drop_every: u64,
+}
+
+/// How a simulated serial device frames its samples.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SerialDeviceSpec {
+    /// Channels in wire order, with the gain and offset the receiver will apply.
+    pub channels: Vec<crate::acquire::ChannelSpec>,
+    /// Samples per frame.
+    pub frame_samples: usize,
+    /// Pace frames at the sample rate (a live device) or write as fast as possible.
+    pub realtime: bool,
+    pub faults: SerialFaults,
+}
+
+/// What a simulated serial device wrote.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DeviceStats {
+    pub frames: u64,
+    pub samples: u64,
+    pub dropped_frames: u64,
+    pub corrupted_frames: u64,
+    pub garbage_bursts: u64,
+}
+
+/// Run `sim` to the end through the binary framing of CONTRACTS.md §7 into `writer`.
+/// Stops early when `stop` turns true or the reader goes away.
+/// `on_billet(k)` is called when the stream reaches billet k (k = 2, 3, ...), as a PLC
+/// would signal a new billet in the dies.
+pub async fn drive_serial<W: tokio::io::AsyncWrite + Unpin>(
+    mut sim: SimMachine,
+    spec: &SerialDeviceSpec,
+    mut writer: W,
+    stop: tokio::sync::watch::Receiver<bool>,
+    mut on_billet: impl FnMut(usize),
+) -> std::io::Result<DeviceStats> {
+    use crate::acquire::serial::frame::{Frame, encode_frame};
+    use crate::signal::sample::Role;
+    use tokio::io::AsyncWriteExt;
+
+    let rate = sim.sample_rate_hz();
+    let period_ns = (1e9 / rate).round() as u32;
+    let frame_dt = std::time::Duration::from_secs_f64(spec.frame_samples as f64 / rate);
+    let start = tokio::time::Instant::now();
+    let mut stats = DeviceStats::default();
+    let mut seq: u32 = 0;
+    let mut device_ns: u64 = 1_000_000_000;
+    while !sim.finished() && !*stop.borrow() {
+        let billet_before = sim.billet_of_emitted();
+        let rows = sim.next_rows(spec.frame_samples).map_err(std::io::Error::other)?;
+        if rows.is_empty() {
+            break;
+        }
+        let billet_now = sim.billet_of_emitted();
+        if billet_now > billet_before && billet_before > 0 {
+            on_billet(billet_now);
+        }
+        let mut counts = Vec::with_capacity(rows.len() * spec.channels.len());
+        for r in &rows {
+            for c in &spec.channels {
+                let v = match c.role {
+                    Role::Load => r.load_n,
+                    Role::Disp => r.disp_m,
+                    Role::Acc => r.acc_mps2,
+                };
+                counts.push(((v - c.offset) / c.gain).round().clamp(i32::MIN as f64, i32::MAX as f64) as i32);
+            }
+        }
+        let frame = Frame {
+            channel_count: spec.channels.len() as u8,
+            sample_count: rows.len() as u16,
+            sequence: seq,
+            device_time_ns: device_ns,
+            sample_period_ns: period_ns,
+            counts,
+        };
+        seq = seq.wrapping_add(1);
+        device_ns += u64::from(period_ns) * rows.len() as u64;
+        stats.frames += 1;
+        let f = spec.faults;
+        let nth = |every: u64| every > 0 && stats.frames % every == 0;
+        if nth(f.drop_every) {
+            stats.dropped_frames += 1;
+        } else {
+            if nth(f.garbage_every) {
+                stats.garbage_bursts += 1;
+                // Bytes that are not a valid frame and hold no 0x00 (no delimiter).
+                let junk: Vec<u8> = (0..f.garbage_bytes).map(|i| (i as u8).wrapping_mul(37) | 1).collect();
+                writer.write_all(&junk).await?;
+            }
+            let mut bytes = encode_frame(&frame);
+            if nth(f.corrupt_every) && bytes.len() > 8 {
+                stats.corrupted_frames += 1;
+                let i = bytes.len() / 2;
+                bytes[i] = if bytes[i] == 0x55 { 0x56 } else { 0x55 };
+            }
+            writer.write_all(&bytes).await?;
+            stats.samples += rows.len() as u64;
+        }
+        if spec.realtime {
+            tokio::time::sleep_until(start + frame_dt * stats.frames as u32).await;
+        }
+    }
+    writer.flush().await?;
+    Ok(stats)
 }

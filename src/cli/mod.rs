@@ -6,9 +6,11 @@ use std::path::Path;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 
+pub mod demo;
 pub mod import;
 pub mod inspect;
 pub mod replay;
+pub mod run;
 pub mod simulate;
 
 /// forgemon: blow-by-blow monitoring of gravity drop hammers and screw presses.
@@ -29,6 +31,10 @@ pub enum Command {
     Import(import::ImportArgs),
     /// Say what a recording holds: sources, rates, duration, blows, gaps, drops, alerts.
     Inspect(inspect::InspectArgs),
+    /// The always-on service: acquire, segment, estimate, alert, record.
+    Run(run::RunArgs),
+    /// The service against a simulated hammer over a pty: no hardware needed.
+    Demo(demo::DemoArgs),
 }
 
 impl Cli {
@@ -38,6 +44,8 @@ impl Cli {
             Command::Replay(args) => replay::run(args),
             Command::Import(args) => import::run(args),
             Command::Inspect(args) => inspect::run(args),
+            Command::Run(args) => run::run(args),
+            Command::Demo(args) => demo::run(args),
         }
     }
 }

@@ -10,6 +10,7 @@ use clap::Args;
 
 use super::read_text;
 use crate::config::{parse_machine, parse_process};
+use crate::daemon::{CONTROL_SOURCE, NEW_BILLET_STATE};
 use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline, PipelineConfig, PipelineEvent};
 use crate::record::{BlowBoundary, Payload, RecordReader, RecordWriter, Rotation};
@@ -164,24 +165,27 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             }
         }
         Input::Recording { mut reader, ahead } => {
-            let mut feed = |batch: &SampleBatch,
-                            writer: &mut Option<RecordWriter>,
-                            events: &mut Vec<PipelineEvent>|
-             -> anyhow::Result<()> {
-                if let Some(rec) = writer.as_mut() {
-                    rec.write_samples(batch)?;
-                }
-                feeder.push(batch, events);
-                Ok(())
-            };
+            let mut last_log_ns = 0;
             for batch in &ahead {
-                feed(batch, &mut writer, &mut events)?;
+                last_log_ns = batch.host_time_ns;
+                feed_batch(batch, &mut feeder, &mut writer, &mut events)?;
                 handle(&mut events, &mut writer, &mut w)?;
             }
             for m in reader.by_ref() {
-                if let Payload::Samples(batch) = m?.payload {
-                    feed(&batch, &mut writer, &mut events)?;
-                    handle(&mut events, &mut writer, &mut w)?;
+                match m?.payload {
+                    Payload::Samples(batch) => {
+                        last_log_ns = batch.host_time_ns;
+                        feed_batch(&batch, &mut feeder, &mut writer, &mut events)?;
+                        handle(&mut events, &mut writer, &mut w)?;
+                    }
+                    // A new billet went into the dies here during the live run.
+                    Payload::Status(st) if st.source == CONTROL_SOURCE && st.state == NEW_BILLET_STATE => {
+                        feeder.pipeline_mut().new_billet();
+                        if let Some(rec) = writer.as_mut() {
+                            rec.write_status(last_log_ns, &st)?;
+                        }
+                    }
+                    _ => {}
                 }
             }
             if !reader.report().complete {
@@ -206,6 +210,20 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         s.batches_dropped
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// Record a batch (with `--out`) and feed it to the pipeline.
+fn feed_batch(
+    batch: &SampleBatch,
+    feeder: &mut Feeder,
+    writer: &mut Option<RecordWriter>,
+    events: &mut Vec<PipelineEvent>,
+) -> anyhow::Result<()> {
+    if let Some(rec) = writer.as_mut() {
+        rec.write_samples(batch)?;
+    }
+    feeder.push(batch, events);
+    Ok(())
 }
 
 /// Classify the input and, for a recording, read its samples and stored process sheet.

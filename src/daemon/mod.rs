@@ -41,9 +41,29 @@ pub struct ServiceParts {
     pub process_text: Option<String>,
 }
 
+/// Commands to the running service (from the status endpoint or a front end).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Control {
+    /// A new billet is in the dies (an operator's button, a PLC input, the simulator).
+    NewBillet,
+}
+
+/// Source name of the control markers in a recording.
+pub const CONTROL_SOURCE: &str = "control";
+/// State of the marker that says a new billet was put in the dies here.
+pub const NEW_BILLET_STATE: &str = "new_billet";
+
+/// The status message that marks a new billet in a recording, in stream order, so that a
+/// replay starts the billet at the same point as the live run did.
+pub fn new_billet_marker() -> crate::record::Status {
+    crate::record::Status { source: CONTROL_SOURCE.into(), state: NEW_BILLET_STATE.into(), ..Default::default() }
+}
+
 /// Callbacks for a front end (the demo prints each blow).
 #[derive(Default)]
 pub struct Hooks {
+    /// Called once the status endpoint listens, with its address.
+    pub on_listening: Option<Box<dyn FnOnce(std::net::SocketAddr) + Send>>,
     pub on_blow: Option<Box<dyn FnMut(&BlowEstimate) + Send>>,
     pub on_rejected: Option<Box<dyn FnMut(&str) + Send>>,
 }
@@ -75,7 +95,9 @@ pub async fn serve(
     shutdown: watch::Sender<bool>,
     mut stop: watch::Receiver<bool>,
     mut hooks: Hooks,
+    control: Option<(mpsc::Sender<Control>, mpsc::Receiver<Control>)>,
 ) -> anyhow::Result<Summary> {
+    let (control_tx, mut control_rx) = control.unwrap_or_else(|| mpsc::channel(16));
     let cfg = &parts.config;
     std::fs::create_dir_all(&cfg.recording_dir)
         .with_context(|| format!("{}: cannot create the recording directory", cfg.recording_dir.display()))?;
@@ -95,7 +117,10 @@ pub async fn serve(
     let listener = tokio::net::TcpListener::bind(cfg.http_listen)
         .await
         .with_context(|| format!("http.listen {}: cannot listen", cfg.http_listen))?;
-    let http = tokio::spawn(status::serve_http(listener, status.clone()));
+    if let (Some(f), Ok(addr)) = (hooks.on_listening.take(), listener.local_addr()) {
+        f(addr);
+    }
+    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx));
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
 
     let mut feeder = Feeder::new(Pipeline::new(
@@ -141,6 +166,14 @@ pub async fn serve(
                     }
                 }
             }
+            Some(c) = control_rx.recv() => match c {
+                Control::NewBillet => {
+                    feeder.pipeline_mut().new_billet();
+                    let _ = writer.write_status(host_now_ns(), &new_billet_marker());
+                    status.lock().map(|mut s| s.billets += 1).ok();
+                    tracing::info!("new billet");
+                }
+            },
             _ = sigterm.recv() => { tracing::info!("SIGTERM: finishing the recording"); break; }
             _ = tokio::signal::ctrl_c() => { tracing::info!("interrupted: finishing the recording"); break; }
             _ = stop.changed() => { if *stop.borrow() { break; } }

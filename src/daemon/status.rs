@@ -8,9 +8,10 @@ use std::sync::{Arc, Mutex};
 
 use axum::Router;
 use axum::extract::State;
+use axum::http::StatusCode;
 use axum::http::header;
 use axum::response::IntoResponse;
-use axum::routing::get;
+use axum::routing::{get, post};
 use serde::Serialize;
 
 use crate::estimate::BlowEstimate;
@@ -38,6 +39,8 @@ pub struct SourceState {
 #[derive(Debug, Clone, Serialize)]
 pub struct StatusSnapshot {
     pub machine: String,
+    /// Billets started (by `POST /billet`), counting the first.
+    pub billets: u64,
     pub samples: u64,
     pub blows: u64,
     pub alerts: u64,
@@ -52,6 +55,7 @@ impl StatusSnapshot {
     pub fn new(machine: &str) -> Self {
         StatusSnapshot {
             machine: machine.to_string(),
+            billets: 1,
             samples: 0,
             blows: 0,
             alerts: 0,
@@ -146,9 +150,24 @@ async fn metrics_text(State(s): State<SharedStatus>) -> impl IntoResponse {
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], body)
 }
 
-/// Serve `/status` and `/metrics` on an already bound listener.
-pub async fn serve_http(listener: tokio::net::TcpListener, status: SharedStatus) {
-    let app = Router::new().route("/status", get(status_json)).route("/metrics", get(metrics_text)).with_state(status);
+async fn new_billet(State(tx): State<tokio::sync::mpsc::Sender<super::Control>>) -> impl IntoResponse {
+    match tx.try_send(super::Control::NewBillet) {
+        Ok(()) => (StatusCode::ACCEPTED, "new billet\n"),
+        Err(_) => (StatusCode::SERVICE_UNAVAILABLE, "the service is busy or stopping\n"),
+    }
+}
+
+/// Serve `GET /status`, `GET /metrics` and `POST /billet` on an already bound listener.
+pub async fn serve_http(
+    listener: tokio::net::TcpListener,
+    status: SharedStatus,
+    control: tokio::sync::mpsc::Sender<super::Control>,
+) {
+    let app = Router::new()
+        .route("/status", get(status_json))
+        .route("/metrics", get(metrics_text))
+        .with_state(status)
+        .merge(Router::new().route("/billet", post(new_billet)).with_state(control));
     if let Err(e) = axum::serve(listener, app).await {
         tracing::error!("status endpoint stopped: {e}");
     }

@@ -85,6 +85,11 @@ impl Estimator {
         &self.cfg
     }
 
+    /// A new billet from the process sheet: its height starts again from the sheet's.
+    pub fn new_billet(&mut self) {
+        self.h_m = self.process.as_ref().map(|p| p.billet.height_m);
+    }
+
     /// Estimate the next blow.
     pub fn estimate(&mut self, blow: &Blow) -> Result<BlowEstimate, EstimateError> {
         self.blows += 1;

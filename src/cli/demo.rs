@@ -1,0 +1,141 @@
+//! `forgemon demo`: the whole service against a simulated hammer, on a fresh machine with no
+//! hardware. A simulated MONTBARD LG1000 (hammer paper, Table 1) forges steel billets and
+//! streams its DAQ samples over an in-process pty pair in the serial framing of
+//! CONTRACTS.md §7; the real service reads the other end, prints one line per blow,
+//! records to `./forgemon-demo/`, and stops after the billets (or on Ctrl-C).
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::Args;
+use tokio::sync::{mpsc, watch};
+
+use crate::acquire::ChannelSpec;
+use crate::acquire::serial::driver::{SerialConfig, SerialFormat, run_on_stream, system_clock_ns};
+use crate::config::service::ServiceConfig;
+use crate::config::{parse_machine, parse_process};
+use crate::daemon::{Control, Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
+use crate::physics::effects::EffectSet;
+use crate::signal::sample::Role;
+use crate::simdevice::{BilletPlan, SerialDeviceSpec, SimMachine, drive_serial};
+use crate::synth::CaptureSpec;
+
+const MACHINE: &str = include_str!("../../config/hammer-lg1000.machine.toml");
+const STEEL: &str = include_str!("../../config/steel-16NiCrMo13.process.toml");
+
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// How many billets to forge.
+    #[arg(long, default_value_t = 2)]
+    pub billets: usize,
+    /// Seconds between blows.
+    #[arg(long, default_value_t = 1.5)]
+    pub interval: f64,
+    /// Where to record.
+    #[arg(long, default_value = "forgemon-demo")]
+    pub dir: PathBuf,
+    /// Run as fast as possible instead of in real time.
+    #[arg(long)]
+    pub fast: bool,
+}
+
+/// The DAQ's channels: 1 N, 1 µm and 1 mm/s² per count.
+pub fn demo_channels() -> Vec<ChannelSpec> {
+    vec![
+        ChannelSpec { role: Role::Load, gain: 1.0, offset: 0.0 },
+        ChannelSpec { role: Role::Disp, gain: 1e-6, offset: 0.0 },
+        ChannelSpec { role: Role::Acc, gain: 1e-3, offset: 0.0 },
+    ]
+}
+
+pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
+    if !(args.interval.is_finite() && args.interval >= 0.2) {
+        anyhow::bail!("--interval must be at least 0.2 s (a blow and its capture take 0.05 s)");
+    }
+    let machine = parse_machine("hammer-lg1000.machine.toml", MACHINE)?.machine;
+    let steel = parse_process("steel-16NiCrMo13.process.toml", STEEL)?;
+    let plan = BilletPlan { process: steel, v0s_mps: vec![3.9, 5.3, 5.3, 5.3, 5.3, 5.3, 5.3, 5.3] };
+    let sim = SimMachine::new(
+        machine,
+        EffectSet::NONE,
+        vec![plan; args.billets.max(1)],
+        CaptureSpec::hammer(7),
+        args.interval,
+    );
+    let config = ServiceConfig {
+        machine_path: PathBuf::from("hammer-lg1000.machine.toml"),
+        process_path: None,
+        recording_dir: args.dir.clone(),
+        rotate_bytes: crate::config::service::DEFAULT_ROTATE_BYTES,
+        rotate_seconds: crate::config::service::DEFAULT_ROTATE_SECONDS,
+        http_listen: "127.0.0.1:0".parse().expect("a valid address"),
+        alerts: crate::alert::AlertConfig::default(),
+        webhook: None,
+        plc_coil: None,
+        sources: Vec::new(),
+    };
+    // The simulated machine signals each new billet (as a PLC would), so the service tracks
+    // the billet's height and splits plastic from friction work.
+    let parts = ServiceParts {
+        config,
+        config_path: args.dir.join("demo.toml"),
+        machine,
+        machine_text: MACHINE.to_string(),
+        process: Some(parse_process("steel-16NiCrMo13.process.toml", STEEL)?),
+        process_text: Some(STEEL.to_string()),
+    };
+    super::run::init_logging_quiet();
+    let rt = tokio::runtime::Runtime::new()?;
+    let blows_per_billet = 8;
+    rt.block_on(async move {
+        let (master, slave) = tokio_serial::SerialStream::pair().context("cannot open a pty pair")?;
+        let (tx, rx) = mpsc::channel(SOURCE_CHANNEL_CAPACITY);
+        let (shutdown_tx, shutdown_rx) = watch::channel(false);
+        let (_stop_tx, stop_rx) = watch::channel(false);
+        let spec = SerialDeviceSpec { channels: demo_channels(), frame_samples: 1000, realtime: !args.fast, faults: Default::default() };
+        let device_stop = shutdown_rx.clone();
+        let (control_tx, control_rx) = mpsc::channel(16);
+        let billet_tx = control_tx.clone();
+        let device = tokio::spawn(async move {
+            drive_serial(sim, &spec, master, device_stop, move |_| {
+                let _ = billet_tx.try_send(Control::NewBillet);
+            })
+            .await
+        });
+        let cfg = SerialConfig::new("daq", "pty", 0, SerialFormat::Binary, demo_channels());
+        tokio::spawn(run_on_stream(cfg, slave, system_clock_ns, tx, shutdown_rx));
+        let dir = args.dir.clone();
+        let hooks = Hooks {
+            on_listening: Some(Box::new(move |addr| {
+                println!("forgemon demo: a simulated MONTBARD LG1000 drop hammer (paper Table 1) forges {} steel billets, 60 x 112 mm,", args.billets.max(1));
+                println!("  streaming 3 channels at 100 kHz over a pty; recording to {}/; status on http://{addr}/status", dir.display());
+                println!("blow  billet  impact m/s  plastic J  efficiency                    class");
+            })),
+            on_blow: Some(Box::new(move |e| {
+                let bar_len = (e.efficiency.clamp(0.0, 1.0) * 24.0).round() as usize;
+                let bar: String = "#".repeat(bar_len) + &".".repeat(24 - bar_len);
+                let billet = (e.blow as usize - 1) / blows_per_billet + 1;
+                println!("{:>4}  {:>6}  {:>10.2}  {:>9.0}  [{bar}] {:.2}  {}", e.blow, billet, e.v_impact_mps, e.plastic_j, e.efficiency, e.class.as_str());
+                if let Some(a) = &e.alert {
+                    println!("      ALERT {}: {}", a.kind.as_str(), a.reason);
+                }
+                let _ = std::io::stdout().flush();
+            })),
+            on_rejected: Some(Box::new(|m| println!("      (not estimated: {m})"))),
+        };
+        let summary = serve(parts, rx, shutdown_tx, stop_rx, hooks, Some((control_tx, control_rx))).await?;
+        let stats = device.await.context("the simulated device task")??;
+        println!(
+            "forgemon demo: {} blows, {} alerts, {} samples ({} frames from the device); recorded {}",
+            summary.blows,
+            summary.alerts,
+            summary.samples,
+            stats.frames,
+            summary.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
+        );
+        Ok::<_, anyhow::Error>(())
+    })?;
+    Ok(ExitCode::SUCCESS)
+}

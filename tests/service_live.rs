@@ -1,0 +1,49 @@
+//! The service end to end (issue #4): the demo (a simulated hammer streaming the serial
+//! framing over a pty into the real service) records its live results, and replaying that
+//! recording gives the identical per-blow JSON; every blow of the simulated session is found.
+
+use std::process::Command;
+
+use forgemon::record::{Payload, read_recording};
+
+const HAMMER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/hammer-lg1000.machine.toml");
+
+#[test]
+fn live_equals_replay_over_a_pty() {
+    let dir = std::env::temp_dir().join(format!("forgemon-live-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = Command::new(env!("CARGO_BIN_EXE_forgemon"))
+        .args(["demo", "--fast", "--billets", "2", "--interval", "0.3", "--dir", dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "demo failed: {stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let file = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .expect("a finished recording");
+    // The live results, as the service recorded them.
+    let rec = read_recording(&file).unwrap();
+    assert!(rec.report.complete);
+    let live: Vec<String> = rec
+        .messages
+        .iter()
+        .filter_map(|m| match &m.payload {
+            Payload::Result(r) => Some(serde_json::to_string(r).unwrap()),
+            _ => None,
+        })
+        .collect();
+    // Two billets of eight blows (the demo's plan): every blow found, none extra.
+    assert_eq!(live.len(), 16, "{stdout}");
+    // Both billets end in hard blows, and each raises the elastic-blow alert once.
+    assert_eq!(rec.messages.iter().filter(|m| matches!(m.payload, Payload::Alert(_))).count(), 2);
+    let replay = Command::new(env!("CARGO_BIN_EXE_forgemon"))
+        .args(["replay", file.to_str().unwrap(), "--machine", HAMMER, "--json"])
+        .output()
+        .unwrap();
+    assert!(replay.status.success(), "{}", String::from_utf8_lossy(&replay.stderr));
+    let replayed: Vec<String> = String::from_utf8(replay.stdout).unwrap().lines().map(String::from).collect();
+    assert_eq!(replayed, live, "replaying the live recording gives the live results");
+}
