@@ -2,6 +2,12 @@
 //! config, a sans-IO [`CanDecoder`] fed timestamped frames, `candump -L` logs as a source
 //! (and written by the simulated device), and a live SocketCAN driver.
 //!
+//! Files: `signal` (bit layouts, the mapping), `dbc` (a mapping from a DBC file),
+//! `config` (the `[[sources]]` table of kind `can`), `decoder` (frames to batches and
+//! gaps), `candump` (the log format, read and written), `device` (the simulated DAQ's
+//! encoder), `live` (the SocketCAN driver [`run`]) and `log_source` (a log replayed as a
+//! source, [`run_log`]).
+//!
 //! # The frame convention of forgemon's simulated DAQ
 //!
 //! One classic CAN data frame per sample, standard identifier `0x120` ("ForgeSample"),
@@ -35,17 +41,21 @@
 //! past it (see [`candump`]).
 
 pub mod candump;
+pub mod config;
 pub mod dbc;
 pub mod decoder;
 pub mod device;
 pub mod live;
+pub mod log_source;
 pub mod signal;
 
-pub use candump::{CandumpReader, LogFrame, LoggedFrame, read_candump, write_candump_line};
+pub use candump::{BadLines, CandumpReader, LogFrame, LoggedFrame, read_candump, write_candump_line};
+pub use config::{CanInput, CanSignals, CanSourceSpec, parse_can_source};
 pub use dbc::{DbcNames, mapping_from_dbc};
 pub use decoder::{CanDecoder, CanStats, CanTiming};
 pub use device::CanDevice;
 pub use live::{CanSourceConfig, run};
+pub use log_source::run_log;
 pub use signal::{ByteOrder, CanMapping, CanSignalSpec, FrameId, SignalLayout};
 
 use crate::signal::sample::Role;
