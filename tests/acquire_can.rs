@@ -298,12 +298,18 @@ async fn live_socketcan_reads_frames_or_says_it_was_skipped() {
         mapping: forgemon_mapping(),
         timing: CanTiming::new(SAMPLE_RATE_HZ, 0.01, true),
     };
-    match socketcan::CanSocket::open(&iface) {
+    // Interface index 0 binds to every CAN interface: this fails only when the kernel
+    // cannot create a CAN socket at all. (Opening by name looks the name up first, so a
+    // missing vcan0 would hide a missing AF_CAN.)
+    let probe = socketcan::CanSocket::open_iface(0).and_then(|_| socketcan::CanSocket::open(&iface));
+    match probe {
         Err(e) => {
             let why = if e.raw_os_error() == Some(EAFNOSUPPORT) {
                 "no AF_CAN on this kernel".to_string()
             } else {
-                format!("cannot open {iface}: {e}")
+                format!(
+                    "AF_CAN is there but {iface} cannot be opened ({e}); `ip link add dev {iface} type vcan` would enable it"
+                )
             };
             eprintln!("SKIPPED: live SocketCAN test: {why}");
             // What the driver does meanwhile: it reports the failure and keeps retrying
