@@ -78,6 +78,10 @@ struct Service {
 }
 
 fn start_service(name: &str, tty: &str, webhook_port: u16) -> Service {
+    start_service_with(name, tty, webhook_port, "")
+}
+
+fn start_service_with(name: &str, tty: &str, webhook_port: u16, extra_alerts: &str) -> Service {
     let dir = std::env::temp_dir().join(format!("forgemon-run-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -91,6 +95,7 @@ dir = "rec"
 listen = "127.0.0.1:{http}"
 [alerts]
 webhook = "http://127.0.0.1:{webhook_port}/alerts"
+{extra_alerts}
 [[sources]]
 name = "daq"
 kind = "serial"
@@ -277,4 +282,31 @@ fn kill_9_loses_at_most_the_last_second() {
     let lost = sent_samples - samples as f64;
     assert!(lost <= 1.2 * RATE_HZ, "sent ~{sent_samples:.0}, recovered {samples}: lost {lost:.0} samples");
     assert!(samples > 0);
+}
+
+#[test]
+fn alerts_set_the_plc_coil() {
+    use forgemon::acquire::modbus::server::{BankService, TcpServer, lock, shared_bank};
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let bank = shared_bank();
+    let service = BankService { bank: bank.clone(), faults: Default::default(), unit: None };
+    let server = rt.block_on(TcpServer::start("127.0.0.1:0".parse().unwrap(), service)).unwrap();
+    let plc = format!("[alerts.plc_coil]\naddress = \"{}\"\nunit = 1\ncoil = 12", server.addr());
+    let (master, slave, tty) = pty();
+    let (hook_port, _hooks) = webhook_server();
+    let mut svc = start_service_with("coil", &tty, hook_port, &plc);
+    assert!(!lock(&bank).coils[12]);
+    let (_stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    drive(master, 1, 0.3, Arc::new(AtomicU64::new(0)), stop_rx);
+    // The hard blows of the billet raise the alert; the coil is set on the PLC.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while !lock(&bank).coils[12] {
+        assert!(Instant::now() < deadline, "the coil was not set: {}", status(svc.http));
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(!lock(&bank).coils[11] && !lock(&bank).coils[13], "only coil 12");
+    svc.child.kill().unwrap();
+    svc.child.wait().unwrap();
+    drop(slave);
+    drop(server);
 }
