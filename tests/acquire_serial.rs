@@ -154,9 +154,9 @@ async fn wait_for_samples(rx: &mut watch::Receiver<u64>, n: u64) {
 }
 
 /// Feed the events through the live pipeline (a gap ends the stream, as in the service).
-fn blows_found(events: &[SourceEvent]) -> Vec<Box<forgemon::estimate::BlowEstimate>> {
+fn blows_found(events: &[SourceEvent]) -> Vec<forgemon::estimate::BlowEstimate> {
     let (machine, process) = machine_and_process();
-    let mut p = Pipeline::new(machine.clone(), Some(process), PipelineConfig::for_machine(&machine));
+    let mut p = Pipeline::new(machine, Some(process), PipelineConfig::for_machine(&machine));
     let mut out = Vec::new();
     for ev in events {
         match ev {
@@ -168,7 +168,7 @@ fn blows_found(events: &[SourceEvent]) -> Vec<Box<forgemon::estimate::BlowEstima
     p.end_of_stream(&mut out);
     out.into_iter()
         .map(|e| match e {
-            PipelineEvent::Blow { estimate, .. } => estimate,
+            PipelineEvent::Blow { estimate, .. } => *estimate,
             PipelineEvent::Rejected { cut, error } => panic!("blow at {cut:?} rejected: {error}"),
         })
         .collect()

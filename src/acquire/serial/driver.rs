@@ -388,3 +388,113 @@ pub async fn run(cfg: SerialConfig, tx: mpsc::Sender<SourceEvent>, shutdown: wat
     let port_cfg = cfg.clone();
     run_with(cfg, system_clock_ns, move || std::future::ready(open_port(&port_cfg)), tx, shutdown).await
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::acquire::serial::frame::{Frame, encode_frame};
+    use crate::signal::sample::Role;
+
+    fn clock() -> i64 {
+        123
+    }
+
+    fn config() -> SerialConfig {
+        let ch = ChannelSpec { role: Role::Load, gain: 1.0, offset: 0.0 };
+        SerialConfig::new("s", "mem", 115_200, SerialFormat::Binary, vec![ch])
+    }
+
+    fn wire(seqs: impl IntoIterator<Item = u32>) -> Vec<u8> {
+        seqs.into_iter()
+            .flat_map(|s| {
+                encode_frame(&Frame {
+                    channel_count: 1,
+                    sample_count: 10,
+                    sequence: s,
+                    device_time_ns: s as u64 * 1000,
+                    sample_period_ns: 100,
+                    counts: vec![s as i32; 10],
+                })
+            })
+            .collect()
+    }
+
+    #[tokio::test]
+    async fn a_full_channel_drops_and_counts_instead_of_waiting() {
+        let (tx, mut rx) = mpsc::channel(4);
+        let (_stop_tx, stop) = watch::channel(false);
+        let bytes = wire(0..100);
+        let (end, counters) = run_on_stream(config(), &bytes[..], clock, tx, stop).await;
+        assert!(matches!(end, StreamEnd::Eof));
+        assert_eq!(counters.frames, 100);
+        assert_eq!(counters.samples, 1000);
+        // 4 slots: the "connected" status and 3 batches got through; the rest was dropped.
+        assert_eq!(counters.drops, 100 + 1 - 3);
+        let mut got = Vec::new();
+        while let Ok(ev) = rx.try_recv() {
+            got.push(ev);
+        }
+        assert_eq!(got.len(), 4);
+        assert!(matches!(&got[0], SourceEvent::Status(s) if s.state == "connected"));
+        assert!(matches!(&got[1], SourceEvent::Batch(b) if b.host_time_ns == 123 && b.seq == 0));
+    }
+
+    #[tokio::test]
+    async fn end_of_stream_reopens_and_the_missing_frames_are_a_gap() {
+        let (tx, mut rx) = mpsc::channel(1000);
+        let (stop_tx, stop) = watch::channel(false);
+        let mut streams = vec![wire(0..5), wire(8..10)].into_iter();
+        let opened = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+        let opens = opened.clone();
+        let open = move || {
+            opens.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            let next = streams.next();
+            async move {
+                match next {
+                    Some(bytes) => Ok(std::io::Cursor::new(bytes)),
+                    None => Err(io::Error::new(io::ErrorKind::NotFound, "unplugged")),
+                }
+            }
+        };
+        let task = tokio::spawn(run_with(config(), clock, open, tx, stop));
+        // Two streams, then failed opens with backoff.
+        while opened.load(std::sync::atomic::Ordering::SeqCst) < 4 {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        stop_tx.send(true).unwrap();
+        let counters = task.await.unwrap();
+        let mut states = Vec::new();
+        let mut gaps = Vec::new();
+        while let Ok(ev) = rx.try_recv() {
+            match ev {
+                SourceEvent::Status(s) => states.push(s.state),
+                SourceEvent::Gap(g) => gaps.push(g),
+                SourceEvent::Batch(_) => {}
+            }
+        }
+        assert_eq!(counters.reconnects, 1);
+        assert_eq!((counters.frames, counters.samples, counters.gaps), (7, 70, 1));
+        assert_eq!(gaps.len(), 1);
+        assert_eq!(gaps[0].samples_lost, 30); // frames 5, 6, 7 × 10 samples
+        assert_eq!(&states[..4], &["connected", "reconnecting", "connected", "reconnecting"]);
+        assert_eq!(states.last().map(String::as_str), Some("stopped"));
+    }
+
+    #[tokio::test]
+    async fn ascii_through_the_driver_flushes_at_end_of_stream() {
+        let mut cfg = config();
+        cfg.format = SerialFormat::Ascii;
+        let (tx, mut rx) = mpsc::channel(100);
+        let (_stop_tx, stop) = watch::channel(false);
+        let text = b"0.000,1\n0.001,2\nnot a line\n0.002,3\n";
+        let (_, counters) = run_on_stream(cfg, &text[..], clock, tx, stop).await;
+        assert_eq!((counters.samples, counters.decode_errors, counters.frames), (3, 1, 1));
+        let mut values = Vec::new();
+        while let Ok(ev) = rx.try_recv() {
+            if let SourceEvent::Batch(b) = ev {
+                values.extend(b.values);
+            }
+        }
+        assert_eq!(values, vec![1.0, 2.0, 3.0]);
+    }
+}
