@@ -449,3 +449,37 @@ pub async fn run(cfg: ModbusConfig, tx: mpsc::Sender<SourceEvent>, mut shutdown:
     }
     d.status("stopped");
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn tokio_modbus_results_become_one_error_type() {
+        let limit = Duration::from_millis(20);
+        let ok = call(limit, async { Ok(Ok(vec![1u16])) }).await;
+        assert_eq!(ok.unwrap(), vec![1]);
+        let exc = call(limit, async { tokio_modbus::Result::<()>::Ok(Err(ExceptionCode::ServerDeviceBusy)) }).await;
+        assert!(matches!(exc, Err(ModbusError::Exception { code: ExceptionCode::ServerDeviceBusy })));
+        assert!(!exc.unwrap_err().ends_connection(), "an exception is a value; the link is fine");
+        let slow = call(limit, std::future::pending::<tokio_modbus::Result<()>>()).await;
+        assert!(matches!(slow, Err(ModbusError::Timeout { timeout_ms: 20 })));
+        let io = call(limit, async {
+            tokio_modbus::Result::<()>::Err(io::Error::from(io::ErrorKind::ConnectionReset).into())
+        })
+        .await;
+        assert!(io.unwrap_err().ends_connection());
+    }
+
+    #[test]
+    fn counts_read_back_from_the_status_detail() {
+        let mut extra = Extra { exceptions: 3, timeouts: 12, ..Extra::default() };
+        extra.named.insert("setpoint_J".into(), 5200.0);
+        let d = extra.detail(&Transport::Rtu { path: "/dev/ttyS0".into(), baud: 19200 });
+        assert_eq!(d, "exceptions=3 timeouts=12 setpoint_J=5200 rtu=/dev/ttyS0@19200");
+        assert_eq!(detail_count(&d, "exceptions"), Some(3));
+        assert_eq!(detail_count(&d, "timeouts"), Some(12));
+        assert_eq!(detail_count(&d, "time"), None);
+        assert_eq!(detail_count("", "exceptions"), None);
+    }
+}
