@@ -12,6 +12,7 @@ pub mod inspect;
 pub mod replay;
 pub mod run;
 pub mod simulate;
+pub mod simulate_device;
 
 /// forgemon: blow-by-blow monitoring of gravity drop hammers and screw presses.
 #[derive(Debug, Parser)]
@@ -35,6 +36,8 @@ pub enum Command {
     Run(run::RunArgs),
     /// The service against a simulated hammer over a pty: no hardware needed.
     Demo(demo::DemoArgs),
+    /// A simulated hammer or press driving a real transport (a pty), like a DAQ.
+    SimulateDevice(simulate_device::SimulateDeviceArgs),
 }
 
 impl Cli {
@@ -46,6 +49,7 @@ impl Cli {
             Command::Inspect(args) => inspect::run(args),
             Command::Run(args) => run::run(args),
             Command::Demo(args) => demo::run(args),
+            Command::SimulateDevice(args) => simulate_device::run(args),
         }
     }
 }

@@ -282,6 +282,17 @@ gain = 0.01
     }
 
     #[test]
+    fn the_example_service_configs_parse_and_name_existing_files() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+        for name in ["hammer-serial.service.toml"] {
+            let text = std::fs::read_to_string(dir.join(name)).unwrap();
+            let c = parse_service(name, &dir, &text).unwrap();
+            assert!(c.machine_path.exists(), "{name}: {}", c.machine_path.display());
+            assert!(c.process_path.as_ref().is_none_or(|p| p.exists()), "{name}");
+        }
+    }
+
+    #[test]
     fn errors_name_the_key() {
         let e = |text: &str| parse_service("s.toml", Path::new("/"), text).unwrap_err().to_string();
         assert_eq!(e(&GOOD.replace("machine = \"hammer.machine.toml\"\n", "")), "s.toml: missing key 'machine'");
