@@ -86,7 +86,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         process: Some(parse_process("steel-16NiCrMo13.process.toml", STEEL)?),
         process_text: Some(STEEL.to_string()),
     };
-    super::run::init_logging_quiet();
+    super::run::init_logging("error");
     let rt = tokio::runtime::Runtime::new()?;
     let blows_per_billet = 8;
     rt.block_on(async move {

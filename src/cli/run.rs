@@ -65,7 +65,7 @@ pub fn spawn_source(spec: &SourceSpec, tx: mpsc::Sender<crate::acquire::SourceEv
 
 pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     let parts = load_parts(&args.config)?;
-    init_logging();
+    init_logging("info");
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async move {
         let (tx, rx) = mpsc::channel(SOURCE_CHANNEL_CAPACITY);
@@ -82,17 +82,12 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Logs to stderr (journald captures it under systemd); `RUST_LOG` filters.
-pub fn init_logging() {
+/// Logs to stderr (journald captures it under systemd), coloured only on a terminal;
+/// `RUST_LOG` overrides `default_level` ("info" for the service, "error" for the demo,
+/// which prints its own lines).
+pub fn init_logging(default_level: &str) {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_level));
     let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
     let _ = tracing_subscriber::fmt().with_env_filter(filter).with_ansi(ansi).with_writer(std::io::stderr).try_init();
-}
-
-/// Errors only: the demo prints its own lines (alerts included).
-pub fn init_logging_quiet() {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("error"));
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
 }
