@@ -11,7 +11,7 @@
 //!          | i32 counts[N][C] (interleaved), all little-endian
 //! ```
 
-use crc::{CRC_32_ISCSI, Crc};
+use crc::{CRC_32_ISCSI, Crc, Table};
 
 use crate::acquire::ChannelSpec;
 use crate::record::Gap;
@@ -33,8 +33,8 @@ pub const MAX_PAYLOAD_LEN: usize = HEADER_LEN + 4 * MAX_CHANNELS as usize * MAX_
 /// The longest COBS-encoded frame (without its delimiter): anything longer is garbage.
 pub const MAX_ENCODED_LEN: usize = cobs::max_encoding_length(MAX_PAYLOAD_LEN + CRC_LEN);
 
-/// CRC-32C (Castagnoli), the iSCSI polynomial.
-pub const CRC32C: Crc<u32> = Crc::<u32>::new(&CRC_32_ISCSI);
+/// CRC-32C (Castagnoli), the iSCSI polynomial; slice-by-16 tables (16 KiB, built at compile time).
+pub static CRC32C: Crc<u32, Table<16>> = Crc::<u32, Table<16>>::new(&CRC_32_ISCSI);
 
 /// How many bytes of a failed segment the decoder searches for a frame that follows
 /// garbage (a frame whose start was glued to line noise). Bounded so a long burst of
