@@ -480,3 +480,29 @@ async fn the_coil_write_reaches_the_server_coil_bank() {
     assert!(write_coil(addr, 1, 12, true, limit).await.is_err());
     assert!(t.elapsed() < limit * 2);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_ring_unlike_the_config_is_counted_not_fatal() {
+    // The device has 3 channels; the config names 2.
+    let bank = shared_bank();
+    let ring = RingWriter::new(0, RING, 3, 2, 20_000).unwrap();
+    ring.write_header(&mut lock(&bank).holding);
+    let service = BankService { bank, faults: Arc::new(Faults::default()), unit: None };
+    let server = TcpServer::start("127.0.0.1:0".parse().unwrap(), service).await.unwrap();
+    let mut cfg = block_config(&server);
+    cfg.mode = Mode::Block { base: 0, channels: channels()[..2].to_vec() };
+    let (tx, rx) = mpsc::channel(4096);
+    let (stop, shutdown) = watch::channel(false);
+    let (log, collector) = collect(rx);
+    let driver = tokio::spawn(run(cfg, tx, shutdown));
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert!(!driver.is_finished());
+    stop.send(true).unwrap();
+    driver.await.unwrap();
+    collector.await.unwrap();
+    assert!(batches(&log).is_empty());
+    let last = statuses(&log).last().unwrap().1.clone();
+    assert!(last.decode_errors >= 10, "every poll counted: {last:?}");
+    assert_eq!(last.reconnects, 0, "a bad header is not a lost link");
+    assert!(last.detail.contains("3_channels"), "{}", last.detail);
+}

@@ -207,12 +207,16 @@ impl<'a> Driver<'a> {
         self.send(SourceEvent::Status(s))
     }
 
-    /// Count an error that did not end the connection.
+    /// Count an error: exceptions and timeouts in the detail, replies that do not decode
+    /// in `decode_errors`; a lost link shows in `reconnects`.
     fn count(&mut self, e: &ModbusError) {
         match e {
             ModbusError::Exception { .. } => self.extra.exceptions += 1,
             ModbusError::Timeout { .. } => self.extra.timeouts += 1,
-            _ => self.counters.decode_errors += 1,
+            ModbusError::Io(_) => {}
+            ModbusError::Protocol(_) | ModbusError::Decode(_) | ModbusError::Block(_) => {
+                self.counters.decode_errors += 1
+            }
         }
         self.extra.last_error = e.to_string().replace(' ', "_");
     }
