@@ -331,7 +331,12 @@ where
         if backoff_ms > 0 {
             tokio::select! {
                 _ = tokio::time::sleep(Duration::from_millis(backoff_ms)) => {}
-                _ = shutdown.changed() => continue,
+                changed = shutdown.changed() => {
+                    if changed.is_err() {
+                        break; // the shutdown sender is gone: nobody can stop us any more
+                    }
+                    continue;
+                }
             }
         }
         let reader = match open().await {
