@@ -25,8 +25,8 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-/// 50 kHz: 3 channels of i32 are 300 000 registers/s, 2 500 reads of 120 registers/s
-/// over loopback. The estimator was tuned at 100 kHz and reads the efficiency low at lower
+/// 50 kHz device time, 3 channels of i32 (6 registers a sample, 20 samples a read). The
+/// estimator was tuned at 100 kHz and reads the efficiency low at lower
 /// rates, because the 2 kHz lower-tool mode (DESIGN.md §2.1) gets fewer samples per
 /// period: measured on these blows fed directly, 100 kHz -0.006, 50 kHz -0.02, 10 kHz
 /// -0.16. So the tolerance against the truth is 0.05 here (the replay tests' 0.03 at
@@ -34,9 +34,15 @@ use tokio::time::Instant;
 /// to the pipeline directly.
 const RATE_HZ: f64 = 50e3;
 const EFFICIENCY_TOL: f64 = 0.05;
+/// The simulated DAQ writes its 50 kHz samples (device time) at 10 000 samples per wall
+/// second: 500 reads/s, which debug builds of client and server keep up with on a loaded
+/// 2-core machine (at full pace, several tests at once fell behind the ring there). The
+/// pace changes no sample and no device time; what a link sustains is a throughput
+/// question for the benchmarks.
+const PACE_HZ: f64 = 10e3;
 /// Counts of the simulated DAQ: 10 N, 1 µm, 1 mm/s² per count.
 const GAINS: [(Role, f64); 3] = [(Role::Load, 10.0), (Role::Disp, 1e-6), (Role::Acc, 1e-3)];
-/// 8192 samples: 0.16 s at 50 kHz.
+/// 8192 samples: 0.8 s of wall time at the pace.
 const RING: u16 = 8192;
 
 fn machine_and_process() -> (Machine, Process) {
@@ -48,7 +54,7 @@ fn machine_and_process() -> (Machine, Process) {
     (parse_machine(m, &mtext).unwrap().machine, parse_process(p, &ptext).unwrap())
 }
 
-/// A continuous stream: `idle_s[i]` of machine at rest before blow i, and 0.3 s after the
+/// A continuous stream: `idle_s[i]` of machine at rest before blow i, and 0.1 s after the
 /// last. Returns the rows (one clock) and the truth.
 fn hammer_stream(v0s: &[f64], idle_s: &[f64]) -> (Vec<CaptureRow>, Vec<SynthBlow>) {
     let (machine, process) = machine_and_process();
@@ -61,7 +67,7 @@ fn hammer_stream(v0s: &[f64], idle_s: &[f64]) -> (Vec<CaptureRow>, Vec<SynthBlow
         rows.extend_from_slice(&b.rows);
     }
     let last = rows.last().map_or(0.0, |r| r.disp_m);
-    rows.extend(idle_rows((0.3 * RATE_HZ) as usize, 0.0, &spec, last, 999));
+    rows.extend(idle_rows((0.1 * RATE_HZ) as usize, 0.0, &spec, last, 999));
     let t0 = rows[0].t_s;
     for (k, r) in rows.iter_mut().enumerate() {
         r.t_s = t0 + k as f64 / RATE_HZ;
@@ -78,17 +84,18 @@ fn channels() -> Vec<ChannelSpec> {
     GAINS.iter().map(|&(role, gain)| ChannelSpec { role, gain, offset: 0.0 }).collect()
 }
 
-/// The simulated DAQ: writes `rows` into the block-mode ring in real time, 5 ms at a time.
-fn produce(bank: SharedBank, rows: Vec<CaptureRow>) -> JoinHandle<()> {
+/// The simulated DAQ: writes `rows` into a block-mode ring of `ring_len` slots at
+/// [`PACE_HZ`], 5 ms at a time.
+fn produce(bank: SharedBank, rows: Vec<CaptureRow>, ring_len: u16) -> JoinHandle<()> {
     tokio::spawn(async move {
-        let mut ring = RingWriter::new(0, RING, 3, 2, (1e9 / RATE_HZ) as u32).unwrap();
+        let mut ring = RingWriter::new(0, ring_len, 3, 2, (1e9 / RATE_HZ) as u32).unwrap();
         ring.write_header(&mut lock(&bank).holding);
         let start = Instant::now();
         let mut done = 0;
         let mut counts = Vec::new();
         while done < rows.len() {
             tokio::time::sleep(Duration::from_millis(5)).await;
-            let due = ((start.elapsed().as_secs_f64() * RATE_HZ) as usize).min(rows.len());
+            let due = ((start.elapsed().as_secs_f64() * PACE_HZ) as usize).min(rows.len());
             counts.clear();
             for r in &rows[done..due] {
                 for (v, (_, gain)) in [r.load_n, r.disp_m, r.acc_mps2].iter().zip(GAINS) {
@@ -205,7 +212,7 @@ fn block_config(server: &TcpServer) -> ModbusConfig {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn block_mode_over_tcp_finds_every_blow_of_a_simulated_hammer() {
-    let (rows, truth) = hammer_stream(&[3.9, 5.0, 5.0], &[0.4, 0.4, 0.4]);
+    let (rows, truth) = hammer_stream(&[3.9, 5.0, 5.0], &[0.15, 0.15, 0.15]);
     let bank = shared_bank();
     let service = BankService { bank: bank.clone(), faults: Arc::new(Faults::default()), unit: None };
     let server = TcpServer::start("127.0.0.1:0".parse().unwrap(), service).await.unwrap();
@@ -213,7 +220,7 @@ async fn block_mode_over_tcp_finds_every_blow_of_a_simulated_hammer() {
     let (stop, shutdown) = watch::channel(false);
     let (log, collector) = collect(rx);
     let driver = tokio::spawn(run(block_config(&server), tx, shutdown));
-    produce(bank, rows.clone()).await.unwrap();
+    produce(bank, rows.clone(), RING).await.unwrap();
     tokio::time::sleep(Duration::from_millis(200)).await;
     stop.send(true).unwrap();
     driver.await.unwrap();
@@ -222,7 +229,7 @@ async fn block_mode_over_tcp_finds_every_blow_of_a_simulated_hammer() {
     let samples: usize =
         log.lock().unwrap().iter().map(|(_, e)| if let SourceEvent::Batch(b) = e { b.len() } else { 0 }).sum();
     // The first read only sets the starting point: at most the first poll's worth is missed.
-    assert!(samples + (0.1 * RATE_HZ) as usize >= rows.len() && samples <= rows.len(), "{samples} of {}", rows.len());
+    assert!(samples + (0.05 * PACE_HZ) as usize >= rows.len() && samples <= rows.len(), "{samples} of {}", rows.len());
     let gaps = log.lock().unwrap().iter().filter(|(_, e)| matches!(e, SourceEvent::Gap(_))).count();
     assert_eq!(gaps, 0, "no samples lost on a healthy link");
     let st = statuses(&log);
@@ -239,10 +246,10 @@ async fn block_mode_over_tcp_finds_every_blow_of_a_simulated_hammer() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn block_mode_over_rtu_on_a_pty_finds_every_blow() {
     // A pty ignores the baud rate: a real line at 921 600 baud (11 bits a byte) carries
-    // about 35 000 registers/s, a 5 kHz ring of 3 i32 channels, not this 50 kHz one. The test
-    // checks the protocol path (RTU framing, CRC, slave address) end to end.
+    // about 35 000 registers/s, a 5 kHz ring of 3 i32 channels; this test moves 60 000.
+    // It checks the protocol path (RTU framing, CRC, slave address) end to end.
     use tokio_serial::SerialPort;
-    let (rows, truth) = hammer_stream(&[3.9, 5.0, 5.0], &[0.4, 0.4, 0.4]);
+    let (rows, truth) = hammer_stream(&[3.9, 5.0, 5.0], &[0.15, 0.15, 0.15]);
     let (master, slave) = tokio_serial::SerialStream::pair().expect("a pty pair");
     let path = slave.name().expect("the pty has a path");
     let bank = shared_bank();
@@ -261,7 +268,7 @@ async fn block_mode_over_rtu_on_a_pty_finds_every_blow() {
     let (stop, shutdown) = watch::channel(false);
     let (log, collector) = collect(rx);
     let driver = tokio::spawn(run(cfg, tx, shutdown));
-    produce(bank, rows.clone()).await.unwrap();
+    produce(bank, rows.clone(), RING).await.unwrap();
     tokio::time::sleep(Duration::from_millis(200)).await;
     stop.send(true).unwrap();
     driver.await.unwrap();
@@ -270,7 +277,7 @@ async fn block_mode_over_rtu_on_a_pty_finds_every_blow() {
     drop(slave);
 
     let gaps = log.lock().unwrap().iter().filter(|(_, e)| matches!(e, SourceEvent::Gap(_))).count();
-    assert_eq!(gaps, 0, "the RTU link keeps up with 50 kHz over a pty");
+    assert_eq!(gaps, 0, "the RTU link keeps up with the pace over a pty");
     let samples: usize =
         log.lock().unwrap().iter().map(|(_, e)| if let SourceEvent::Batch(b) = e { b.len() } else { 0 }).sum();
     let found = pipeline_blows(&log);
@@ -280,10 +287,11 @@ async fn block_mode_over_rtu_on_a_pty_finds_every_blow() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn server_stopped_and_restarted_is_reconnected_with_a_gap_and_the_driver_keeps_going() {
-    // A long rest after blow 1: the server goes away for 0.8 s in it, longer than the
-    // ring holds (8192 samples = 0.16 s), so samples are really lost.
-    let (rows, truth) = hammer_stream(&[3.9, 5.0], &[0.4, 2.5]);
-    let blow1_end_s = (0.4 * RATE_HZ + truth[0].rows.len() as f64) / RATE_HZ;
+    // A long rest after blow 1 (0.6 s device time, 3 s of wall time at the pace): the
+    // server goes away for 1 s in it, longer than the ring of 2048 samples holds (0.2 s),
+    // so samples are really lost.
+    let (rows, truth) = hammer_stream(&[3.9, 5.0], &[0.15, 0.6]);
+    let blow1_end_wall_s = (0.15 * RATE_HZ + truth[0].rows.len() as f64) / PACE_HZ;
     let bank = shared_bank();
     let service = BankService { bank: bank.clone(), faults: Arc::new(Faults::default()), unit: None };
     let mut server = TcpServer::start("127.0.0.1:0".parse().unwrap(), service).await.unwrap();
@@ -291,10 +299,10 @@ async fn server_stopped_and_restarted_is_reconnected_with_a_gap_and_the_driver_k
     let (stop, shutdown) = watch::channel(false);
     let (log, collector) = collect(rx);
     let driver = tokio::spawn(run(block_config(&server), tx, shutdown));
-    let producer = produce(bank, rows);
-    tokio::time::sleep(Duration::from_secs_f64(blow1_end_s + 0.5)).await;
+    let producer = produce(bank, rows, 2048);
+    tokio::time::sleep(Duration::from_secs_f64(blow1_end_wall_s + 0.3)).await;
     server.stop();
-    tokio::time::sleep(Duration::from_millis(800)).await;
+    tokio::time::sleep(Duration::from_millis(1000)).await;
     assert!(!driver.is_finished(), "the driver never exits on a lost link");
     server.restart().await.unwrap();
     let restarted = Instant::now();
@@ -319,8 +327,8 @@ async fn server_stopped_and_restarted_is_reconnected_with_a_gap_and_the_driver_k
         .collect();
     assert_eq!(gaps.len(), 1, "{gaps:?}");
     assert_eq!(gaps[0].reason, "link_down");
-    // 0.8 s at 50 kHz (40 000 samples) less the readable ring (7168 samples) at least.
-    assert!(gaps[0].samples_lost > 30_000, "{gaps:?}");
+    // 1 s at the pace (10 000 samples) less the readable ring (1792 samples) at least.
+    assert!(gaps[0].samples_lost > 8_000, "{gaps:?}");
     assert_eq!(st.last().unwrap().1.gaps, 1);
     // The blows on either side of the outage are all found.
     assert_blows_match(&pipeline_blows(&log), &truth);
