@@ -21,17 +21,17 @@
 //! | `base+5` | C, channels per sample |
 //! | `base+6` | W, registers per value: 1 = i16 counts, 2 = i32 counts (high word first) |
 //! | `base+7` | reserved, 0 |
-//! | `base+8 ..` | the ring: sample with counter value `c` in slot `s = c mod N` (u32 `c`), at `base + 8 + s·C·W`, channels in order |
+//! | `base+8 ..` | the ring: the sample of counter value `c` in slot `c mod N`, at `base+8+slot·C·W` |
 //!
-//! The device writes a sample's slot before bumping the counter. The client reads the
-//! header, then the slots written since its last read (in reads of at most 125
-//! registers), and turns counts into physical values with each channel's `gain` and
-//! `offset`. Its first read only sets the starting point. The slot about to be
-//! overwritten may change while it is read, so only the newest `N − N/8` samples count as
-//! readable: a counter jump beyond that is a `Gap` (`ring_overflow`) of the samples
-//! skipped. A counter that goes backwards means the device restarted (`device_reset`).
-//! The sample index (the counter extended past its wrap) times the period is the device
-//! time.
+//! Channels follow each other within a slot. The device writes a sample's slot before
+//! bumping the counter. The client reads the header, then the slots written since its
+//! last read (in reads of at most 125 registers), and turns counts into physical values
+//! with each channel's `gain` and `offset`. Its first read only sets the starting point.
+//! The slot about to be overwritten may change while it is read, so only the newest
+//! `N − N/8` samples count as readable: a counter jump beyond that is a `Gap`
+//! (`ring_overflow`) of the samples skipped. A counter that goes backwards means the
+//! device restarted (`device_reset`). The sample index (the counter extended past its
+//! wrap) times the period is the device time.
 //!
 //! # Plain polling
 //!
@@ -39,6 +39,18 @@
 //! possible and sends a 1-sample batch of the map's roles (device time = host time).
 //! Named signals that are no sample role (a setpoint, a temperature) are reported in the
 //! status detail as `name=value`, because a `SampleBatch` carries roles only.
+//!
+//! # Faults
+//!
+//! - A Modbus exception is counted (`exceptions=` in the status detail) and the poll is
+//!   retried at the next tick; the connection stays.
+//! - A request that times out is counted (`timeouts=`) and the connection is reopened at
+//!   once: its reply may still come, and would be taken for the next request's.
+//! - A lost link (refused, reset) is reopened with `acquire::next_backoff_ms`; the first
+//!   good read after it sends a `Gap` with reason `link_down` and the samples lost (in
+//!   block mode 0 when the ring covered the outage; the outage is recorded anyway).
+//! - Replies that do not decode count in `decode_errors`. Status: `connected` on connect
+//!   and every second, `reconnecting` after each failure, `stopped` at shutdown.
 
 pub mod block;
 pub mod client;
