@@ -12,7 +12,8 @@ use tokio::io::{AsyncRead, AsyncReadExt};
 use tokio::sync::{mpsc, watch};
 
 use super::ascii::{AsciiEvent, DEFAULT_ASCII_BATCH_S, LineDecoder};
-use super::frame::{FrameDecoder, FrameTracker};
+use super::frame::FrameDecoder;
+use super::tracker::FrameTracker;
 use crate::acquire::{BACKOFF_START_MS, ChannelSpec, Counters, SourceEvent, next_backoff_ms, offer};
 
 /// Interval between periodic status reports, ms.

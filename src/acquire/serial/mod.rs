@@ -2,18 +2,20 @@
 //! framing and the ASCII line variant, each a sans-IO decoder, plus the tokio driver that
 //! opens the port, reconnects with backoff and reports status, gaps and counters.
 //!
-//! - `frame`: the binary frame codec, its decoder with resync, and the frame-to-samples
-//!   tracker that turns sequence jumps into gaps.
+//! - `frame`: the binary frame codec and its decoder with resync.
+//! - `tracker`: frames into samples; sequence jumps into gaps.
 //! - `ascii`: the `t_s,v0,v1,...` line decoder.
 //! - `driver`: the IO (tokio-serial, or any `AsyncRead` for tests and ptys).
 
 pub mod ascii;
 pub mod driver;
 pub mod frame;
+pub mod tracker;
 
 pub use ascii::{AsciiEvent, LineDecoder, LineStats};
 pub use driver::{
     HostClock, SerialConfig, SerialFormat, SerialSource, StreamEnd, open_port, run, run_on_stream, run_with,
     system_clock_ns,
 };
-pub use frame::{DecoderStats, Frame, FrameDecoder, FrameError, FrameTracker, TrackError, Tracked, encode_frame};
+pub use frame::{DecoderStats, Frame, FrameDecoder, FrameError, encode_frame};
+pub use tracker::{FrameTracker, TrackError, Tracked};
