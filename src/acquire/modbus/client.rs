@@ -23,6 +23,11 @@ use crate::signal::sample::{Role, SampleBatch};
 
 /// How often a connected driver reports its counters.
 pub const STATUS_INTERVAL: Duration = Duration::from_secs(1);
+/// Defaults for a config that names none: a request limit well above a loaded PLC's
+/// reply time, slow signals polled 10 times a second, a block ring drained every 10 ms.
+pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(500);
+pub const DEFAULT_POLL_INTERVAL: Duration = Duration::from_millis(100);
+pub const DEFAULT_BLOCK_POLL_INTERVAL: Duration = Duration::from_millis(10);
 
 /// Where the device is.
 #[derive(Debug, Clone, PartialEq)]
