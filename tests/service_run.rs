@@ -310,3 +310,53 @@ fn alerts_set_the_plc_coil() {
     drop(slave);
     drop(server);
 }
+
+#[test]
+fn a_candump_log_with_its_dbc_feeds_the_service() {
+    let fixtures = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/can");
+    let dir = std::env::temp_dir().join(format!("forgemon-run-{}-can", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let http = free_port();
+    let cfg = format!(
+        r#"machine = "{HAMMER}"
+process = "{STEEL}"
+[recording]
+dir = "rec"
+[http]
+listen = "127.0.0.1:{http}"
+[[sources]]
+name = "bus"
+kind = "can"
+log = "{fixtures}/hammer_blows.log"
+sample_rate_hz = 5000
+dbc = "{fixtures}/hammer.dbc"
+[sources.signals]
+load_N = "Load"
+disp_m = "Disp"
+acc_mps2 = "Acc"
+sequence = "Seq"
+"#
+    );
+    std::fs::write(dir.join("service.toml"), cfg).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_forgemon"))
+        .args(["run", "--config", dir.join("service.toml").to_str().unwrap()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // The fixture holds three blows (fixtures/can/README.md), replayed in real time (~1 s).
+    let deadline = Instant::now() + Duration::from_secs(15);
+    loop {
+        if let Some(st) = http_get(http, "/status").and_then(|b| serde_json::from_str::<serde_json::Value>(&b).ok())
+            && st["blows"] == 3
+        {
+            assert_eq!(st["sources"]["bus"]["gaps"], 0);
+            break;
+        }
+        assert!(Instant::now() < deadline, "three blows were not found");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+}

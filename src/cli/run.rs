@@ -46,6 +46,12 @@ pub fn load_parts(config_path: &Path) -> anyhow::Result<ServiceParts> {
         }
         None => (None, None),
     };
+    // A CAN source's DBC file is read now, so that a bad one stops the start.
+    for s in &config.sources {
+        if let SourceSpec::Can(c) = s {
+            c.resolve().with_context(|| format!("source '{}'", c.name))?;
+        }
+    }
     Ok(ServiceParts { config, config_path: config_path.to_path_buf(), machine, machine_text, process, process_text })
 }
 
@@ -59,6 +65,26 @@ pub fn spawn_source(spec: &SourceSpec, tx: mpsc::Sender<crate::acquire::SourceEv
             };
             let cfg = SerialConfig::new(name.clone(), path.clone(), *baud, wire, channels.clone());
             tokio::spawn(crate::acquire::serial::driver::run(cfg, tx, shutdown));
+        }
+        SourceSpec::Can(c) => {
+            use crate::acquire::can::CanInput;
+            let Ok(cfg) = c.resolve() else {
+                tracing::error!(source = %c.name, "the DBC file changed since the start and no longer reads");
+                return;
+            };
+            match &c.input {
+                CanInput::Interface(_) => {
+                    tokio::spawn(crate::acquire::can::run(cfg, tx, shutdown));
+                }
+                CanInput::Log(path) => {
+                    let (path, name) = (path.clone(), c.name.clone());
+                    tokio::spawn(async move {
+                        if let Err(e) = crate::acquire::can::run_log(cfg, path, true, tx, shutdown).await {
+                            tracing::error!(source = %name, "{e}");
+                        }
+                    });
+                }
+            }
         }
     }
 }

@@ -29,13 +29,22 @@ pub enum SerialFormat {
 /// One source of samples.
 #[derive(Debug, Clone, PartialEq)]
 pub enum SourceSpec {
-    Serial { name: String, path: String, baud: u32, format: SerialFormat, channels: Vec<ChannelSpec> },
+    Serial {
+        name: String,
+        path: String,
+        baud: u32,
+        format: SerialFormat,
+        channels: Vec<ChannelSpec>,
+    },
+    /// A SocketCAN interface or a `candump -L` log, signals from a DBC file or the config.
+    Can(crate::acquire::can::CanSourceSpec),
 }
 
 impl SourceSpec {
     pub fn name(&self) -> &str {
         match self {
             SourceSpec::Serial { name, .. } => name,
+            SourceSpec::Can(c) => &c.name,
         }
     }
 }
@@ -153,7 +162,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
                 let key = format!("sources[{}]", i + 1);
                 let toml::Value::Table(t) = v else { return Err(keys.invalid(&key, "must be a table ([[sources]])")) };
                 let s = Keys { origin, prefix: key, table: t };
-                out.push(parse_source(&s)?);
+                out.push(parse_source(&s, base)?);
             }
             let mut names: Vec<&str> = out.iter().map(SourceSpec::name).collect();
             names.sort();
@@ -179,7 +188,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
     })
 }
 
-fn parse_source(s: &Keys<'_>) -> Result<SourceSpec, ConfigError> {
+fn parse_source(s: &Keys<'_>, base: &Path) -> Result<SourceSpec, ConfigError> {
     let name = s.string("name")?.to_string();
     if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
         return Err(s.invalid("name", "must be letters, digits, '_' or '-'"));
@@ -198,9 +207,14 @@ fn parse_source(s: &Keys<'_>) -> Result<SourceSpec, ConfigError> {
                 None => DEFAULT_BAUD,
             };
             let channels = parse_channels(s)?;
+            // CONTRACTS.md §7: 1..=16 channels per frame.
+            if !(1..=16).contains(&channels.len()) {
+                return Err(s.invalid("channels", format!("has {} entries; a frame carries 1 to 16", channels.len())));
+            }
             Ok(SourceSpec::Serial { name, path: s.string("path")?.to_string(), baud, format, channels })
         }
-        other => Err(s.invalid("kind", format!("'{other}' is not a known source kind (serial)"))),
+        "can" => Ok(SourceSpec::Can(crate::acquire::can::parse_can_source(s.origin, &s.prefix, s.table, base)?)),
+        other => Err(s.invalid("kind", format!("'{other}' is not a known source kind (serial, can)"))),
     }
 }
 
@@ -276,7 +290,7 @@ gain = 0.01
         assert_eq!(c.http_listen.to_string(), DEFAULT_HTTP_LISTEN);
         assert_eq!(c.alerts.low_efficiency, 0.55);
         assert_eq!(c.plc_coil.unwrap().coil, 7);
-        let SourceSpec::Serial { baud, format, channels, .. } = &c.sources[0];
+        let SourceSpec::Serial { baud, format, channels, .. } = &c.sources[0] else { panic!("a serial source") };
         assert_eq!((*baud, *format), (DEFAULT_BAUD, SerialFormat::Binary));
         assert_eq!(channels[1], ChannelSpec { role: Role::Disp, gain: 1e-6, offset: 0.1 });
     }
@@ -284,7 +298,7 @@ gain = 0.01
     #[test]
     fn the_example_service_configs_parse_and_name_existing_files() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
-        for name in ["hammer-serial.service.toml"] {
+        for name in ["hammer-serial.service.toml", "hammer-can.service.toml"] {
             let text = std::fs::read_to_string(dir.join(name)).unwrap();
             let c = parse_service(name, &dir, &text).unwrap();
             assert!(c.machine_path.exists(), "{name}: {}", c.machine_path.display());
