@@ -220,6 +220,9 @@ fn alerts_reach_the_webhook_and_the_status_endpoint_tells_the_state() {
     assert_eq!(st["last_class"], "hard");
     assert_eq!(st["sources"]["daq"]["state"], "connected");
     assert_eq!(st["sources"]["daq"]["crc_errors"], 0);
+    let latency = st["last_result_latency_ms"].as_f64().unwrap();
+    eprintln!("last result latency: {latency:.3} ms");
+    assert!(latency >= 0.0);
     let alert: serde_json::Value =
         serde_json::from_str(&hooks.recv_timeout(Duration::from_secs(5)).expect("the webhook was called")).unwrap();
     assert_eq!(alert["kind"], "elastic_blow");

@@ -66,6 +66,9 @@ pub fn spawn_source(spec: &SourceSpec, tx: mpsc::Sender<crate::acquire::SourceEv
             let cfg = SerialConfig::new(name.clone(), path.clone(), *baud, wire, channels.clone());
             tokio::spawn(crate::acquire::serial::driver::run(cfg, tx, shutdown));
         }
+        SourceSpec::Modbus(m) => {
+            tokio::spawn(crate::acquire::modbus::run(m.clone(), tx, shutdown));
+        }
         SourceSpec::Can(c) => {
             use crate::acquire::can::CanInput;
             let Ok(cfg) = c.resolve() else {

@@ -38,6 +38,8 @@ pub enum SourceSpec {
     },
     /// A SocketCAN interface or a `candump -L` log, signals from a DBC file or the config.
     Can(crate::acquire::can::CanSourceSpec),
+    /// A Modbus TCP or RTU device: polled registers, or a DAQ's block-mode sample ring.
+    Modbus(crate::acquire::modbus::ModbusConfig),
 }
 
 impl SourceSpec {
@@ -45,6 +47,7 @@ impl SourceSpec {
         match self {
             SourceSpec::Serial { name, .. } => name,
             SourceSpec::Can(c) => &c.name,
+            SourceSpec::Modbus(m) => &m.source,
         }
     }
 }
@@ -213,9 +216,128 @@ fn parse_source(s: &Keys<'_>, base: &Path) -> Result<SourceSpec, ConfigError> {
             }
             Ok(SourceSpec::Serial { name, path: s.string("path")?.to_string(), baud, format, channels })
         }
+        "modbus" => Ok(SourceSpec::Modbus(parse_modbus(s, name)?)),
         "can" => Ok(SourceSpec::Can(crate::acquire::can::parse_can_source(s.origin, &s.prefix, s.table, base)?)),
-        other => Err(s.invalid("kind", format!("'{other}' is not a known source kind (serial, can)"))),
+        other => Err(s.invalid("kind", format!("'{other}' is not a known source kind (serial, modbus, can)"))),
     }
+}
+
+/// `kind = "modbus"`: `transport` "tcp" (`address`) or "rtu" (`path`, `baud`), `unit`,
+/// `poll_ms`, `timeout_ms`, and `mode` "poll" with `[[sources.registers]]` (`role` or
+/// `name`, `address`, `register` "holding"|"input", `type` u16|i16|u32|i32|f32, `word_order`
+/// "big"|"little", `scale`, `offset`) or "block" with `block_base` and `[[sources.channels]]`.
+fn parse_modbus(s: &Keys<'_>, name: String) -> Result<crate::acquire::modbus::ModbusConfig, ConfigError> {
+    use crate::acquire::modbus::{
+        DataType, ModbusConfig, Mode, RegisterKind, RegisterSpec, Signal, Transport, WordOrder, client,
+    };
+    use std::time::Duration;
+    let transport = match s.string("transport")? {
+        "tcp" => {
+            let a = s.string("address")?;
+            Transport::Tcp {
+                addr: a.parse().map_err(|_| s.invalid("address", format!("'{a}' is not an address:port")))?,
+            }
+        }
+        "rtu" => Transport::Rtu {
+            path: s.string("path")?.to_string(),
+            baud: match s.opt_number("baud")? {
+                Some(_) => s.positive("baud")? as u32,
+                None => 19_200,
+            },
+        },
+        other => return Err(s.invalid("transport", format!("must be \"tcp\" or \"rtu\", got \"{other}\""))),
+    };
+    let unit = match s.opt_number("unit")? {
+        Some(_) => s.non_negative("unit")?,
+        None => 1.0,
+    };
+    if unit > 247.0 {
+        return Err(s.invalid("unit", "must be 0..=247"));
+    }
+    let ms = |key: &str, default: Duration| -> Result<Duration, ConfigError> {
+        Ok(match s.opt_number(key)? {
+            Some(_) => Duration::from_secs_f64(s.positive(key)? / 1e3),
+            None => default,
+        })
+    };
+    let (mode, map, default_poll) = match s.table.get("mode").map(|_| s.string("mode")).transpose()?.unwrap_or("poll") {
+        "block" => {
+            let base = match s.opt_number("block_base")? {
+                Some(_) => s.non_negative("block_base")?,
+                None => 0.0,
+            };
+            if base > 65535.0 {
+                return Err(s.invalid("block_base", "must be a register address 0..=65535"));
+            }
+            (
+                Mode::Block { base: base as u16, channels: parse_channels(s)? },
+                Vec::new(),
+                client::DEFAULT_BLOCK_POLL_INTERVAL,
+            )
+        }
+        "poll" => {
+            let Some(toml::Value::Array(list)) = s.table.get("registers") else { return Err(s.missing("registers")) };
+            let mut map = Vec::new();
+            for (i, v) in list.iter().enumerate() {
+                let key = format!("registers[{}]", i + 1);
+                let toml::Value::Table(t) = v else { return Err(s.invalid(&key, "must be a table")) };
+                let r = Keys { origin: s.origin, prefix: s.path(&key), table: t };
+                let signal = if r.table.contains_key("role") {
+                    let n = r.string("role")?;
+                    Signal::Role(
+                        Role::from_column(n)
+                            .ok_or_else(|| r.invalid("role", format!("'{n}' is not load_N, disp_m or acc_mps2")))?,
+                    )
+                } else {
+                    Signal::Named(r.string("name")?.to_string())
+                };
+                let address = r.non_negative("address")?;
+                if address > 65535.0 {
+                    return Err(r.invalid("address", "must be 0..=65535"));
+                }
+                let kind = match r.table.get("register").map(|_| r.string("register")).transpose()?.unwrap_or("holding")
+                {
+                    "holding" => RegisterKind::Holding,
+                    "input" => RegisterKind::Input,
+                    other => {
+                        return Err(r.invalid("register", format!("must be \"holding\" or \"input\", got \"{other}\"")));
+                    }
+                };
+                let data_type = match r.string("type")? {
+                    "u16" => DataType::U16,
+                    "i16" => DataType::I16,
+                    "u32" => DataType::U32,
+                    "i32" => DataType::I32,
+                    "f32" => DataType::F32,
+                    other => return Err(r.invalid("type", format!("'{other}' is not u16, i16, u32, i32 or f32"))),
+                };
+                let word_order =
+                    match r.table.get("word_order").map(|_| r.string("word_order")).transpose()?.unwrap_or("big") {
+                        "big" => WordOrder::BigEndian,
+                        "little" => WordOrder::LittleEndian,
+                        other => {
+                            return Err(
+                                r.invalid("word_order", format!("must be \"big\" or \"little\", got \"{other}\""))
+                            );
+                        }
+                    };
+                let scale = r.opt_number("scale")?.map(|_| r.finite("scale")).transpose()?.unwrap_or(1.0);
+                let offset = r.opt_number("offset")?.map(|_| r.finite("offset")).transpose()?.unwrap_or(0.0);
+                map.push(RegisterSpec { signal, address: address as u16, kind, data_type, word_order, scale, offset });
+            }
+            (Mode::Poll, map, client::DEFAULT_POLL_INTERVAL)
+        }
+        other => return Err(s.invalid("mode", format!("must be \"poll\" or \"block\", got \"{other}\""))),
+    };
+    Ok(ModbusConfig {
+        source: name,
+        transport,
+        unit_id: unit as u8,
+        poll_interval: ms("poll_ms", default_poll)?,
+        timeout: ms("timeout_ms", client::DEFAULT_TIMEOUT)?,
+        map,
+        mode,
+    })
 }
 
 fn parse_channels(s: &Keys<'_>) -> Result<Vec<ChannelSpec>, ConfigError> {
@@ -298,12 +420,30 @@ gain = 0.01
     #[test]
     fn the_example_service_configs_parse_and_name_existing_files() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
-        for name in ["hammer-serial.service.toml", "hammer-can.service.toml"] {
+        for name in ["hammer-serial.service.toml", "hammer-can.service.toml", "press-modbus-serial.service.toml"] {
             let text = std::fs::read_to_string(dir.join(name)).unwrap();
             let c = parse_service(name, &dir, &text).unwrap();
             assert!(c.machine_path.exists(), "{name}: {}", c.machine_path.display());
             assert!(c.process_path.as_ref().is_none_or(|p| p.exists()), "{name}");
         }
+    }
+
+    #[test]
+    fn a_modbus_source_reads_its_register_map() {
+        use crate::acquire::modbus::{DataType, Mode, Transport, WordOrder};
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+        let text = std::fs::read_to_string(dir.join("press-modbus-serial.service.toml")).unwrap();
+        let c = parse_service("press", &dir, &text).unwrap();
+        let SourceSpec::Modbus(m) = &c.sources[1] else { panic!("a modbus source") };
+        assert!(matches!(m.transport, Transport::Tcp { .. }) && matches!(m.mode, Mode::Poll));
+        assert_eq!(
+            (m.map[0].address, m.map[0].data_type, m.map[0].word_order),
+            (100, DataType::U32, WordOrder::BigEndian)
+        );
+        assert_eq!(m.map[1].scale, 0.1);
+        assert_eq!(m.timeout, std::time::Duration::from_millis(200));
+        let e = parse_service("p", &dir, &text.replace("type = \"i16\"", "type = \"i8\"")).unwrap_err();
+        assert!(e.to_string().contains("key 'sources[2].registers[2].type'"), "{e}");
     }
 
     #[test]

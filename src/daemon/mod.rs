@@ -59,13 +59,18 @@ pub fn new_billet_marker() -> crate::record::Status {
     crate::record::Status { source: CONTROL_SOURCE.into(), state: NEW_BILLET_STATE.into(), ..Default::default() }
 }
 
+/// A front end's callback for each blow.
+pub type BlowHook = Box<dyn FnMut(&BlowEstimate) + Send>;
+/// A front end's callback for each blow that could not be estimated.
+pub type RejectHook = Box<dyn FnMut(&str) + Send>;
+
 /// Callbacks for a front end (the demo prints each blow).
 #[derive(Default)]
 pub struct Hooks {
     /// Called once the status endpoint listens, with its address.
     pub on_listening: Option<Box<dyn FnOnce(std::net::SocketAddr) + Send>>,
-    pub on_blow: Option<Box<dyn FnMut(&BlowEstimate) + Send>>,
-    pub on_rejected: Option<Box<dyn FnMut(&str) + Send>>,
+    pub on_blow: Option<BlowHook>,
+    pub on_rejected: Option<RejectHook>,
 }
 
 /// What the service did, when it stops.
@@ -236,7 +241,15 @@ fn on_event(
                 class = estimate.class.as_str(),
                 "blow"
             );
-            status.lock().map(|mut s| s.on_blow(&estimate)).ok();
+            // From the host receiving the batch that ended the blow to its result.
+            let latency_ms = (host_now_ns() - log_time_ns) as f64 * 1e-6;
+            status
+                .lock()
+                .map(|mut s| {
+                    s.on_blow(&estimate);
+                    s.last_result_latency_ms = Some(latency_ms);
+                })
+                .ok();
             if let Some(alert) = &estimate.alert {
                 summary.alerts += 1;
                 tracing::warn!(kind = alert.kind.as_str(), blow = alert.blow, "{}", alert.reason);

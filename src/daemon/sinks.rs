@@ -36,19 +36,9 @@ impl Sinks {
         }
         if let Some(c) = self.coil {
             tokio::spawn(async move {
-                let write = async {
-                    let mut ctx =
-                        tokio_modbus::client::tcp::connect_slave(c.address, tokio_modbus::Slave(c.unit)).await?;
-                    use tokio_modbus::client::Writer;
-                    ctx.write_single_coil(c.coil, true).await??;
-                    Ok::<(), Box<dyn std::error::Error + Send + Sync>>(())
-                };
-                match tokio::time::timeout(SINK_TIMEOUT, write).await {
-                    Ok(Ok(())) => {}
-                    Ok(Err(e)) => tracing::error!("PLC coil {} at {}: {e}", c.coil, c.address),
-                    Err(_) => {
-                        tracing::error!("PLC coil {} at {}: no answer within {SINK_TIMEOUT:?}", c.coil, c.address)
-                    }
+                if let Err(e) = crate::acquire::modbus::write_coil(c.address, c.unit, c.coil, true, SINK_TIMEOUT).await
+                {
+                    tracing::error!("PLC coil {} at {}: {e}", c.coil, c.address);
                 }
             });
         }

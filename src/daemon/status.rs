@@ -47,6 +47,8 @@ pub struct StatusSnapshot {
     pub last_efficiency: Option<f64>,
     pub last_class: Option<String>,
     pub last_blow: Option<BlowEstimate>,
+    /// From the host receiving the samples that ended the last blow to its result, ms.
+    pub last_result_latency_ms: Option<f64>,
     pub sources: BTreeMap<String, SourceState>,
     pub recording: String,
 }
@@ -62,6 +64,7 @@ impl StatusSnapshot {
             last_efficiency: None,
             last_class: None,
             last_blow: None,
+            last_result_latency_ms: None,
             sources: BTreeMap::new(),
             recording: String::new(),
         }
@@ -128,6 +131,14 @@ impl StatusSnapshot {
         );
         metric("blows_total", "counter", "Blows estimated.", vec![(String::new(), self.blows as f64)]);
         metric("alerts_total", "counter", "Alerts raised.", vec![(String::new(), self.alerts as f64)]);
+        if let Some(l) = self.last_result_latency_ms {
+            metric(
+                "result_latency_ms",
+                "gauge",
+                "Receipt of the blow's last samples to its result, ms.",
+                vec![(String::new(), l)],
+            );
+        }
         if let Some(e) = self.last_efficiency {
             metric(
                 "last_efficiency",
