@@ -15,6 +15,11 @@ use crate::physics::process::Process;
 use crate::signal::segment::Blow;
 use approach::{ApproachError, fit_impact_speed};
 
+/// A tracked billet height below this fraction of the sheet's is impossible for an upset
+/// cylinder: the billets changed without a new-billet signal, so the height is no longer
+/// known (until `new_billet`).
+pub const MIN_TRACKED_HEIGHT_FRACTION: f64 = 0.02;
+
 /// Thresholds of the estimator, with the defaults named.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EstimatorConfig {
@@ -85,6 +90,11 @@ impl Estimator {
         &self.cfg
     }
 
+    /// Whether the billet's height is being tracked (a process sheet, and not lost).
+    pub fn tracking_height(&self) -> bool {
+        self.h_m.is_some()
+    }
+
     /// A new billet from the process sheet: its height starts again from the sheet's.
     pub fn new_billet(&mut self) {
         self.h_m = self.process.as_ref().map(|p| p.billet.height_m);
@@ -114,8 +124,14 @@ impl Estimator {
                     friction += dw * (1.0 - share);
                 }
                 let h_end = h0 - max_comp;
-                self.h_m = Some(h_end);
-                (plastic, Some(friction), Some(h_end))
+                if h_end < MIN_TRACKED_HEIGHT_FRACTION * p.billet.height_m {
+                    // Lost track of the billet: report the work unsplit and no height.
+                    self.h_m = None;
+                    (o.deform_j, None, None)
+                } else {
+                    self.h_m = Some(h_end);
+                    (plastic, Some(friction), Some(h_end))
+                }
             }
             _ => (o.deform_j, None, None),
         };
@@ -140,5 +156,49 @@ impl Estimator {
             peak_load_n: o.peak_load_n,
             residual,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{parse_machine, parse_process};
+    use crate::physics::effects::EffectSet;
+    use crate::signal::capture::CaptureReader;
+    use crate::signal::segment::{SegmentConfig, Segmenter};
+    use crate::synth::{CaptureSpec, synth_blows};
+
+    /// Billets changed without a new-billet signal: the tracked height would go negative.
+    /// Past 2 % of the sheet's height the estimator stops reporting one (and the split that
+    /// needs it) until `new_billet`, which restores it.
+    #[test]
+    fn an_impossible_billet_height_is_reported_as_unknown() {
+        let m = parse_machine("m", include_str!("../../config/hammer-lg1000.machine.toml")).unwrap().machine;
+        let p = parse_process("p", include_str!("../../config/steel-16NiCrMo13.process.toml")).unwrap();
+        // Four blows on one billet, estimated as if the sheet were 20 mm high: the tracked
+        // height runs out after the first blows.
+        let blows = synth_blows(&m, &EffectSet::NONE, &p, &[5.3; 4], &CaptureSpec::hammer(9)).unwrap();
+        let mut short = p.clone();
+        short.billet.height_m = 0.020;
+        let mut est = Estimator::new(m, Some(short), EstimatorConfig::for_kind(m.kind()));
+        let mut heights = Vec::new();
+        for b in &blows {
+            let mut text = Vec::new();
+            crate::signal::capture::write_capture(&mut text, &b.rows).unwrap();
+            let batches = CaptureReader::new("x", text.as_slice(), 0.05).unwrap().read_all().unwrap();
+            let mut seg = Segmenter::new(SegmentConfig::HAMMER);
+            let mut cut = Vec::new();
+            for bt in &batches {
+                seg.push(bt, &mut cut);
+            }
+            seg.finish(&mut cut);
+            let e = est.estimate(&cut[0]).unwrap();
+            assert!(e.h_end_m.is_none_or(|h| h > 0.0), "{:?}", e.h_end_m);
+            heights.push(e.h_end_m);
+        }
+        assert!(heights.iter().any(|h| h.is_none()), "{heights:?}");
+        assert!(!est.tracking_height());
+        est.new_billet();
+        assert!(est.tracking_height());
     }
 }
