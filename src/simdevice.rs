@@ -136,6 +136,24 @@ mod tests {
     }
 }
 
+/// Quantise samples to a DAQ's counts, channel by channel (`count = (value - offset) /
+/// gain`, saturating), interleaved as they go on the wire.
+pub fn to_counts(rows: &[CaptureRow], channels: &[crate::acquire::ChannelSpec]) -> Vec<i32> {
+    use crate::signal::sample::Role;
+    let mut counts = Vec::with_capacity(rows.len() * channels.len());
+    for r in rows {
+        for c in channels {
+            let v = match c.role {
+                Role::Load => r.load_n,
+                Role::Disp => r.disp_m,
+                Role::Acc => r.acc_mps2,
+            };
+            counts.push(((v - c.offset) / c.gain).round().clamp(i32::MIN as f64, i32::MAX as f64) as i32);
+        }
+    }
+    counts
+}
+
 /// Fault switches of a simulated serial device.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SerialFaults {
@@ -182,7 +200,6 @@ pub async fn drive_serial<W: tokio::io::AsyncWrite + Unpin>(
     mut on_billet: impl FnMut(usize),
 ) -> std::io::Result<DeviceStats> {
     use crate::acquire::serial::frame::{Frame, encode_frame};
-    use crate::signal::sample::Role;
     use tokio::io::AsyncWriteExt;
 
     let rate = sim.sample_rate_hz();
@@ -202,17 +219,7 @@ pub async fn drive_serial<W: tokio::io::AsyncWrite + Unpin>(
         if billet_now > billet_before && billet_before > 0 {
             on_billet(billet_now);
         }
-        let mut counts = Vec::with_capacity(rows.len() * spec.channels.len());
-        for r in &rows {
-            for c in &spec.channels {
-                let v = match c.role {
-                    Role::Load => r.load_n,
-                    Role::Disp => r.disp_m,
-                    Role::Acc => r.acc_mps2,
-                };
-                counts.push(((v - c.offset) / c.gain).round().clamp(i32::MIN as f64, i32::MAX as f64) as i32);
-            }
-        }
+        let counts = to_counts(&rows, &spec.channels);
         let frame = Frame {
             channel_count: spec.channels.len() as u8,
             sample_count: rows.len() as u16,

@@ -317,7 +317,29 @@ fn alerts_set_the_plc_coil() {
 #[test]
 fn a_candump_log_with_its_dbc_feeds_the_service() {
     let fixtures = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/can");
-    let dir = std::env::temp_dir().join(format!("forgemon-run-{}-can", std::process::id()));
+    // The committed fixture holds three blows (fixtures/can/README.md).
+    service_finds_blows_in_candump(&format!("{fixtures}/hammer_blows.log"), "can", 3);
+}
+
+#[test]
+fn simulate_device_writes_a_candump_log_the_service_reads() {
+    let dir = std::env::temp_dir().join(format!("forgemon-simdev-{}-can", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let log = dir.join("session.log");
+    let out = Command::new(env!("CARGO_BIN_EXE_forgemon"))
+        .args(["simulate-device", "--machine", HAMMER, "--process", STEEL, "--v0", "3.9,5.3,5.3,5.3", "--billets", "1"])
+        .args(["--interval", "0.3", "--rate", "5000", "--transport", "candump", "--out", log.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    service_finds_blows_in_candump(log.to_str().unwrap(), "simdev", 4);
+}
+
+/// Run the service on a candump log with the fixture DBC until it has found `blows`.
+fn service_finds_blows_in_candump(log: &str, name: &str, blows: u64) {
+    let fixtures = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/can");
+    let dir = std::env::temp_dir().join(format!("forgemon-run-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let http = free_port();
@@ -331,7 +353,7 @@ listen = "127.0.0.1:{http}"
 [[sources]]
 name = "bus"
 kind = "can"
-log = "{fixtures}/hammer_blows.log"
+log = "{log}"
 sample_rate_hz = 5000
 dbc = "{fixtures}/hammer.dbc"
 [sources.signals]
@@ -348,16 +370,16 @@ sequence = "Seq"
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    // The fixture holds three blows (fixtures/can/README.md), replayed in real time (~1 s).
+    // The log is replayed in real time (about 0.3 s a blow).
     let deadline = Instant::now() + Duration::from_secs(15);
     loop {
         if let Some(st) = http_get(http, "/status").and_then(|b| serde_json::from_str::<serde_json::Value>(&b).ok())
-            && st["blows"] == 3
+            && st["blows"] == blows
         {
             assert_eq!(st["sources"]["bus"]["gaps"], 0);
             break;
         }
-        assert!(Instant::now() < deadline, "three blows were not found");
+        assert!(Instant::now() < deadline, "{blows} blows were not found in {log}");
         std::thread::sleep(Duration::from_millis(100));
     }
     child.kill().unwrap();

@@ -25,6 +25,17 @@ pub enum Wire {
     Binary,
 }
 
+/// Where the simulated DAQ's samples go.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Transport {
+    /// A pty pair, in real time; the path to open is printed.
+    Pty,
+    /// A Modbus TCP server with the block-mode sample ring at register 0, in real time.
+    ModbusTcp,
+    /// A `candump -L` log file, one CAN frame per sample (fixtures/can/hammer.dbc).
+    Candump,
+}
+
 #[derive(Debug, Args)]
 pub struct SimulateDeviceArgs {
     /// The machine model (machine.toml).
@@ -50,6 +61,14 @@ pub struct SimulateDeviceArgs {
     pub effects: Vec<String>,
     #[arg(long, value_enum, default_value = "binary")]
     pub wire: Wire,
+    #[arg(long, value_enum, default_value = "pty")]
+    pub transport: Transport,
+    /// Modbus TCP: the address to listen on.
+    #[arg(long, default_value = "127.0.0.1:5020")]
+    pub listen: std::net::SocketAddr,
+    /// candump: the log file to write.
+    #[arg(long, required_if_eq("transport", "candump"))]
+    pub out: Option<PathBuf>,
     /// Garbage bytes before every N-th frame (0: never).
     #[arg(long, default_value_t = 0)]
     pub garbage_every: u64,
@@ -93,7 +112,14 @@ pub fn run(args: SimulateDeviceArgs) -> anyhow::Result<ExitCode> {
             drop_every: args.drop_every,
         },
     };
+    if args.transport == Transport::Candump {
+        return write_candump(sim, args.out.as_deref().context("--out is required with --transport candump")?);
+    }
     let rt = tokio::runtime::Runtime::new()?;
+    if args.transport == Transport::ModbusTcp {
+        rt.block_on(serve_modbus(sim, args.listen, args.rate))?;
+        return Ok(ExitCode::SUCCESS);
+    }
     rt.block_on(async move {
         let (master, slave) = tokio_serial::SerialStream::pair().context("cannot open a pty pair")?;
         let path = slave.name().unwrap_or_default();
@@ -113,3 +139,66 @@ pub fn run(args: SimulateDeviceArgs) -> anyhow::Result<ExitCode> {
     })?;
     Ok(ExitCode::SUCCESS)
 }
+
+/// Write the whole session as a `candump -L` log (one frame per sample, counter and three
+/// signals as in `fixtures/can/hammer.dbc`), as a bus capture would hold it.
+fn write_candump(mut sim: SimMachine, out: &std::path::Path) -> anyhow::Result<ExitCode> {
+    use std::io::Write;
+    let mut dev = crate::acquire::can::CanDevice::new(crate::acquire::can::forgemon_mapping());
+    let file = std::fs::File::create(out).with_context(|| format!("{}: cannot write", out.display()))?;
+    let mut w = std::io::BufWriter::new(file);
+    let mut samples = 0u64;
+    while !sim.finished() {
+        let rows = sim.next_rows(4096)?;
+        samples += rows.len() as u64;
+        dev.write_log(&mut w, "can0", &rows).with_context(|| format!("{}: cannot write", out.display()))?;
+    }
+    w.flush()?;
+    println!("wrote {samples} frames to {} (decode with fixtures/can/hammer.dbc: Load, Disp, Acc, Seq)", out.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Serve the session from a Modbus TCP server: every 10 ms the new samples go into the
+/// block-mode ring at register 0 (3 channels of i32 counts with the demo's gains).
+async fn serve_modbus(mut sim: SimMachine, listen: std::net::SocketAddr, rate: f64) -> anyhow::Result<()> {
+    use crate::acquire::modbus::block::RingWriter;
+    use crate::acquire::modbus::server::{BankService, TcpServer, lock, shared_bank};
+    let bank = shared_bank();
+    let server = TcpServer::start(listen, BankService { bank: bank.clone(), faults: Default::default(), unit: None })
+        .await
+        .with_context(|| format!("{listen}: cannot listen"))?;
+    let mut ring = RingWriter::new(0, 8192, 3, 2, (1e9 / rate).round() as u32)?;
+    ring.write_header(&mut lock(&bank).holding);
+    println!(
+        "simulated DAQ on modbus tcp {}: block mode at register 0, ring of 8192 samples x 3 channels (i32)",
+        server.addr()
+    );
+    let channels = super::demo::demo_channels();
+    let step = ((rate * 0.01) as usize).max(1);
+    let start = tokio::time::Instant::now();
+    let mut ticks = 0u32;
+    while !sim.finished() {
+        let rows = sim.next_rows(step)?;
+        {
+            let mut b = lock(&bank);
+            ring.push(&mut b.holding, &crate::simdevice::to_counts(&rows, &channels));
+            ring.write_header(&mut b.holding);
+        }
+        ticks += 1;
+        tokio::select! {
+            _ = tokio::time::sleep_until(start + std::time::Duration::from_millis(10) * ticks) => {}
+            _ = tokio::signal::ctrl_c() => break,
+        }
+    }
+    // Stay up after the last sample, so that a reader can drain the ring.
+    println!("session over; serving the ring for {} s more", DRAIN_LINGER.as_secs());
+    tokio::select! {
+        _ = tokio::time::sleep(DRAIN_LINGER) => {}
+        _ = tokio::signal::ctrl_c() => {}
+    }
+    drop(server);
+    Ok(())
+}
+
+/// How long the Modbus device keeps serving after its session has ended.
+const DRAIN_LINGER: std::time::Duration = std::time::Duration::from_secs(3);
