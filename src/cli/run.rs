@@ -102,7 +102,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         for s in &parts.config.sources {
             spawn_source(s, tx.clone(), shutdown_rx.clone());
         }
-        drop(tx);
+        // The service is always on: a source that ends (a log played out) does not stop it;
+        // only SIGTERM does. Holding a sender keeps the channel open.
+        let _hold_open = tx;
         let (_stop_tx, stop_rx) = watch::channel(false);
         let summary = serve(parts, rx, shutdown_tx, stop_rx, Hooks::default(), None).await?;
         tracing::info!(samples = summary.samples, blows = summary.blows, alerts = summary.alerts, "stopped");

@@ -135,6 +135,9 @@ pub async fn serve(
     ));
     let mut summary = Summary::default();
     let mut events = Vec::new();
+    // Each source's device clock against the host's (reported; merging roles from several
+    // sources on it is not built yet).
+    let mut clocks: std::collections::HashMap<String, crate::signal::align::ClockModel> = Default::default();
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
     // systemd's watchdog wants a ping at least every WATCHDOG_USEC; ping at half of it.
@@ -152,7 +155,11 @@ pub async fn serve(
                         if let Err(e) = writer.write_samples(&batch) {
                             tracing::error!("recording samples: {e}");
                         }
-                        status.lock().map(|mut s| s.on_samples(&batch)).ok();
+                        let clock = clocks.entry(batch.source.clone()).or_insert_with(crate::signal::align::ClockModel::new);
+                        // The batch's last sample arrived with it.
+                        let last_ns = batch.device_time_ns + (batch.period_ns * batch.len().saturating_sub(1) as f64) as i64;
+                        clock.observe(last_ns, batch.host_time_ns);
+                        status.lock().map(|mut s| s.on_samples(&batch, clock)).ok();
                         if feeds_pipeline(&batch) {
                             feeder.push(&batch, &mut events);
                         }

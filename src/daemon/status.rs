@@ -33,6 +33,10 @@ pub struct SourceState {
     pub decode_errors: u64,
     pub reconnects: u64,
     pub detail: String,
+    /// The device clock against the host's (signal::align), once batches arrived.
+    pub clock_drift_ppm: Option<f64>,
+    /// Host time minus device time at the latest batch, s.
+    pub clock_offset_s: Option<f64>,
 }
 
 /// What `/status` returns.
@@ -70,9 +74,14 @@ impl StatusSnapshot {
         }
     }
 
-    pub fn on_samples(&mut self, b: &SampleBatch) {
+    pub fn on_samples(&mut self, b: &SampleBatch, clock: &crate::signal::align::ClockModel) {
         self.samples += b.len() as u64;
-        self.sources.entry(b.source.clone()).or_default().samples += b.len() as u64;
+        let s = self.sources.entry(b.source.clone()).or_default();
+        s.samples += b.len() as u64;
+        if clock.len() >= 2 {
+            s.clock_drift_ppm = Some(clock.drift_ppm());
+            s.clock_offset_s = Some((clock.map(b.device_time_ns) - b.device_time_ns) as f64 * 1e-9);
+        }
     }
 
     pub fn on_gap(&mut self, g: &Gap) {

@@ -1,6 +1,7 @@
 //! Signals: the one sample type every source produces, capture files, and blow
 //! segmentation. Pure code: fed data, no IO, no clock.
 
+pub mod align;
 pub mod capture;
 pub mod sample;
 pub mod segment;

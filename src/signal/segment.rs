@@ -160,7 +160,7 @@ impl Segmenter {
             self.stats.batches_dropped += 1;
             return;
         };
-        if batch.values.iter().any(|v| !v.is_finite()) || !(batch.period_ns > 0.0) {
+        if batch.values.iter().any(|v| !v.is_finite()) || batch.period_ns.is_nan() || batch.period_ns <= 0.0 {
             self.stats.batches_dropped += 1;
             return;
         }
