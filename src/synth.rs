@@ -162,7 +162,7 @@ pub fn idle_rows(n: usize, t0_s: f64, spec: &CaptureSpec, disp_m: f64, rng_seed:
         .map(|k| CaptureRow {
             t_s: t0_s + k as f64 * dt,
             load_n: load_noise.sample(&mut rng),
-            disp_m: disp_m,
+            disp_m,
             acc_mps2: acc_noise.sample(&mut rng),
         })
         .collect()

@@ -42,7 +42,7 @@ enum Input {
     /// A recording, streamed in file order (the writer stores each source's samples in
     /// time order), with the samples read ahead while looking for the stored process sheet.
     Recording {
-        reader: RecordReader,
+        reader: Box<RecordReader>,
         ahead: Vec<SampleBatch>,
     },
 }
@@ -254,7 +254,7 @@ fn open_input(path: &Path) -> anyhow::Result<(Input, Option<String>)> {
                 _ => {}
             }
         }
-        return Ok((Input::Recording { reader, ahead }, process));
+        return Ok((Input::Recording { reader: Box::new(reader), ahead }, process));
     }
     if !path.exists() {
         bail!("{}: no such file or directory", path.display());

@@ -344,6 +344,8 @@ const E5: f64 = -17253.0 / 339200.0;
 const E6: f64 = 22.0 / 525.0;
 const E7: f64 = -1.0 / 40.0;
 
+// The stage loops index several arrays in step; iterators would hide the tableau.
+#[allow(clippy::needless_range_loop)]
 /// One Dormand–Prince step of length `h`; leaves the new state in `ws.y_new` and its
 /// derivative (FSAL) in `ws.k[6]`. Returns the RMS error norm (≤ 1 accepts).
 #[allow(clippy::too_many_arguments)]
@@ -397,6 +399,7 @@ fn dopri5_step<const N: usize, S: Hybrid<N>>(
     (sum / active.max(1) as f64).sqrt()
 }
 
+#[allow(clippy::needless_range_loop)]
 /// One classical RK4 step of length `h` into `ws.y_new`.
 fn rk4_step<const N: usize, S: Hybrid<N>>(
     sys: &S,
@@ -419,6 +422,7 @@ fn rk4_step<const N: usize, S: Hybrid<N>>(
     }
 }
 
+#[allow(clippy::needless_range_loop)]
 /// Cubic Hermite interpolation of a step at `theta` in [0, 1].
 pub fn hermite<const N: usize>(
     y0: &[f64; N],

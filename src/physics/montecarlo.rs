@@ -92,6 +92,7 @@ pub enum MonteCarloError {
 }
 
 /// Run the study: `runs` draws around the nominal `v0s_mps` and `process.friction`.
+#[allow(clippy::too_many_arguments)]
 pub fn monte_carlo(
     machine: &Machine,
     effects: &EffectSet,
