@@ -155,7 +155,7 @@ pub async fn serve(
                         if let Err(e) = writer.write_samples(&batch) {
                             tracing::error!("recording samples: {e}");
                         }
-                        let clock = clocks.entry(batch.source.clone()).or_insert_with(crate::signal::align::ClockModel::new);
+                        let clock = clocks.entry(batch.source.clone()).or_default();
                         // The batch's last sample arrived with it.
                         let last_ns = batch.device_time_ns + (batch.period_ns * batch.len().saturating_sub(1) as f64) as i64;
                         clock.observe(last_ns, batch.host_time_ns);

@@ -16,7 +16,7 @@ pub const WINDOW: usize = 512;
 pub const SEGMENTS: usize = 8;
 
 /// The clock model of one source.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct ClockModel {
     /// (device ns, host ns) relative to the first pair, to keep the sums well conditioned.
     pairs: VecDeque<(f64, f64)>,
@@ -25,9 +25,16 @@ pub struct ClockModel {
     offset_ns: f64,
 }
 
+impl Default for ClockModel {
+    /// No pairs yet: the device clock is taken as the host's (rate 1, offset 0).
+    fn default() -> Self {
+        ClockModel { pairs: VecDeque::new(), origin: None, rate: 1.0, offset_ns: 0.0 }
+    }
+}
+
 impl ClockModel {
     pub fn new() -> Self {
-        ClockModel { rate: 1.0, ..Default::default() }
+        Self::default()
     }
 
     /// Observe that the sample at `device_ns` reached the host at `host_ns`.
