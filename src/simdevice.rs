@@ -190,14 +190,14 @@ pub struct DeviceStats {
 
 /// Run `sim` to the end through the binary framing of CONTRACTS.md §7 into `writer`.
 /// Stops early when `stop` turns true or the reader goes away.
-/// `on_billet(k)` is called when the stream reaches billet k (k = 2, 3, ...), as a PLC
-/// would signal a new billet in the dies.
+/// `on_billet(k, device_ns)` is called when the stream reaches billet k (k = 2, 3, ...),
+/// with the device time of the frame that starts it, as a PLC would signal a new billet.
 pub async fn drive_serial<W: tokio::io::AsyncWrite + Unpin>(
     mut sim: SimMachine,
     spec: &SerialDeviceSpec,
     mut writer: W,
     stop: tokio::sync::watch::Receiver<bool>,
-    mut on_billet: impl FnMut(usize),
+    mut on_billet: impl FnMut(usize, u64),
 ) -> std::io::Result<DeviceStats> {
     use crate::acquire::serial::frame::{Frame, encode_frame};
     use tokio::io::AsyncWriteExt;
@@ -217,7 +217,7 @@ pub async fn drive_serial<W: tokio::io::AsyncWrite + Unpin>(
         }
         let billet_now = sim.billet_of_emitted();
         if billet_now > billet_before && billet_before > 0 {
-            on_billet(billet_now);
+            on_billet(billet_now, device_ns);
         }
         let counts = to_counts(&rows, &spec.channels);
         let frame = Frame {

@@ -155,7 +155,7 @@ fn drive(
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async move {
         let counting = CountingWriter { inner: master, written };
-        drive_serial(sim, &spec, counting, stop, |_| {}).await.unwrap();
+        drive_serial(sim, &spec, counting, stop, |_, _| {}).await.unwrap();
     });
 }
 

@@ -99,8 +99,8 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         let (control_tx, control_rx) = mpsc::channel(16);
         let billet_tx = control_tx.clone();
         let device = tokio::spawn(async move {
-            drive_serial(sim, &spec, master, device_stop, move |_| {
-                let _ = billet_tx.try_send(Control::NewBillet);
+            drive_serial(sim, &spec, master, device_stop, move |_, device_ns| {
+                let _ = billet_tx.try_send(Control::NewBillet { at_device_ns: Some(device_ns as i64) });
             })
             .await
         });

@@ -129,7 +129,7 @@ pub fn run(args: SimulateDeviceArgs) -> anyhow::Result<ExitCode> {
             let _ = tokio::signal::ctrl_c().await;
             let _ = stop_tx.send(true);
         });
-        let stats = drive_serial(sim, &dev, master, stop_rx, |k| println!("billet {k}")).await?;
+        let stats = drive_serial(sim, &dev, master, stop_rx, |k, _| println!("billet {k}")).await?;
         drop(slave);
         println!(
             "device: {} frames, {} samples sent, {} frames dropped, {} corrupted, {} garbage bursts",

@@ -44,8 +44,10 @@ pub struct ServiceParts {
 /// Commands to the running service (from the status endpoint or a front end).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Control {
-    /// A new billet is in the dies (an operator's button, a PLC input, the simulator).
-    NewBillet,
+    /// A new billet is in the dies (an operator's button, a PLC input, the simulator):
+    /// now (`None`), or from the source's sample at this device time on, so that samples
+    /// still queued from the last billet are estimated as that billet's.
+    NewBillet { at_device_ns: Option<i64> },
 }
 
 /// Source name of the control markers in a recording.
@@ -138,6 +140,8 @@ pub async fn serve(
     // Each source's device clock against the host's (reported; merging roles from several
     // sources on it is not built yet).
     let mut clocks: std::collections::HashMap<String, crate::signal::align::ClockModel> = Default::default();
+    // A new billet announced for a device time the samples have not reached yet.
+    let mut pending_billet: Option<i64> = None;
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
     // systemd's watchdog wants a ping at least every WATCHDOG_USEC; ping at half of it.
@@ -161,6 +165,11 @@ pub async fn serve(
                         clock.observe(last_ns, batch.host_time_ns);
                         status.lock().map(|mut s| s.on_samples(&batch, clock)).ok();
                         if feeds_pipeline(&batch) {
+                            let batch_end_ns = batch.device_time_ns + (batch.period_ns * batch.len() as f64) as i64;
+                            if pending_billet.is_some_and(|at| batch_end_ns > at) {
+                                pending_billet = None;
+                                start_billet(&mut feeder, &mut writer, &status);
+                            }
                             feeder.push(&batch, &mut events);
                         }
                         for e in events.drain(..) {
@@ -179,12 +188,8 @@ pub async fn serve(
                 }
             }
             Some(c) = control_rx.recv() => match c {
-                Control::NewBillet => {
-                    feeder.pipeline_mut().new_billet();
-                    let _ = writer.write_status(host_now_ns(), &new_billet_marker());
-                    status.lock().map(|mut s| s.billets += 1).ok();
-                    tracing::info!("new billet");
-                }
+                Control::NewBillet { at_device_ns: None } => start_billet(&mut feeder, &mut writer, &status),
+                Control::NewBillet { at_device_ns: Some(at) } => pending_billet = Some(at),
             },
             _ = sigterm.recv() => { tracing::info!("SIGTERM: finishing the recording"); break; }
             _ = tokio::signal::ctrl_c() => { tracing::info!("interrupted: finishing the recording"); break; }
@@ -217,6 +222,15 @@ pub async fn serve(
     summary.files = writer.finish()?;
     http.abort();
     Ok(summary)
+}
+
+/// A new billet from here on: restart the height tracking and alert memory, and mark the
+/// point in the recording so that a replay restarts it at the same sample.
+fn start_billet(feeder: &mut Feeder, writer: &mut RecordWriter, status: &SharedStatus) {
+    feeder.pipeline_mut().new_billet();
+    let _ = writer.write_status(host_now_ns(), &new_billet_marker());
+    status.lock().map(|mut s| s.billets += 1).ok();
+    tracing::info!("new billet");
 }
 
 fn on_event(

@@ -171,7 +171,7 @@ async fn metrics_text(State(s): State<SharedStatus>) -> impl IntoResponse {
 }
 
 async fn new_billet(State(tx): State<tokio::sync::mpsc::Sender<super::Control>>) -> impl IntoResponse {
-    match tx.try_send(super::Control::NewBillet) {
+    match tx.try_send(super::Control::NewBillet { at_device_ns: None }) {
         Ok(()) => (StatusCode::ACCEPTED, "new billet\n"),
         Err(_) => (StatusCode::SERVICE_UNAVAILABLE, "the service is busy or stopping\n"),
     }
