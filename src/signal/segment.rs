@@ -109,8 +109,17 @@ pub struct SegmentStats {
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum State {
     Armed,
-    InBlow { i_trigger: usize },
-    Refractory { quiet_since: Option<f64> },
+    /// `zero`: the load zero, fixed at the trigger; `contact`: the first contact sample once
+    /// the load has confirmed it; `quiet`: samples in a row below the end level since.
+    InBlow {
+        i_trigger: usize,
+        zero: f64,
+        contact: Option<usize>,
+        quiet: usize,
+    },
+    Refractory {
+        quiet_since: Option<f64>,
+    },
 }
 
 /// The streaming segmenter.
@@ -181,9 +190,9 @@ impl Segmenter {
 
     /// End of the stream: a blow in progress is closed as it stands.
     pub fn finish(&mut self, out: &mut Vec<Blow>) {
-        if let State::InBlow { i_trigger } = self.state {
+        if let State::InBlow { i_trigger, zero, contact, .. } = self.state {
             let n = self.blow.len();
-            self.close(i_trigger, n.saturating_sub(1), out);
+            self.close(i_trigger, zero, contact, n.saturating_sub(1), out);
         }
         self.state = State::Armed;
         self.ring.clear();
@@ -199,7 +208,15 @@ impl Segmenter {
                     self.blow.extend(self.ring.drain(..));
                     let i_trigger = self.blow.len();
                     self.blow.push(s);
-                    self.state = State::InBlow { i_trigger };
+                    // The zero and any contact already in the pre-trigger window are known
+                    // now; later samples only extend them.
+                    let zero = self.zero(i_trigger);
+                    let first = Self::first_searched(i_trigger, self.blow.len());
+                    let contact = (first..self.blow.len())
+                        .find(|&i| self.blow[i].load_n - zero > self.cfg.contact_load_n)
+                        .map(|i| self.walk_back(i, first, zero));
+                    let quiet = usize::from(s.load_n - zero < self.cfg.end_load_n);
+                    self.state = State::InBlow { i_trigger, zero, contact, quiet };
                 } else {
                     if self.ring.len() == self.ring_cap {
                         self.ring.pop_front();
@@ -207,17 +224,28 @@ impl Segmenter {
                     self.ring.push_back(s);
                 }
             }
-            State::InBlow { i_trigger } => {
+            State::InBlow { i_trigger, zero, mut contact, mut quiet } => {
                 self.blow.push(s);
+                let n = self.blow.len();
+                if contact.is_none() && s.load_n - zero > self.cfg.contact_load_n {
+                    let first = Self::first_searched(i_trigger, n);
+                    contact = Some(self.walk_back(n - 1, first, zero));
+                }
+                quiet = if s.load_n - zero < self.cfg.end_load_n { quiet + 1 } else { 0 };
+                // The blow ends when, after contact, the load has been quiet for the hold time.
+                let hold = (self.cfg.hold_s / self.period_s).ceil() as usize;
+                let end =
+                    (quiet >= hold && n > hold).then(|| n - hold).filter(|start| contact.is_some_and(|c| *start > c));
                 let duration = s.t_s - self.blow[i_trigger].t_s;
-                if let Some(i_end) = self.end_of_blow(i_trigger) {
-                    self.close(i_trigger, i_end, out);
+                if let Some(i_end) = end {
+                    self.close(i_trigger, zero, contact, i_end, out);
                 } else if duration > self.cfg.max_blow_s {
-                    if self.contact_index(i_trigger).is_some() {
+                    if contact.is_some() {
                         self.stats.cut_at_max_length += 1;
                     }
-                    let n = self.blow.len();
-                    self.close(i_trigger, n - 1, out);
+                    self.close(i_trigger, zero, contact, n - 1, out);
+                } else {
+                    self.state = State::InBlow { i_trigger, zero, contact, quiet };
                 }
             }
             State::Refractory { quiet_since } => {
@@ -243,47 +271,26 @@ impl Segmenter {
         self.blow[..n].iter().map(|s| s.load_n).sum::<f64>() / n as f64
     }
 
-    /// First sample whose zeroed load exceeds the contact level.
-    fn contact_index(&self, i_trigger: usize) -> Option<usize> {
-        let zero = self.zero(i_trigger);
-        let first = (i_trigger / 2).max(1).min(self.blow.len());
-        let i = self.blow[first..].iter().position(|s| s.load_n - zero > self.cfg.contact_load_n)? + first;
-        // Walk back to where the load left its noise band (the contact level is set well
-        // above the noise, so the true first contact is a few samples earlier).
+    /// Where the contact search starts: after the zero's window.
+    fn first_searched(i_trigger: usize, len: usize) -> usize {
+        (i_trigger / 2).max(1).min(len)
+    }
+
+    /// From the first sample above the contact level, walk back to where the load left its
+    /// noise band (the contact level is set well above the noise, so the true first
+    /// contact is a few samples earlier).
+    fn walk_back(&self, i: usize, first: usize, zero: f64) -> usize {
         let mut j = i;
         while j > first && self.blow[j - 1].load_n - zero > self.cfg.end_load_n * 0.5 {
             j -= 1;
         }
-        Some(j)
+        j
     }
 
-    /// The blow has ended when, after contact, the load has been quiet for the hold time.
-    fn end_of_blow(&self, i_trigger: usize) -> Option<usize> {
-        let last = *self.blow.last()?;
-        let hold = (self.cfg.hold_s / self.period_s).ceil() as usize;
-        let n = self.blow.len();
-        if n < hold + 1 {
-            return None;
-        }
-        // Cheap test first: the newest sample must be quiet.
-        let zero = self.zero(i_trigger);
-        if last.load_n - zero >= self.cfg.end_load_n {
-            return None;
-        }
-        let start = n - hold;
-        if self.blow[start..].iter().any(|s| s.load_n - zero >= self.cfg.end_load_n) {
-            return None;
-        }
-        let contact = self.contact_index(i_trigger)?;
-        (start > contact).then_some(start)
-    }
-
-    fn close(&mut self, i_trigger: usize, i_end: usize, out: &mut Vec<Blow>) {
-        let contact = self.contact_index(i_trigger);
+    fn close(&mut self, i_trigger: usize, load_zero_n: f64, contact: Option<usize>, i_end: usize, out: &mut Vec<Blow>) {
         match contact {
             Some(i_contact) if i_end > i_contact => {
                 self.stats.blows += 1;
-                let load_zero_n = self.zero(i_trigger);
                 out.push(Blow {
                     samples: std::mem::take(&mut self.blow),
                     i_trigger,
