@@ -2,17 +2,15 @@
 //! MCAP recording that `replay` and `inspect` read, with the process sheet (and, if given,
 //! the machine model) stored in it.
 
-use std::io::BufReader;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use clap::Args;
 
 use super::read_text;
 use crate::config::{parse_machine, parse_process};
 use crate::record::{RecordWriter, Rotation};
-use crate::signal::capture::{CaptureReader, DEFAULT_BATCH_S, blow_files};
 
 #[derive(Debug, Args)]
 pub struct ImportArgs {
@@ -30,18 +28,8 @@ pub struct ImportArgs {
 }
 
 pub fn run(args: ImportArgs) -> anyhow::Result<ExitCode> {
-    let files: Vec<PathBuf> = if args.input.is_dir() {
-        let names = std::fs::read_dir(&args.input)
-            .with_context(|| format!("{}: cannot list", args.input.display()))?
-            .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()));
-        let files: Vec<PathBuf> = blow_files(names).into_iter().map(|n| args.input.join(n)).collect();
-        if files.is_empty() {
-            bail!("{}: no blow_NN.csv files: not a capture directory", args.input.display());
-        }
-        files
-    } else {
-        vec![args.input.clone()]
-    };
+    let files: Vec<PathBuf> =
+        if args.input.is_dir() { super::capture_dir_files(&args.input)? } else { vec![args.input.clone()] };
     let process = args
         .process
         .clone()
@@ -65,13 +53,10 @@ pub fn run(args: ImportArgs) -> anyhow::Result<ExitCode> {
     }
     let mut samples = 0u64;
     for path in &files {
-        let file = std::fs::File::open(path).with_context(|| format!("{}: cannot read", path.display()))?;
-        let mut reader = CaptureReader::new(path.display().to_string(), BufReader::new(file), DEFAULT_BATCH_S)?;
-        while let Some(mut batch) = reader.next_batch()? {
-            batch.source = "capture".to_string();
+        super::for_each_capture_batch(path, |batch| {
             samples += batch.len() as u64;
-            w.write_samples(&batch)?;
-        }
+            Ok(w.write_samples(&batch)?)
+        })?;
     }
     for f in w.finish()? {
         eprintln!("forgemon: imported {samples} samples from {} file(s) into {}", files.len(), f.display());

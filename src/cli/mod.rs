@@ -58,3 +58,34 @@ impl Cli {
 pub(crate) fn read_text(path: &Path) -> anyhow::Result<String> {
     std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))
 }
+
+/// Source name of samples read from capture files: the captures of a directory are one
+/// machine, whatever file each came from.
+pub(crate) const CAPTURE_SOURCE: &str = "capture";
+
+/// The blow files of a capture directory (CONTRACTS.md §1), in blow order.
+pub(crate) fn capture_dir_files(dir: &Path) -> anyhow::Result<Vec<std::path::PathBuf>> {
+    let names = std::fs::read_dir(dir)
+        .with_context(|| format!("{}: cannot list", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()));
+    let files: Vec<_> = crate::signal::capture::blow_files(names).into_iter().map(|n| dir.join(n)).collect();
+    if files.is_empty() {
+        anyhow::bail!("{}: no blow_NN.csv files: not a capture directory", dir.display());
+    }
+    Ok(files)
+}
+
+/// Each batch of a capture file, as the source `CAPTURE_SOURCE`.
+pub(crate) fn for_each_capture_batch(
+    path: &Path,
+    mut f: impl FnMut(crate::signal::sample::SampleBatch) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    use crate::signal::capture::{CaptureReader, DEFAULT_BATCH_S};
+    let file = std::fs::File::open(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let mut reader = CaptureReader::new(path.display().to_string(), std::io::BufReader::new(file), DEFAULT_BATCH_S)?;
+    while let Some(mut batch) = reader.next_batch()? {
+        batch.source = CAPTURE_SOURCE.to_string();
+        f(batch)?;
+    }
+    Ok(())
+}

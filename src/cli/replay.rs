@@ -1,7 +1,7 @@
 //! `forgemon replay` (CONTRACTS.md §5): a recording, a capture CSV or a capture directory
 //! through exactly the live pipeline; one JSON line per blow; `--out` records the replay.
 
-use std::io::{BufReader, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -14,7 +14,6 @@ use crate::daemon::{CONTROL_SOURCE, NEW_BILLET_STATE};
 use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline, PipelineConfig, PipelineEvent};
 use crate::record::{BlowBoundary, Payload, RecordReader, RecordWriter, Rotation};
-use crate::signal::capture::{CaptureReader, DEFAULT_BATCH_S, blow_files};
 use crate::signal::sample::SampleBatch;
 
 #[derive(Debug, Args)]
@@ -151,17 +150,10 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     match input {
         Input::Files(files) => {
             for path in files {
-                let file = std::fs::File::open(&path).with_context(|| format!("{}: cannot read", path.display()))?;
-                let mut reader = CaptureReader::new(path.display().to_string(), BufReader::new(file), DEFAULT_BATCH_S)?;
-                while let Some(mut batch) = reader.next_batch()? {
-                    // One source per input: the captures of a directory are one machine.
-                    batch.source = "capture".to_string();
-                    if let Some(rec) = writer.as_mut() {
-                        rec.write_samples(&batch)?;
-                    }
-                    feeder.push(&batch, &mut events);
-                    handle(&mut events, &mut writer, &mut w)?;
-                }
+                super::for_each_capture_batch(&path, |batch| {
+                    feed_batch(&batch, &mut feeder, &mut writer, &mut events)?;
+                    handle(&mut events, &mut writer, &mut w)
+                })?;
             }
         }
         Input::Recording { mut reader, ahead } => {
@@ -229,14 +221,7 @@ fn feed_batch(
 /// Classify the input and, for a recording, read its samples and stored process sheet.
 fn open_input(path: &Path) -> anyhow::Result<(Input, Option<String>)> {
     if path.is_dir() {
-        let names = std::fs::read_dir(path)
-            .with_context(|| format!("{}: cannot list", path.display()))?
-            .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()));
-        let files: Vec<PathBuf> = blow_files(names).into_iter().map(|n| path.join(n)).collect();
-        if files.is_empty() {
-            bail!("{}: no blow_NN.csv files: not a capture directory", path.display());
-        }
-        return Ok((Input::Files(files), None));
+        return Ok((Input::Files(super::capture_dir_files(path)?), None));
     }
     let name = path.to_string_lossy();
     if name.ends_with(".mcap") || name.ends_with(".mcap.part") {
