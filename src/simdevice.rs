@@ -258,3 +258,78 @@ pub async fn drive_serial<W: tokio::io::AsyncWrite + Unpin>(
     writer.flush().await?;
     Ok(stats)
 }
+
+/// One serial line of a machine whose channels are spread over several DAQs (the load and
+/// accelerometer on one, the ram encoder on another), each on its own crystal.
+#[derive(Debug)]
+pub struct SplitLine<W> {
+    /// The channels this DAQ sends, with the gain and offset the receiver will apply.
+    pub channels: Vec<crate::acquire::ChannelSpec>,
+    /// Send every `decimate`-th sample (a slower DAQ), ≥ 1.
+    pub decimate: usize,
+    /// Device time of the stream's first sample, ns.
+    pub clock_offset_ns: u64,
+    /// How fast the DAQ's crystal runs against true time, ppm (its time stamps and its
+    /// stated sample period both carry it).
+    pub clock_ppm: f64,
+    pub writer: W,
+}
+
+/// Run `sim` to the end, in real time, framing each line's channels (CONTRACTS.md §7) into
+/// its own writer, frames of `frame_samples` samples of the simulated machine.
+/// `on_billet(k, device_ns)` gets the first line's device time where billet k starts.
+pub async fn drive_serial_split<W: tokio::io::AsyncWrite + Unpin>(
+    mut sim: SimMachine,
+    frame_samples: usize,
+    mut lines: Vec<SplitLine<W>>,
+    stop: tokio::sync::watch::Receiver<bool>,
+    mut on_billet: impl FnMut(usize, u64),
+) -> std::io::Result<u64> {
+    use crate::acquire::serial::frame::{Frame, encode_frame};
+    use tokio::io::AsyncWriteExt;
+
+    let rate = sim.sample_rate_hz();
+    let true_period_ns = 1e9 / rate;
+    let frame_dt = std::time::Duration::from_secs_f64(frame_samples as f64 / rate);
+    let start = tokio::time::Instant::now();
+    let (mut frames, mut emitted) = (0u64, 0u64);
+    while !sim.finished() && !*stop.borrow() {
+        let billet_before = sim.billet_of_emitted();
+        let rows = sim.next_rows(frame_samples).map_err(std::io::Error::other)?;
+        if rows.is_empty() {
+            break;
+        }
+        let billet_now = sim.billet_of_emitted();
+        for (k, line) in lines.iter_mut().enumerate() {
+            let d = line.decimate.max(1) as u64;
+            let scale = 1.0 + line.clock_ppm * 1e-6;
+            // The first sample of this frame the line keeps.
+            let first = emitted.div_ceil(d) * d;
+            let kept: Vec<CaptureRow> =
+                rows.iter().enumerate().filter(|(i, _)| (emitted + *i as u64).is_multiple_of(d)).map(|(_, r)| *r).collect();
+            let device_ns = line.clock_offset_ns + (first as f64 * true_period_ns * scale).round() as u64;
+            if k == 0 && billet_now > billet_before && billet_before > 0 {
+                on_billet(billet_now, device_ns);
+            }
+            if kept.is_empty() {
+                continue;
+            }
+            let frame = Frame {
+                channel_count: line.channels.len() as u8,
+                sample_count: kept.len() as u16,
+                sequence: frames as u32,
+                device_time_ns: device_ns,
+                sample_period_ns: (true_period_ns * d as f64 * scale).round() as u32,
+                counts: to_counts(&kept, &line.channels),
+            };
+            line.writer.write_all(&encode_frame(&frame)).await?;
+        }
+        emitted += rows.len() as u64;
+        frames += 1;
+        tokio::time::sleep_until(start + frame_dt * frames as u32).await;
+    }
+    for line in &mut lines {
+        line.writer.flush().await?;
+    }
+    Ok(frames)
+}

@@ -14,6 +14,7 @@ use crate::daemon::{CONTROL_SOURCE, NEW_BILLET_STATE};
 use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline, PipelineConfig, PipelineEvent};
 use crate::record::{BlowBoundary, Payload, RecordReader, RecordWriter, Rotation};
+use crate::signal::merge::Merger;
 use crate::signal::sample::SampleBatch;
 
 #[derive(Debug, Args)]
@@ -86,6 +87,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         None => None,
     };
     let mut feeder = Feeder::new(Pipeline::new(machine, process, PipelineConfig::for_machine(&machine)));
+    let mut input_merge = (Merger::default(), Vec::new());
     let stdout = std::io::stdout();
     let mut w = std::io::BufWriter::new(stdout.lock());
     if !args.json {
@@ -151,7 +153,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         Input::Files(files) => {
             for path in files {
                 super::for_each_capture_batch(&path, |batch| {
-                    feed_batch(&batch, &mut feeder, &mut writer, &mut events)?;
+                    feed_batch(&batch, &mut input_merge, &mut feeder, &mut writer, &mut events)?;
                     handle(&mut events, &mut writer, &mut w)
                 })?;
             }
@@ -160,14 +162,14 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             let mut last_log_ns = 0;
             for batch in &ahead {
                 last_log_ns = batch.host_time_ns;
-                feed_batch(batch, &mut feeder, &mut writer, &mut events)?;
+                feed_batch(batch, &mut input_merge, &mut feeder, &mut writer, &mut events)?;
                 handle(&mut events, &mut writer, &mut w)?;
             }
             for m in reader.by_ref() {
                 match m?.payload {
                     Payload::Samples(batch) => {
                         last_log_ns = batch.host_time_ns;
-                        feed_batch(&batch, &mut feeder, &mut writer, &mut events)?;
+                        feed_batch(&batch, &mut input_merge, &mut feeder, &mut writer, &mut events)?;
                         handle(&mut events, &mut writer, &mut w)?;
                     }
                     // A new billet went into the dies here during the live run.
@@ -204,9 +206,11 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Record a batch (with `--out`) and feed it to the pipeline.
+/// Record a batch (with `--out`) and feed it to the pipeline, through the same merge of
+/// several sources' roles as the live service (`signal::merge`).
 fn feed_batch(
     batch: &SampleBatch,
+    input: &mut (Merger, Vec<SampleBatch>),
     feeder: &mut Feeder,
     writer: &mut Option<RecordWriter>,
     events: &mut Vec<PipelineEvent>,
@@ -214,7 +218,13 @@ fn feed_batch(
     if let Some(rec) = writer.as_mut() {
         rec.write_samples(batch)?;
     }
-    feeder.push(batch, events);
+    let (merger, merged) = input;
+    if merger.push(batch, merged) {
+        feeder.push(batch, events);
+    }
+    for b in merged.drain(..) {
+        feeder.push(&b, events);
+    }
     Ok(())
 }
 

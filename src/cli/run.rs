@@ -10,10 +10,13 @@ use clap::Args;
 use tokio::sync::{mpsc, watch};
 
 use super::read_text;
+use crate::acquire::modbus::Mode;
+use crate::acquire::modbus::registers::Signal;
 use crate::acquire::serial::driver::{SerialConfig, SerialFormat as WireFormat};
 use crate::config::service::{SerialFormat, ServiceConfig, SourceSpec, parse_service};
 use crate::config::{parse_machine, parse_process};
 use crate::daemon::{Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
+use crate::signal::sample::Role;
 
 #[derive(Debug, Args)]
 pub struct RunArgs {
@@ -47,12 +50,49 @@ pub fn load_parts(config_path: &Path) -> anyhow::Result<ServiceParts> {
         None => (None, None),
     };
     // A CAN source's DBC file is read now, so that a bad one stops the start.
+    let mut roles: Vec<(&str, Vec<Role>)> = Vec::new();
     for s in &config.sources {
-        if let SourceSpec::Can(c) = s {
-            c.resolve().with_context(|| format!("source '{}'", c.name))?;
+        let r = match s {
+            SourceSpec::Can(c) => c.resolve().with_context(|| format!("source '{}'", c.name))?.mapping.roles(),
+            SourceSpec::Serial { channels, .. } => channels.iter().map(|c| c.role).collect(),
+            SourceSpec::Modbus(m) => match &m.mode {
+                Mode::Poll => m
+                    .map
+                    .iter()
+                    .filter_map(|r| match r.signal {
+                        Signal::Role(role) => Some(role),
+                        Signal::Named(_) => None,
+                    })
+                    .collect(),
+                Mode::Block { channels, .. } => channels.iter().map(|c| c.role).collect(),
+            },
+        };
+        roles.push((s.name(), r));
+    }
+    check_roles(&config_path.display().to_string(), &roles)?;
+    Ok(ServiceParts { config, config_path: config_path.to_path_buf(), machine, machine_text, process, process_text })
+}
+
+/// Every blow needs the load, the ram position and the acceleration: from one source, or
+/// each from exactly one of several (merged onto the acceleration's timeline,
+/// `signal::merge`). Checked before anything is opened.
+fn check_roles(origin: &str, roles: &[(&str, Vec<Role>)]) -> anyhow::Result<()> {
+    if roles.iter().any(|(_, r)| Role::ALL.iter().all(|x| r.contains(x))) {
+        return Ok(());
+    }
+    for role in Role::ALL {
+        let from: Vec<&str> = roles.iter().filter(|(_, r)| r.contains(&role)).map(|(n, _)| *n).collect();
+        match from.as_slice() {
+            [] => bail!("{origin}: key 'sources': no source gives {role} (a blow needs load_N, disp_m and acc_mps2)"),
+            [_] => {}
+            many => bail!(
+                "{origin}: key 'sources': {role} comes from sources '{}'; with no source giving all three roles, \
+                 give each role from one source",
+                many.join("', '")
+            ),
         }
     }
-    Ok(ServiceParts { config, config_path: config_path.to_path_buf(), machine, machine_text, process, process_text })
+    Ok(())
 }
 
 /// Start a source's task; it stops when `shutdown` turns true.
@@ -121,4 +161,24 @@ pub fn init_logging(default_level: &str) {
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_level));
     let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
     let _ = tracing_subscriber::fmt().with_env_filter(filter).with_ansi(ansi).with_writer(std::io::stderr).try_init();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_roles_must_be_covered_once() {
+        let all = Role::ALL.to_vec();
+        // One source with every role: others may repeat roles (they are recorded only).
+        assert!(check_roles("s.toml", &[("daq", all.clone()), ("spare", vec![Role::Load])]).is_ok());
+        // Split over two sources, each role once: merged.
+        assert!(check_roles("s.toml", &[("daq", vec![Role::Load, Role::Acc]), ("enc", vec![Role::Disp])]).is_ok());
+        let e = check_roles("s.toml", &[("daq", vec![Role::Load, Role::Acc])]).unwrap_err().to_string();
+        assert!(e.contains("s.toml: key 'sources': no source gives disp_m"), "{e}");
+        let e = check_roles("s.toml", &[("a", vec![Role::Load, Role::Acc]), ("b", vec![Role::Disp, Role::Load])])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("load_N comes from sources 'a', 'b'"), "{e}");
+    }
 }

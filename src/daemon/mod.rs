@@ -24,7 +24,7 @@ use crate::physics::machine::Machine;
 use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline, PipelineConfig, PipelineEvent};
 use crate::record::{BlowBoundary, Payload, RecordOptions, RecordWriter, Rotation};
-use crate::signal::sample::{Role, SampleBatch};
+use crate::signal::merge::Merger;
 use status::{SharedStatus, StatusSnapshot};
 
 /// Capacity of the channel from the sources to the service; a full channel drops events
@@ -89,11 +89,6 @@ pub fn host_now_ns() -> i64 {
     SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_nanos() as i64).unwrap_or(0)
 }
 
-/// Whether a batch carries the three roles the pipeline needs (the others are recorded).
-pub fn feeds_pipeline(batch: &SampleBatch) -> bool {
-    Role::ALL.iter().all(|r| batch.channel(*r).is_some())
-}
-
 /// Run the service until SIGTERM/SIGINT, until `stop` turns true, or until every source
 /// has hung up. `shutdown` tells the sources to stop.
 pub async fn serve(
@@ -137,9 +132,10 @@ pub async fn serve(
     ));
     let mut summary = Summary::default();
     let mut events = Vec::new();
-    // Each source's device clock against the host's (reported; merging roles from several
-    // sources on it is not built yet).
-    let mut clocks: std::collections::HashMap<String, crate::signal::align::ClockModel> = Default::default();
+    // The pipeline's input: a source carrying every role as it is, or the roles of several
+    // sources merged onto one timeline through each source's clock model (signal::merge).
+    let mut merger = Merger::default();
+    let mut to_pipeline = Vec::new();
     // A new billet announced for a device time the samples have not reached yet.
     let mut pending_billet: Option<i64> = None;
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
@@ -159,19 +155,17 @@ pub async fn serve(
                         if let Err(e) = writer.write_samples(&batch) {
                             tracing::error!("recording samples: {e}");
                         }
-                        let clock = clocks.entry(batch.source.clone()).or_default();
-                        // The batch's last sample arrived with it.
-                        let last_ns = batch.device_time_ns + (batch.period_ns * batch.len().saturating_sub(1) as f64) as i64;
-                        clock.observe(last_ns, batch.host_time_ns);
-                        status.lock().map(|mut s| s.on_samples(&batch, clock)).ok();
-                        if feeds_pipeline(&batch) {
-                            let batch_end_ns = batch.device_time_ns + (batch.period_ns * batch.len() as f64) as i64;
+                        let direct = merger.push(&batch, &mut to_pipeline);
+                        status.lock().map(|mut s| s.on_samples(&batch, merger.clock(&batch.source), merger.stats())).ok();
+                        for b in direct.then_some(&batch).into_iter().chain(to_pipeline.iter()) {
+                            let batch_end_ns = b.device_time_ns + (b.period_ns * b.len() as f64) as i64;
                             if pending_billet.is_some_and(|at| batch_end_ns > at) {
                                 pending_billet = None;
                                 start_billet(&mut feeder, &mut writer, &status);
                             }
-                            feeder.push(&batch, &mut events);
+                            feeder.push(b, &mut events);
                         }
+                        to_pipeline.clear();
                         for e in events.drain(..) {
                             on_event(e, batch.host_time_ns, &mut writer, &status, &sinks, &mut hooks, &mut summary);
                         }

@@ -16,6 +16,8 @@ use serde::Serialize;
 
 use crate::estimate::BlowEstimate;
 use crate::record::{Gap, Status};
+use crate::signal::align::ClockModel;
+use crate::signal::merge::MergeStats;
 use crate::signal::sample::SampleBatch;
 
 /// Shared between the service loop and the HTTP handlers.
@@ -54,6 +56,9 @@ pub struct StatusSnapshot {
     /// From the host receiving the samples that ended the last blow to its result, ms.
     pub last_result_latency_ms: Option<f64>,
     pub sources: BTreeMap<String, SourceState>,
+    /// Roles merged from several sources onto one timeline (signal::merge), when no
+    /// source carries all three.
+    pub merge: MergeStats,
     pub recording: String,
 }
 
@@ -70,15 +75,17 @@ impl StatusSnapshot {
             last_blow: None,
             last_result_latency_ms: None,
             sources: BTreeMap::new(),
+            merge: MergeStats::default(),
             recording: String::new(),
         }
     }
 
-    pub fn on_samples(&mut self, b: &SampleBatch, clock: &crate::signal::align::ClockModel) {
+    pub fn on_samples(&mut self, b: &SampleBatch, clock: Option<&ClockModel>, merge: MergeStats) {
         self.samples += b.len() as u64;
+        self.merge = merge;
         let s = self.sources.entry(b.source.clone()).or_default();
         s.samples += b.len() as u64;
-        if clock.len() >= 2 {
+        if let Some(clock) = clock.filter(|c| c.len() >= 2) {
             s.clock_drift_ppm = Some(clock.drift_ppm());
             s.clock_offset_s = Some((clock.map(b.device_time_ns) - b.device_time_ns) as f64 * 1e-9);
         }
@@ -137,6 +144,24 @@ impl StatusSnapshot {
             "gauge",
             "1 when the source is connected.",
             per_source(&|s| f64::from(u8::from(s.state == "connected"))),
+        );
+        metric(
+            "merged_samples_total",
+            "counter",
+            "Timeline samples with roles merged from several sources.",
+            vec![(String::new(), self.merge.merged_samples as f64)],
+        );
+        metric(
+            "merge_held_values_total",
+            "counter",
+            "Merged role values held because their source was late.",
+            vec![(String::new(), self.merge.held_values as f64)],
+        );
+        metric(
+            "merge_dropped_samples_total",
+            "counter",
+            "Timeline samples dropped because a role's source had sent nothing.",
+            vec![(String::new(), self.merge.dropped_samples as f64)],
         );
         metric("blows_total", "counter", "Blows estimated.", vec![(String::new(), self.blows as f64)]);
         metric("alerts_total", "counter", "Alerts raised.", vec![(String::new(), self.alerts as f64)]);

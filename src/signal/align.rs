@@ -78,6 +78,11 @@ impl ClockModel {
         }
     }
 
+    /// Host ns per device ns.
+    pub fn rate(&self) -> f64 {
+        self.rate
+    }
+
     /// Device clock drift against the host, ppm (positive: the device runs slow).
     pub fn drift_ppm(&self) -> f64 {
         (self.rate - 1.0) * 1e6

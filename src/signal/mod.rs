@@ -3,5 +3,6 @@
 
 pub mod align;
 pub mod capture;
+pub mod merge;
 pub mod sample;
 pub mod segment;
