@@ -305,8 +305,12 @@ pub async fn drive_serial_split<W: tokio::io::AsyncWrite + Unpin>(
             let scale = 1.0 + line.clock_ppm * 1e-6;
             // The first sample of this frame the line keeps.
             let first = emitted.div_ceil(d) * d;
-            let kept: Vec<CaptureRow> =
-                rows.iter().enumerate().filter(|(i, _)| (emitted + *i as u64).is_multiple_of(d)).map(|(_, r)| *r).collect();
+            let kept: Vec<CaptureRow> = rows
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| (emitted + *i as u64).is_multiple_of(d))
+                .map(|(_, r)| *r)
+                .collect();
             let device_ns = line.clock_offset_ns + (first as f64 * true_period_ns * scale).round() as u64;
             if k == 0 && billet_now > billet_before && billet_before > 0 {
                 on_billet(billet_now, device_ns);

@@ -232,6 +232,18 @@ fn alerts_reach_the_webhook_and_the_status_endpoint_tells_the_state() {
     assert_eq!(alert["kind"], "elastic_blow");
     assert_eq!(alert["blow"], 7);
     assert!(alert["reason"].as_str().unwrap().contains("hard"));
+    // The status shows when the webhook answered, counted from the samples that ended the
+    // blow (a figure for the note, not a timed assertion; the webhook task runs after the
+    // handler replied, so poll briefly).
+    let deadline = Instant::now() + Duration::from_secs(2);
+    let hook_ms = loop {
+        if let Some(ms) = status(svc.http)["last_webhook_latency_ms"].as_f64() {
+            break ms;
+        }
+        assert!(Instant::now() < deadline, "no webhook latency in {}", status(svc.http));
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    eprintln!("end of blow to webhook answered: {hook_ms:.3} ms");
     let metrics = http_get(svc.http, "/metrics").unwrap();
     assert!(metrics.contains("forgemon_blows_total 8"), "{metrics}");
     assert!(metrics.contains("forgemon_source_up{source=\"daq\"} 1"), "{metrics}");

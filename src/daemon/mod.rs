@@ -269,7 +269,7 @@ fn on_event(
                 summary.alerts += 1;
                 tracing::warn!(kind = alert.kind.as_str(), blow = alert.blow, "{}", alert.reason);
                 let _ = writer.write_alert(log_time_ns, alert);
-                sinks.fire(alert);
+                sinks.fire(alert, log_time_ns, status);
             }
             if let Some(f) = hooks.on_blow.as_mut() {
                 f(&estimate);

@@ -22,15 +22,21 @@ impl Sinks {
         Sinks { webhook, coil }
     }
 
-    /// Send `alert` to every sink, without waiting.
-    pub fn fire(&self, alert: &Alert) {
+    /// Send `alert` to every sink, without waiting. `since_host_ns` is when the samples that
+    /// ended the blow arrived: the status shows how long after that the webhook answered.
+    pub fn fire(&self, alert: &Alert, since_host_ns: i64, status: &super::status::SharedStatus) {
         if let Some(url) = self.webhook.clone() {
             let body = serde_json::to_string(alert).unwrap_or_default();
+            let status = status.clone();
             tokio::task::spawn_blocking(move || {
                 let agent: ureq::Agent =
                     ureq::Agent::config_builder().timeout_global(Some(SINK_TIMEOUT)).build().into();
-                if let Err(e) = agent.post(&url).header("content-type", "application/json").send(body.as_bytes()) {
-                    tracing::error!("webhook {url}: {e}");
+                match agent.post(&url).header("content-type", "application/json").send(body.as_bytes()) {
+                    Ok(_) => {
+                        let ms = (super::host_now_ns() - since_host_ns) as f64 * 1e-6;
+                        status.lock().map(|mut s| s.last_webhook_latency_ms = Some(ms)).ok();
+                    }
+                    Err(e) => tracing::error!("webhook {url}: {e}"),
                 }
             });
         }

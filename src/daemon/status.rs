@@ -55,6 +55,9 @@ pub struct StatusSnapshot {
     pub last_blow: Option<BlowEstimate>,
     /// From the host receiving the samples that ended the last blow to its result, ms.
     pub last_result_latency_ms: Option<f64>,
+    /// From the host receiving the samples that ended the last alerting blow to the
+    /// webhook's answer, ms.
+    pub last_webhook_latency_ms: Option<f64>,
     pub sources: BTreeMap<String, SourceState>,
     /// Roles merged from several sources onto one timeline (signal::merge), when no
     /// source carries all three.
@@ -74,6 +77,7 @@ impl StatusSnapshot {
             last_class: None,
             last_blow: None,
             last_result_latency_ms: None,
+            last_webhook_latency_ms: None,
             sources: BTreeMap::new(),
             merge: MergeStats::default(),
             recording: String::new(),
