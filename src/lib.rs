@@ -7,6 +7,7 @@ pub mod cli;
 pub mod config;
 pub mod daemon;
 pub mod estimate;
+pub mod identify;
 pub mod physics;
 pub mod pipeline;
 pub mod record;

@@ -105,9 +105,30 @@ pub fn synth_blows(
     v0s_mps: &[f64],
     spec: &CaptureSpec,
 ) -> Result<Vec<SynthBlow>, SequenceError> {
-    let dt = 1.0 / spec.sample_rate_hz;
-    let opts = SimOptions { post_s: spec.post_s, trace_dt_s: Some(dt), ..SimOptions::default() };
+    let opts = SimOptions { post_s: spec.post_s, trace_dt_s: Some(1.0 / spec.sample_rate_hz), ..SimOptions::default() };
     let results = simulate_sequence(machine, effects, process, v0s_mps, &opts)?;
+    Ok(render(results, spec))
+}
+
+/// Bare strikes (tool on tool, no billet: the press paper's §3.1 reference) at `v0s_mps`,
+/// rendered as triggered captures like `synth_blows`.
+pub fn synth_bare(
+    machine: &Machine,
+    effects: &EffectSet,
+    v0s_mps: &[f64],
+    spec: &CaptureSpec,
+) -> Result<Vec<SynthBlow>, crate::physics::blow::BlowError> {
+    let opts = SimOptions { post_s: spec.post_s, trace_dt_s: Some(1.0 / spec.sample_rate_hz), ..SimOptions::default() };
+    let results = v0s_mps
+        .iter()
+        .map(|&v| crate::physics::sequence::simulate_bare(machine, effects, v, &opts))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(render(results, spec))
+}
+
+/// Each simulated blow as the DAQ would have recorded it.
+fn render(results: Vec<BlowResult>, spec: &CaptureSpec) -> Vec<SynthBlow> {
+    let dt = 1.0 / spec.sample_rate_hz;
     let mut rng = StdRng::seed_from_u64(spec.seed);
     let s = spec.sensors;
     let load_noise = Normal::new(0.0, s.load_sd_n).expect("finite sd");
@@ -148,7 +169,7 @@ pub fn synth_blows(
         }
         out.push(SynthBlow { rows, truth, t_contact_s: t_contact });
     }
-    Ok(out)
+    out
 }
 
 /// Samples of a machine at rest between blows: load noise around an offset, the ram still,

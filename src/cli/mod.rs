@@ -7,6 +7,7 @@ use anyhow::Context;
 use clap::{Parser, Subcommand};
 
 pub mod demo;
+pub mod identify;
 pub mod import;
 pub mod inspect;
 pub mod replay;
@@ -26,6 +27,8 @@ pub struct Cli {
 pub enum Command {
     /// Simulate consecutive blows on a billet (or bare strikes) with the machine model.
     Simulate(simulate::SimulateArgs),
+    /// Fit the machine model to reference blows (or bare strikes), with uncertainty.
+    Identify(identify::IdentifyArgs),
     /// Run a recording, capture CSV or capture directory through the live pipeline.
     Replay(replay::ReplayArgs),
     /// Turn capture CSV files or a capture directory into an MCAP recording.
@@ -44,6 +47,7 @@ impl Cli {
     pub fn run(self) -> anyhow::Result<std::process::ExitCode> {
         match self.command {
             Command::Simulate(args) => simulate::run(args),
+            Command::Identify(args) => identify::run(args),
             Command::Replay(args) => replay::run(args),
             Command::Import(args) => import::run(args),
             Command::Inspect(args) => inspect::run(args),

@@ -71,7 +71,8 @@ pub struct SimulateArgs {
     pub trace_dt: f64,
     /// Also write the blows as a capture directory (blow_01.csv, ..., process.toml), the way a
     /// DAQ would have recorded them: approach, sensor offset and noise, 10 µm encoder.
-    #[arg(long, value_name = "DIR", conflicts_with = "bare")]
+    /// With --bare: bare strikes, blow_01.csv, ..., without a process sheet.
+    #[arg(long, value_name = "DIR")]
     pub captures: Option<PathBuf>,
     /// Seed of the capture noise.
     #[arg(long, default_value_t = DEFAULT_SEED, requires = "captures")]
@@ -151,6 +152,12 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
             })
             .collect::<anyhow::Result<_>>()?;
         out["strikes"] = results.iter().enumerate().map(|(i, r)| strike_json(i + 1, r)).collect();
+        if let Some(dir) = &args.captures {
+            let spec = capture_spec(inputs.machine.machine.kind(), args.capture_seed);
+            let strikes = crate::synth::synth_bare(&inputs.machine.machine, &inputs.set, &args.v0, &spec)?;
+            write_capture_files(dir, &strikes)
+                .with_context(|| format!("{}: cannot write the capture directory", dir.display()))?;
+        }
     } else {
         let process_path = args.process.as_ref().context("--process is required without --bare")?;
         let process = load_process(process_path, &inputs.machine, &args.machine)?;
@@ -243,18 +250,27 @@ fn write_captures(
     process_path: &Path,
     args: &SimulateArgs,
 ) -> anyhow::Result<()> {
-    let spec = match inputs.machine.machine.kind() {
-        MachineKind::Hammer => CaptureSpec::hammer(args.capture_seed),
-        MachineKind::ScrewPress => CaptureSpec::press(args.capture_seed),
-    };
+    let spec = capture_spec(inputs.machine.machine.kind(), args.capture_seed);
     let blows = synth_blows(&inputs.machine.machine, &inputs.set, process, &args.v0, &spec)?;
+    write_capture_files(dir, &blows)?;
+    std::fs::copy(process_path, dir.join("process.toml"))?;
+    Ok(())
+}
+
+fn capture_spec(kind: MachineKind, seed: u64) -> CaptureSpec {
+    match kind {
+        MachineKind::Hammer => CaptureSpec::hammer(seed),
+        MachineKind::ScrewPress => CaptureSpec::press(seed),
+    }
+}
+
+fn write_capture_files(dir: &Path, blows: &[crate::synth::SynthBlow]) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir)?;
     for (i, b) in blows.iter().enumerate() {
         let mut w = std::io::BufWriter::new(std::fs::File::create(dir.join(format!("blow_{:02}.csv", i + 1)))?);
         write_capture(&mut w, &b.rows)?;
         w.flush()?;
     }
-    std::fs::copy(process_path, dir.join("process.toml"))?;
     Ok(())
 }
 

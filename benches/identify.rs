@@ -1,0 +1,61 @@
+//! Speed of identification (issue #5 target: a hammer from one reference blow in ≤ 5 s on
+//! the 2-core machine): the whole `identify` (8 starts, envelope then full objective,
+//! uncertainty, 200 Monte Carlo draws for the bands), and one evaluation of the objective.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use forgemon::config::{parse_machine, parse_process};
+use forgemon::identify::model::default_prior;
+use forgemon::identify::objective::{Objective, Reference, Setting};
+use forgemon::identify::{IdentifyConfig, identify};
+use forgemon::physics::EffectSet;
+use forgemon::physics::machine::MachineKind;
+use forgemon::signal::sample::{Role, SampleBatch};
+use forgemon::signal::segment::{SegmentConfig, Segmenter};
+use forgemon::synth::{CaptureSpec, synth_blows};
+
+/// Blow 1 of a hammer unlike the paper's, as a reference.
+fn reference() -> (Reference, Setting) {
+    let m = parse_machine("m", "kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n")
+        .unwrap()
+        .machine;
+    let p = parse_process("p", include_str!("../config/steel-16NiCrMo13.process.toml")).unwrap();
+    let b = &synth_blows(&m, &EffectSet::NONE, &p, &[4.2], &CaptureSpec::hammer(3)).unwrap()[0];
+    let batch = SampleBatch {
+        source: "c".into(),
+        seq: 0,
+        device_time_ns: 0,
+        host_time_ns: 0,
+        period_ns: 1e4,
+        roles: Role::ALL.to_vec(),
+        values: b.rows.iter().flat_map(|r| [r.load_n, r.disp_m, r.acc_mps2]).collect(),
+    };
+    let mut seg = Segmenter::new(SegmentConfig::for_kind(MachineKind::Hammer));
+    let mut blows = Vec::new();
+    seg.push(&batch, &mut blows);
+    seg.finish(&mut blows);
+    (Reference::from_blow("blow_01", &blows[0], Some(1), 0.01).unwrap(), Setting::Billet(p))
+}
+
+fn bench(c: &mut Criterion) {
+    let (r, setting) = reference();
+    let prior = default_prior(MachineKind::Hammer);
+    let mut g = c.benchmark_group("identify");
+    g.sample_size(10);
+    g.bench_function("hammer_one_blow_8_starts_mc200", |b| {
+        b.iter(|| {
+            identify(vec![r.clone()], Vec::new(), setting.clone(), prior, &IdentifyConfig::default(), &|| {}).unwrap()
+        })
+    });
+    let obj = Objective::new(vec![r.clone()], vec![true], setting.clone(), MachineKind::Hammer);
+    g.bench_function("objective_one_evaluation", |b| {
+        let mut out = Vec::new();
+        b.iter(|| {
+            out.clear();
+            obj.residuals(&prior, &mut out)
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,249 @@
+//! The bounded fit: Levenberg–Marquardt (the `levenberg-marquardt` crate, a MINPACK port)
+//! on the transformed parameters of `model`, from several starting points (multi-start),
+//! with the Jacobian by forward differences, each column a simulation run in parallel.
+//! Then the uncertainty: the covariance of ln p from the Jacobian at the optimum, inflated
+//! for residuals that are correlated in time, the correlations, and which parameters the
+//! data determines.
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+use rayon::prelude::*;
+
+use super::model::ParamSet;
+use super::objective::Objective;
+
+/// Residual given to a simulation that failed (pushes the search away, never NaN).
+const FAILED_RESIDUAL: f64 = 1e3;
+/// Forward-difference step in u.
+const FD_STEP: f64 = 1e-4;
+/// The starts beyond the prior are drawn log-uniformly over this central fraction of each
+/// parameter's log-range (bounds: 1/20 to 20 times the prior: starts from ~1/6 to 6 times).
+const START_SPREAD: f64 = 0.6;
+/// A parameter is "determined" when its relative standard error is below this...
+pub const DETERMINED_REL_SE: f64 = 0.05;
+/// ... and it is not at a bound. A correlation above this is named in the note: the data
+/// separates the pair only through the uncertainty already in the standard error.
+pub const NOTED_CORR: f64 = 0.95;
+
+struct Problem<'a> {
+    obj: &'a Objective,
+    set: &'a ParamSet,
+    u: DVector<f64>,
+    r: DVector<f64>,
+}
+
+impl<'a> Problem<'a> {
+    fn new(obj: &'a Objective, set: &'a ParamSet, u: DVector<f64>) -> Self {
+        let r = residuals(obj, set, u.as_slice());
+        Problem { obj, set, u, r }
+    }
+}
+
+fn residuals(obj: &Objective, set: &ParamSet, u: &[f64]) -> DVector<f64> {
+    let m = set.machine(&set.from_u(u));
+    let mut out = Vec::with_capacity(obj.len());
+    if !obj.residuals(&m, &mut out) {
+        out = vec![FAILED_RESIDUAL; obj.len()];
+    }
+    DVector::from_vec(out)
+}
+
+/// Forward-difference Jacobian of the residuals in u, columns in parallel.
+fn jacobian(obj: &Objective, set: &ParamSet, u: &[f64], r0: &DVector<f64>) -> DMatrix<f64> {
+    let cols: Vec<DVector<f64>> = (0..u.len())
+        .into_par_iter()
+        .map(|j| {
+            let mut up = u.to_vec();
+            up[j] += FD_STEP;
+            (residuals(obj, set, &up) - r0) / FD_STEP
+        })
+        .collect();
+    DMatrix::from_columns(&cols)
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.u.copy_from(x);
+        self.r = residuals(self.obj, self.set, self.u.as_slice());
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.u.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        Some(self.r.clone())
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        Some(jacobian(self.obj, self.set, self.u.as_slice(), &self.r))
+    }
+}
+
+/// One local search.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Run {
+    pub start: Vec<f64>,
+    pub values: Vec<f64>,
+    /// Sum of squared weighted residuals.
+    pub cost: f64,
+    pub evaluations: usize,
+}
+
+/// Levenberg–Marquardt from `start` (parameter values).
+pub fn local_fit(obj: &Objective, set: &ParamSet, start: &[f64]) -> Run {
+    let u0 = DVector::from_vec(set.to_u(start));
+    let (p, report) = LevenbergMarquardt::new()
+        .with_ftol(1e-10)
+        .with_xtol(1e-9)
+        .with_patience(60)
+        .minimize(Problem::new(obj, set, u0));
+    let cost = p.r.norm_squared();
+    Run { start: start.to_vec(), values: set.from_u(p.u.as_slice()), cost, evaluations: report.number_of_evaluations }
+}
+
+/// The starting points: the prior's values, then `n - 1` drawn log-uniformly (seeded).
+pub fn starts(set: &ParamSet, first: &[f64], n: usize, seed: u64) -> Vec<Vec<f64>> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let mut out = vec![first.to_vec()];
+    for _ in 1..n.max(1) {
+        out.push(
+            set.params
+                .iter()
+                .zip(first)
+                .map(|(p, v)| {
+                    let half = 0.5 * START_SPREAD * (p.hi.ln() - p.lo.ln());
+                    let centre = v.ln().clamp(p.lo.ln() + half, p.hi.ln() - half);
+                    (centre + rng.random_range(-half..=half)).exp()
+                })
+                .collect(),
+        );
+    }
+    out
+}
+
+/// Uncertainty of a fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Uncertainty {
+    /// Covariance of ln p (so its diagonal's roots are relative standard errors).
+    pub cov_ln: DMatrix<f64>,
+    pub rel_se: Vec<f64>,
+    pub correlations: Vec<Vec<f64>>,
+    /// Lag-1 autocorrelation of the load residuals and the variance inflation applied.
+    pub residual_lag1: f64,
+    pub inflation: f64,
+    pub determined: Vec<bool>,
+    pub notes: Vec<String>,
+}
+
+/// Covariance at the optimum `values`: s²·(JᵀJ)⁺ in ln p, with s² = cost/(n − p) and the
+/// variance inflated by (1 + ρ)/(1 − ρ) for residuals correlated in time (ρ the lag-1
+/// autocorrelation): neighbouring load samples are not independent measurements.
+pub fn uncertainty(obj: &Objective, set: &ParamSet, values: &[f64]) -> Uncertainty {
+    let u = set.to_u(values);
+    let r0 = residuals(obj, set, &u);
+    let mut j = jacobian(obj, set, &u, &r0);
+    for (c, p) in set.params.iter().enumerate() {
+        let d = p.dlnp_du(u[c]);
+        j.column_mut(c).scale_mut(1.0 / d);
+    }
+    let (n, np) = (r0.len() as f64, values.len() as f64);
+    let s2 = r0.norm_squared() / (n - np).max(1.0);
+    let rho = lag1(r0.as_slice());
+    let inflation = ((1.0 + rho) / (1.0 - rho)).clamp(1.0, 1e4);
+    let jtj = j.transpose() * &j;
+    // (JᵀJ)⁻¹ through its eigenvectors: a direction the data does not constrain (an
+    // eigenvalue ~0) gives the parameters along it an infinite variance, where a
+    // pseudo-inverse would quietly report zero.
+    let eig = jtj.clone().symmetric_eigen();
+    let lmax = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
+    let np_ = values.len();
+    let mut cov_ln = DMatrix::zeros(np_, np_);
+    let mut unconstrained = vec![false; np_];
+    for (e, lambda) in eig.eigenvalues.iter().enumerate() {
+        let v = eig.eigenvectors.column(e);
+        if *lambda > 1e-12 * lmax && lambda.is_finite() {
+            cov_ln += v * v.transpose() * (s2 * inflation / lambda);
+        } else {
+            for (i, flag) in unconstrained.iter_mut().enumerate() {
+                *flag |= v[i].abs() > 0.05;
+            }
+        }
+    }
+    for (i, flag) in unconstrained.iter().enumerate() {
+        if *flag {
+            cov_ln[(i, i)] = f64::INFINITY;
+        }
+    }
+    let k = values.len();
+    let rel_se: Vec<f64> = (0..k).map(|i| cov_ln[(i, i)].max(0.0).sqrt()).collect();
+    let correlations: Vec<Vec<f64>> = (0..k)
+        .map(|a| {
+            (0..k)
+                .map(|b| if a == b { 1.0 } else { cov_ln[(a, b)] / (rel_se[a] * rel_se[b]).max(f64::MIN_POSITIVE) })
+                .collect()
+        })
+        .collect();
+    let mut determined = Vec::new();
+    let mut notes = Vec::new();
+    for i in 0..k {
+        let p = &set.params[i];
+        let worst =
+            (0..k).filter(|&b| b != i).max_by(|&a, &b| correlations[i][a].abs().total_cmp(&correlations[i][b].abs()));
+        let mut note = Vec::new();
+        if p.at_bound(values[i]) {
+            note.push(format!("at the search bound [{:.3e}, {:.3e}]", p.lo, p.hi));
+        }
+        if rel_se[i].is_nan() || rel_se[i] >= DETERMINED_REL_SE {
+            note.push(format!("relative standard error {:.1} %", rel_se[i] * 100.0));
+        }
+        determined.push(note.is_empty());
+        if let Some(b) = worst.filter(|&b| correlations[i][b].abs() > NOTED_CORR) {
+            note.push(format!("correlated with {} (r = {:.3})", set.params[b].key, correlations[i][b]));
+        }
+        notes.push(note.join("; "));
+    }
+    Uncertainty { cov_ln, rel_se, correlations, residual_lag1: rho, inflation, determined, notes }
+}
+
+/// Lag-1 autocorrelation of a sequence.
+fn lag1(r: &[f64]) -> f64 {
+    let n = r.len();
+    if n < 3 {
+        return 0.0;
+    }
+    let mean = r.iter().sum::<f64>() / n as f64;
+    let var: f64 = r.iter().map(|x| (x - mean).powi(2)).sum();
+    let cov: f64 = r.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum();
+    if var > 0.0 { (cov / var).clamp(-0.99, 0.99) } else { 0.0 }
+}
+
+/// Parameter sets drawn from the fit's uncertainty: ln p ~ N(ln p̂, cov) (the hammer
+/// paper's Monte Carlo study of §2.5, on the identified parameters), clamped to the bounds.
+pub fn draw(set: &ParamSet, values: &[f64], cov_ln: &DMatrix<f64>, n: usize, seed: u64) -> Vec<Vec<f64>> {
+    let k = values.len();
+    let l = cov_ln.clone().cholesky().map(|c| c.l()).unwrap_or_else(|| {
+        DMatrix::from_diagonal(&DVector::from_iterator(k, (0..k).map(|i| cov_ln[(i, i)].max(0.0).sqrt())))
+    });
+    let mut rng = StdRng::seed_from_u64(seed);
+    let normal = rand_distr::StandardNormal;
+    (0..n)
+        .map(|_| {
+            let z =
+                DVector::from_iterator(k, (0..k).map(|_| rand_distr::Distribution::<f64>::sample(&normal, &mut rng)));
+            let d = &l * z;
+            set.params
+                .iter()
+                .zip(values)
+                .enumerate()
+                .map(|(i, (p, v))| (v.ln() + d[i]).exp().clamp(p.lo, p.hi))
+                .collect()
+        })
+        .collect()
+}

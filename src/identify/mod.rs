@@ -1,0 +1,250 @@
+//! Identification (issue #5): fit a machine model to measured reference blows, as both
+//! papers do by hand: a billet blow with a known process sheet (hammer paper §2.3–2.5) or
+//! bare strikes (press paper §2.3, §3.1–3.2). The objective is the press paper's eq. 4
+//! (`objective`), the search Levenberg–Marquardt on bounded, log-scaled parameters from
+//! several starts (`fit`, `model`), and the result comes with standard errors,
+//! correlations, a verdict on which parameters the data determines, and Monte Carlo bands
+//! of the predicted load. Pure: the caller reads the files and writes the results.
+
+pub mod fit;
+pub mod model;
+pub mod objective;
+
+use rayon::prelude::*;
+
+use crate::physics::machine::Machine;
+use fit::{Run, Uncertainty};
+use model::ParamSet;
+use objective::{Fidelity, Objective, Reference, Setting, Simulated};
+
+/// How to search.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IdentifyConfig {
+    /// Local searches: the prior plus `starts - 1` random ones.
+    pub starts: usize,
+    pub seed: u64,
+    /// Monte Carlo draws for the load bands (0: none).
+    pub monte_carlo: usize,
+}
+
+impl Default for IdentifyConfig {
+    fn default() -> Self {
+        IdentifyConfig { starts: 8, seed: 1, monte_carlo: 200 }
+    }
+}
+
+/// A fitted reference (or a held-out one, predicted).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FittedBlow {
+    pub reference: Reference,
+    pub model: Simulated,
+    /// 2.5 % and 97.5 % of the Monte Carlo loads at each sample.
+    pub band: Option<(Vec<f64>, Vec<f64>)>,
+    /// RMS of measured − model over the blow, fraction of the measured peak.
+    pub rms_error: f64,
+    pub held_out: bool,
+}
+
+/// The result of an identification.
+#[derive(Debug, Clone)]
+pub struct Identified {
+    pub set: ParamSet,
+    pub machine: Machine,
+    pub values: Vec<f64>,
+    pub uncertainty: Uncertainty,
+    /// Eq. 4 at the optimum (mean over the references).
+    pub objective: f64,
+    pub runs: Vec<Run>,
+    /// Runs that reached within 1 % of the best cost.
+    pub runs_agreeing: usize,
+    pub blows: Vec<FittedBlow>,
+    /// Spectra of each blow (fitted and held out): bin frequencies, measured, model.
+    pub spectra: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)>,
+}
+
+/// Why identification failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum IdentifyError {
+    #[error("no reference blow to fit")]
+    NoReference,
+    #[error("the model cannot simulate the references with the fitted parameters")]
+    Simulation,
+}
+
+/// Fit `prior`'s parameters to `refs`; `held_out` are only predicted. `progress` is told
+/// each finished local search and Monte Carlo draw.
+pub fn identify(
+    refs: Vec<Reference>,
+    held_out: Vec<Reference>,
+    setting: Setting,
+    prior: Machine,
+    cfg: &IdentifyConfig,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Identified, IdentifyError> {
+    if refs.is_empty() {
+        return Err(IdentifyError::NoReference);
+    }
+    let bare = matches!(setting, Setting::Bare);
+    let set = ParamSet::new(prior, bare);
+    // Every blow in order (a billet's height carries from blow to blow); the held-out ones
+    // are simulated but not fitted.
+    let mut all: Vec<(Reference, bool)> =
+        refs.into_iter().map(|r| (r, true)).chain(held_out.into_iter().map(|r| (r, false))).collect();
+    all.sort_by_key(|(r, _)| r.blow_index.unwrap_or(0));
+    let (all_refs, fitted): (Vec<Reference>, Vec<bool>) = all.into_iter().unzip();
+    let obj = Objective::new(all_refs, fitted.clone(), setting, prior.kind());
+    let first = set.values_of(&prior);
+    // Global stage: local searches on the ring-free envelope from every start; then the
+    // full objective from where each ended (objective::Fidelity explains why).
+    let envelope = obj.with_fidelity(Fidelity::Envelope);
+    let runs: Vec<Run> = fit::starts(&set, &first, cfg.starts, cfg.seed)
+        .into_par_iter()
+        .map(|s| {
+            let coarse = fit::local_fit(&envelope, &set, &s);
+            let mut r = fit::local_fit(&obj, &set, &coarse.values);
+            r.start = s;
+            r.evaluations += coarse.evaluations;
+            progress();
+            r
+        })
+        .collect();
+    let best = runs.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)).ok_or(IdentifyError::NoReference)?.clone();
+    let runs_agreeing = runs.iter().filter(|r| r.cost <= best.cost * 1.01).count();
+    let machine = set.machine(&best.values);
+    let uncertainty = fit::uncertainty(&obj, &set, &best.values);
+    let sims = obj.simulate(&machine).ok_or(IdentifyError::Simulation)?;
+    let (of, rms) = obj.report(&sims);
+
+    // Monte Carlo bands from the parameter covariance.
+    let draws = fit::draw(&set, &best.values, &uncertainty.cov_ln, cfg.monte_carlo, cfg.seed ^ 0x5eed);
+    let mc: Vec<Vec<Simulated>> = draws
+        .par_iter()
+        .filter_map(|v| {
+            let s = obj.simulate(&set.machine(v));
+            progress();
+            s
+        })
+        .collect();
+    let band = |k: usize| -> Option<(Vec<f64>, Vec<f64>)> {
+        if mc.len() < 10 {
+            return None;
+        }
+        let n = mc[0][k].load_n.len();
+        let (mut lo, mut hi) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        let mut col = Vec::with_capacity(mc.len());
+        for i in 0..n {
+            col.clear();
+            col.extend(mc.iter().map(|r| r[k].load_n[i]));
+            col.sort_by(f64::total_cmp);
+            lo.push(col[(0.025 * (col.len() - 1) as f64).round() as usize]);
+            hi.push(col[(0.975 * (col.len() - 1) as f64).round() as usize]);
+        }
+        Some((lo, hi))
+    };
+    let mut blows = Vec::new();
+    let mut spectra = Vec::new();
+    for (k, (r, s)) in obj.refs.iter().zip(&sims).enumerate() {
+        spectra.push((
+            (0..s.spectrum.len()).map(|j| obj.bin_hz(k, j)).collect(),
+            obj.measured_spectrum(k).to_vec(),
+            s.spectrum.clone(),
+        ));
+        blows.push(FittedBlow {
+            reference: r.clone(),
+            model: s.clone(),
+            band: band(k),
+            rms_error: rms[k],
+            held_out: !fitted[k],
+        });
+    }
+    Ok(Identified {
+        set,
+        machine,
+        values: best.values,
+        uncertainty,
+        objective: of,
+        runs,
+        runs_agreeing,
+        blows,
+        spectra,
+    })
+}
+
+impl Identified {
+    /// `machine.toml` (CONTRACTS.md §3) with the fit's uncertainty and quality as extra
+    /// keys under `[identify]`.
+    pub fn to_toml(&self, provenance: &str) -> String {
+        use std::fmt::Write as _;
+        let mut s = String::new();
+        let _ = writeln!(s, "# Identified by `forgemon identify` from {provenance}.");
+        let _ = writeln!(s, "# Standard errors are 1 sigma; parameters marked not determined are not to be trusted.");
+        let _ = writeln!(s, "kind = \"{}\"", self.set.kind.as_str());
+        let keys: Vec<&str> = match self.set.kind {
+            crate::physics::machine::MachineKind::Hammer => {
+                let mut k = vec!["m1_kg", "m2_kg", "k_N_per_m", "c_Ns_per_m"];
+                if self.set.params.iter().any(|p| p.key == "k_tool_contact_N_per_m") {
+                    k.push("k_tool_contact_N_per_m");
+                }
+                k
+            }
+            crate::physics::machine::MachineKind::ScrewPress => vec![
+                "m_tool_kg",
+                "m_ram_kg",
+                "k_link_N_per_m",
+                "c_link_Ns_per_m",
+                "k_frame_N_per_m",
+                "c_frame_Ns_per_m",
+                "k_sensor_N_per_m",
+            ],
+        };
+        for key in keys {
+            let v = model::get(&self.machine, key);
+            let note = match self.set.params.iter().position(|p| p.key == key) {
+                Some(i) if self.uncertainty.determined[i] => {
+                    format!("# ± {:.3} % {}", self.uncertainty.rel_se[i] * 100.0, self.uncertainty.notes[i])
+                }
+                Some(i) => format!("# NOT DETERMINED: {}", self.uncertainty.notes[i]),
+                None => "# held (not fitted)".to_string(),
+            };
+            let _ = writeln!(s, "{key} = {v:.6e}  {note}");
+        }
+        let _ = writeln!(s, "\n[identify]");
+        let _ = writeln!(s, "source = {:?}", provenance);
+        let _ = writeln!(s, "objective_eq4 = {:.6}", self.objective);
+        let fitted: Vec<f64> = self.blows.iter().filter(|b| !b.held_out).map(|b| b.rms_error).collect();
+        let _ = writeln!(
+            s,
+            "rms_load_error = {:.6}  # RMS of measured - model over the fitted blows, fraction of peak",
+            mean(&fitted)
+        );
+        let held: Vec<f64> = self.blows.iter().filter(|b| b.held_out).map(|b| b.rms_error).collect();
+        if !held.is_empty() {
+            let _ = writeln!(s, "rms_load_error_held_out = {:.6}", mean(&held));
+        }
+        let _ = writeln!(s, "starts = {}", self.runs.len());
+        let _ = writeln!(s, "starts_agreeing = {}", self.runs_agreeing);
+        let _ = writeln!(s, "residual_lag1 = {:.4}", self.uncertainty.residual_lag1);
+        let _ = writeln!(s, "\n[identify.std_error]  # absolute, 1 sigma");
+        for (i, p) in self.set.params.iter().enumerate() {
+            let _ = writeln!(s, "{} = {:.4e}", p.key, self.values[i] * self.uncertainty.rel_se[i]);
+        }
+        let _ = writeln!(s, "\n[identify.determined]");
+        for (i, p) in self.set.params.iter().enumerate() {
+            let _ = writeln!(s, "{} = {}", p.key, self.uncertainty.determined[i]);
+        }
+        let _ = writeln!(s, "\n[identify.correlation]  # pairs with |r| > 0.5");
+        for a in 0..self.values.len() {
+            for b in a + 1..self.values.len() {
+                let r = self.uncertainty.correlations[a][b];
+                if r.abs() > 0.5 {
+                    let _ = writeln!(s, "\"{}:{}\" = {:.4}", self.set.params[a].key, self.set.params[b].key, r);
+                }
+            }
+        }
+        s
+    }
+}
+
+fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 }
+}
