@@ -10,6 +10,7 @@ pub mod estimate;
 pub mod physics;
 pub mod pipeline;
 pub mod record;
+pub mod report;
 pub mod signal;
 pub mod simdevice;
 pub mod synth;
