@@ -11,6 +11,7 @@ pub mod identify;
 pub mod physics;
 pub mod pipeline;
 pub mod record;
+pub mod report;
 pub mod signal;
 pub mod simdevice;
 pub mod synth;
