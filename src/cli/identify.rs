@@ -110,7 +110,9 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
     std::fs::write(&args.out, result.to_toml(&provenance))
         .with_context(|| format!("{}: cannot write", args.out.display()))?;
     let report_path = args.report.clone().unwrap_or_else(|| args.out.with_extension("html"));
-    // REPORT-PENDING
+    let report = result.report(&provenance, started.elapsed().as_secs_f64());
+    crate::identify::report::write_identify_report(&report, &report_path)
+        .with_context(|| format!("{}: cannot write the report", report_path.display()))?;
 
     println!("{:<24} {:>14} {:>10}  determined", "parameter", "value", "± 1σ");
     for (i, p) in result.set.params.iter().enumerate() {

@@ -9,6 +9,7 @@
 pub mod fit;
 pub mod model;
 pub mod objective;
+pub mod report;
 
 use rayon::prelude::*;
 
@@ -58,6 +59,8 @@ pub struct Identified {
     /// Runs that reached within 1 % of the best cost.
     pub runs_agreeing: usize,
     pub blows: Vec<FittedBlow>,
+    /// Monte Carlo draws whose blows simulated (the bands' sample).
+    pub monte_carlo_runs: usize,
     /// Spectra of each blow (fitted and held out): bin frequencies, measured, model.
     pub spectra: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)>,
 }
@@ -166,6 +169,7 @@ pub fn identify(
         runs,
         runs_agreeing,
         blows,
+        monte_carlo_runs: mc.len(),
         spectra,
     })
 }
@@ -242,6 +246,99 @@ impl Identified {
             }
         }
         s
+    }
+}
+
+impl Identified {
+    /// The report's data: parameters, correlations and every blow's load, residual and
+    /// spectra, with the modes found in the measured spectrum.
+    pub fn report(&self, provenance: &str, elapsed_s: f64) -> report::IdentifyReport {
+        let u = &self.uncertainty;
+        let params = self
+            .set
+            .params
+            .iter()
+            .enumerate()
+            .map(|(i, p)| report::ParamRow {
+                name: p.key.to_string(),
+                value: self.values[i],
+                std_error: self.values[i] * u.rel_se[i],
+                determined: u.determined[i],
+                note: u.notes[i].clone(),
+            })
+            .collect();
+        let blows = self
+            .blows
+            .iter()
+            .zip(&self.spectra)
+            .map(|(b, (f, sm, sf))| {
+                let r = &b.reference;
+                let t_ms: Vec<f64> = (0..r.load_n.len()).map(|i| (i as f64 * r.dt_s - r.t_align_s) * 1e3).collect();
+                let spec = crate::signal::spectrum::amplitude_spectrum(&r.load_n, r.dt_s, objective::PAD_FACTOR, 0);
+                let modes_hz = objective::machine_modes(&spec, f.last().copied().unwrap_or(0.0))
+                    .into_iter()
+                    .map(|m| m.frequency_hz)
+                    .collect();
+                report::BlowFit {
+                    label: format!("{}, v0 {:.3} m/s", r.label, r.v0_mps),
+                    t_ms,
+                    measured_n: r.load_n.clone(),
+                    fitted_n: b.model.load_n.clone(),
+                    band_lo_n: b.band.as_ref().map(|x| x.0.clone()),
+                    band_hi_n: b.band.as_ref().map(|x| x.1.clone()),
+                    freq_hz: f.clone(),
+                    measured_spectrum: sm.clone(),
+                    fitted_spectrum: sf.clone(),
+                    modes_hz,
+                    rms_rel_error: b.rms_error,
+                    held_out: b.held_out,
+                }
+            })
+            .collect();
+        let fitted = self.blows.iter().filter(|b| !b.held_out).count();
+        let mut summary = vec![
+            format!("Fitted to {provenance}, by the press paper's objective (eq. 4), in {elapsed_s:.1} s."),
+            format!(
+                "Objective {:.4}; {} of {} local searches (envelope first, then eq. 4) reached the best fit.",
+                self.objective,
+                self.runs_agreeing,
+                self.runs.len()
+            ),
+            format!(
+                "RMS load error over the {fitted} fitted blow(s): {:.2} % of the peak.",
+                mean(&self.blows.iter().filter(|b| !b.held_out).map(|b| b.rms_error).collect::<Vec<_>>()) * 100.0
+            ),
+            format!(
+                "Standard errors from the Jacobian at the optimum, inflated by {:.1}× for load residuals correlated \
+                 in time (lag-1 autocorrelation {:.2}); bands: 95 % of {} Monte Carlo draws of the parameters.",
+                u.inflation.sqrt(),
+                u.residual_lag1,
+                self.monte_carlo_runs
+            ),
+        ];
+        let held: Vec<f64> = self.blows.iter().filter(|b| b.held_out).map(|b| b.rms_error).collect();
+        if !held.is_empty() {
+            summary.push(format!(
+                "Held-out blows, predicted with the fitted model: RMS load error {:.2} % of the peak.",
+                mean(&held) * 100.0
+            ));
+        }
+        let undetermined: Vec<&str> =
+            self.set.params.iter().zip(&u.determined).filter(|(_, d)| !**d).map(|(p, _)| p.key).collect();
+        if !undetermined.is_empty() {
+            summary.push(format!(
+                "Not determined by these references: {} (see the notes); do not read them as measured.",
+                undetermined.join(", ")
+            ));
+        }
+        report::IdentifyReport {
+            title: format!("forgemon identify: {} model", self.set.kind.as_str()),
+            kind: self.set.kind.as_str().to_string(),
+            summary,
+            params,
+            correlations: u.correlations.clone(),
+            blows,
+        }
     }
 }
 

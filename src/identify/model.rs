@@ -29,7 +29,8 @@ impl Param {
     /// Value of u.
     pub fn from_u(&self, u: f64) -> f64 {
         let (a, b) = (self.lo.ln(), self.hi.ln());
-        (a + (b - a) * sigmoid(u)).exp()
+        // exp(ln lo) may round below lo.
+        (a + (b - a) * sigmoid(u)).exp().clamp(self.lo, self.hi)
     }
 
     /// d ln p / d u at u.

@@ -21,7 +21,7 @@ use crate::physics::plant::Plant;
 use crate::physics::process::Process;
 use crate::physics::sequence::blow_plant;
 use crate::signal::segment::Blow;
-use crate::signal::spectrum::{SpectrumPlanner, find_modes};
+use crate::signal::spectrum::{Mode, Spectrum, SpectrumPlanner, blow_modes};
 
 /// Fraction of the measured peak where the two blows are aligned.
 pub const ALIGN_FRACTION: f64 = 0.10;
@@ -183,20 +183,14 @@ impl Objective {
         let mut planner = SpectrumPlanner::new();
         let spectra: Vec<_> = refs.iter().map(|r| planner.spectrum(&r.load_n, r.dt_s, PAD_FACTOR, 0)).collect();
         let measured_spectra = spectra.iter().map(|s| bins(s, f_max_hz)).collect();
-        // The second mode: the most prominent peak above a fifth of the typical frequency
-        // (below it lies the pulse, the "carrier" of the papers).
-        let typical_hz = match kind {
-            MachineKind::Hammer => 2000.0,
-            MachineKind::ScrewPress => 300.0,
-        };
         let first_fitted = fitted.iter().position(|f| *f).unwrap_or(0);
         let mode2_hz = spectra.get(first_fitted).and_then(|s| {
-            find_modes(s, 1e-3, 16)
+            machine_modes(s, f_max_hz)
                 .into_iter()
-                .filter(|m| !m.below_resolution && m.frequency_hz > 0.2 * typical_hz && m.frequency_hz < f_max_hz)
                 .max_by(|a, b| a.amplitude.total_cmp(&b.amplitude))
                 .map(|m| m.frequency_hz)
         });
+        let typical_hz = typical_mode2_hz(kind);
         let period_s = 1.0 / mode2_hz.unwrap_or(typical_hz);
         let envelope_window: Vec<usize> = refs.iter().map(|r| ((period_s / r.dt_s).round() as usize).max(1)).collect();
         let measured_envelope = refs.iter().zip(&envelope_window).map(|(r, w)| moving_average(&r.load_n, *w)).collect();
@@ -358,6 +352,22 @@ impl Objective {
         }
         (of / self.included().count().max(1) as f64, rms)
     }
+}
+
+/// Where the second mode usually sits (hammer paper §2.2: ~1.8 kHz; press paper §3.1:
+/// ~300 Hz).
+pub fn typical_mode2_hz(kind: MachineKind) -> f64 {
+    match kind {
+        MachineKind::Hammer => 2000.0,
+        MachineKind::ScrewPress => 300.0,
+    }
+}
+
+/// Machine modes in a blow's load spectrum (`spectrum::blow_modes`: the spectrum weighted
+/// so that a mode stands above the ripples of the pulse, the papers' carrier, which is
+/// flagged and left out), below `f_max_hz`.
+pub fn machine_modes(s: &Spectrum, f_max_hz: f64) -> Vec<Mode> {
+    blow_modes(s, 8).into_iter().filter(|m| !m.below_resolution && m.frequency_hz < f_max_hz).collect()
 }
 
 /// RMS of (measured − model) over the blow, as a fraction of the measured peak.
