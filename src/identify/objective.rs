@@ -144,6 +144,8 @@ pub enum Fidelity {
 pub struct Objective {
     /// Every reference, in blow order (the billet's height carries from one to the next).
     pub refs: Vec<Reference>,
+    /// Effects of the model (none for identification; `diagnose` fits them).
+    pub effects: EffectSet,
     /// Which references the residuals cover (the others are only predicted).
     pub fitted: Vec<bool>,
     pub fidelity: Fidelity,
@@ -169,6 +171,12 @@ pub struct Simulated {
     pub spectrum: Vec<f64>,
     /// Billet height after the blow (for the next blow), m.
     pub h_end_m: Option<f64>,
+    /// The model's first contact, end of forming (`None` for a bare strike) and return of
+    /// the sensor load to zero (the contact's end for a bare strike), s on the window's
+    /// clock (sample i at i·dt).
+    pub t_contact_s: f64,
+    pub t_forming_end_s: Option<f64>,
+    pub t_load_zero_s: Option<f64>,
 }
 
 impl Objective {
@@ -196,6 +204,7 @@ impl Objective {
         let measured_envelope = refs.iter().zip(&envelope_window).map(|(r, w)| moving_average(&r.load_n, *w)).collect();
         Objective {
             refs,
+            effects: EffectSet::NONE,
             fitted,
             fidelity: Fidelity::Full,
             envelope_window,
@@ -206,6 +215,11 @@ impl Objective {
             f_max_hz,
             measured_spectra,
         }
+    }
+
+    /// The same references with the model's effects.
+    pub fn with_effects(&self, effects: EffectSet) -> Objective {
+        Objective { effects, ..self.clone() }
     }
 
     /// The same references under another objective.
@@ -261,9 +275,9 @@ impl Objective {
                     // The sheet's measured height after the previous blow, when given.
                     let h0 =
                         n.checked_sub(2).and_then(|k| p.measured_final_heights_m.get(k).copied()).unwrap_or(h_start);
-                    blow_plant(machine, &EffectSet::NONE, p, n, h0)
+                    blow_plant(machine, &self.effects, p, n, h0)
                 }
-                _ => Plant::new(machine, &EffectSet::NONE, None, 0.0),
+                _ => Plant::new(machine, &self.effects, None, 0.0),
             };
             let opts = SimOptions {
                 method: Method::Dopri5 { rtol: FIT_RTOL },
@@ -287,7 +301,18 @@ impl Objective {
                 })
                 .collect();
             let spectrum = bins(&planner.spectrum(&load, r.dt_s, PAD_FACTOR, 0), self.f_max_hz);
-            out.push(Simulated { load_n: load, spectrum, h_end_m: res.forming.map(|f| f.h_end_m) });
+            // The model's instants on the window's clock (model time 0 is first contact).
+            let on_window = |t: f64| t - t_cross + r.t_align_s;
+            let forming_end = res.forming.map(|f| f.forming_time_s);
+            let load_zero = res.forming.and_then(|f| f.spring_back_time_s.map(|sb| f.forming_time_s + sb));
+            out.push(Simulated {
+                load_n: load,
+                spectrum,
+                h_end_m: res.forming.map(|f| f.h_end_m),
+                t_contact_s: on_window(0.0),
+                t_forming_end_s: forming_end.map(on_window),
+                t_load_zero_s: load_zero.map(on_window).or(Some(on_window(res.contact_time_s))),
+            });
         }
         Some(out)
     }
