@@ -9,9 +9,8 @@ use forgemon::identify::objective::{Objective, Reference, Setting};
 use forgemon::identify::{IdentifyConfig, identify};
 use forgemon::physics::EffectSet;
 use forgemon::physics::machine::MachineKind;
-use forgemon::signal::sample::{Role, SampleBatch};
 use forgemon::signal::segment::{SegmentConfig, Segmenter};
-use forgemon::synth::{CaptureSpec, synth_blows};
+use forgemon::synth::{CaptureSpec, rows_batch, synth_blows};
 
 /// Blow 1 of a hammer unlike the paper's, as a reference.
 fn reference() -> (Reference, Setting) {
@@ -20,15 +19,7 @@ fn reference() -> (Reference, Setting) {
         .machine;
     let p = parse_process("p", include_str!("../config/steel-16NiCrMo13.process.toml")).unwrap();
     let b = &synth_blows(&m, &EffectSet::NONE, &p, &[4.2], &CaptureSpec::hammer(3)).unwrap()[0];
-    let batch = SampleBatch {
-        source: "c".into(),
-        seq: 0,
-        device_time_ns: 0,
-        host_time_ns: 0,
-        period_ns: 1e4,
-        roles: Role::ALL.to_vec(),
-        values: b.rows.iter().flat_map(|r| [r.load_n, r.disp_m, r.acc_mps2]).collect(),
-    };
+    let batch = rows_batch("c", 0, 0, 1e4, &b.rows);
     let mut seg = Segmenter::new(SegmentConfig::for_kind(MachineKind::Hammer));
     let mut blows = Vec::new();
     seg.push(&batch, &mut blows);

@@ -13,9 +13,9 @@ use forgemon::physics::EffectSet;
 use forgemon::pipeline::{Pipeline, PipelineConfig};
 use forgemon::record::{Payload, RecordReader, RecordWriter, Rotation};
 use forgemon::signal::capture::CaptureRow;
-use forgemon::signal::sample::{Role, SampleBatch};
+use forgemon::signal::sample::SampleBatch;
 use forgemon::signal::segment::{SegmentConfig, Segmenter};
-use forgemon::synth::{CaptureSpec, idle_rows, synth_blows};
+use forgemon::synth::{CaptureSpec, idle_rows, rows_batch, synth_blows};
 
 /// 20 s of a hammer at 100 kHz: eight blows of the paper's steel sheet with idle between.
 fn stream() -> Vec<SampleBatch> {
@@ -29,21 +29,7 @@ fn stream() -> Vec<SampleBatch> {
         rows.extend_from_slice(&b.rows);
     }
     let n = 5000; // 50 ms batches
-    rows.chunks(n)
-        .enumerate()
-        .map(|(k, c)| {
-            let t0 = (k * n) as i64 * 10_000;
-            SampleBatch {
-                source: "daq".into(),
-                seq: k as u64,
-                device_time_ns: t0,
-                host_time_ns: t0,
-                period_ns: 10_000.0,
-                roles: vec![Role::Load, Role::Disp, Role::Acc],
-                values: c.iter().flat_map(|r| [r.load_n, r.disp_m, r.acc_mps2]).collect(),
-            }
-        })
-        .collect()
+    rows.chunks(n).enumerate().map(|(k, c)| rows_batch("daq", k as u64, (k * n) as i64 * 10_000, 10_000.0, c)).collect()
 }
 
 fn pipeline(c: &mut Criterion) {

@@ -188,3 +188,23 @@ pub fn idle_rows(n: usize, t0_s: f64, spec: &CaptureSpec, disp_m: f64, rng_seed:
         })
         .collect()
 }
+
+/// Capture rows as one batch of the three roles from `source`, its first sample at device
+/// (and host) time `t0_ns`, every `period_ns`.
+pub fn rows_batch(
+    source: &str,
+    seq: u64,
+    t0_ns: i64,
+    period_ns: f64,
+    rows: &[CaptureRow],
+) -> crate::signal::sample::SampleBatch {
+    crate::signal::sample::SampleBatch {
+        source: source.to_string(),
+        seq,
+        device_time_ns: t0_ns,
+        host_time_ns: t0_ns,
+        period_ns,
+        roles: crate::signal::sample::Role::ALL.to_vec(),
+        values: rows.iter().flat_map(|r| [r.load_n, r.disp_m, r.acc_mps2]).collect(),
+    }
+}

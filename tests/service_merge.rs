@@ -17,9 +17,9 @@ use forgemon::estimate::BlowEstimate;
 use forgemon::physics::effects::EffectSet;
 use forgemon::pipeline::{Feeder, Pipeline, PipelineConfig, PipelineEvent};
 use forgemon::record::{Payload, read_recording};
-use forgemon::signal::sample::{Role, SampleBatch};
+use forgemon::signal::sample::Role;
 use forgemon::simdevice::{BilletPlan, SimMachine, SplitLine, drive_serial_split};
-use forgemon::synth::CaptureSpec;
+use forgemon::synth::{CaptureSpec, rows_batch};
 use tokio::sync::{mpsc, watch};
 
 const HAMMER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/hammer-lg1000.machine.toml");
@@ -52,15 +52,7 @@ fn single_daq_reference() -> Vec<BlowEstimate> {
         if billet > 0 && sim.billet_of_emitted() > billet {
             feeder.pipeline_mut().new_billet();
         }
-        let batch = SampleBatch {
-            source: "daq".into(),
-            seq: 0,
-            device_time_ns: n * 10_000,
-            host_time_ns: n * 10_000,
-            period_ns: 10_000.0,
-            roles: Role::ALL.to_vec(),
-            values: rows.iter().flat_map(|r| [r.load_n, r.disp_m, r.acc_mps2]).collect(),
-        };
+        let batch = rows_batch("daq", 0, n * 10_000, 10_000.0, &rows);
         n += rows.len() as i64;
         feeder.push(&batch, &mut events);
         for e in events.drain(..) {

@@ -13,9 +13,8 @@ mod tests {
     use crate::identify::objective::{Objective, Reference, Setting};
     use crate::physics::effects::{Effect, EffectSet};
     use crate::physics::machine::MachineKind;
-    use crate::signal::sample::{Role, SampleBatch};
     use crate::signal::segment::{SegmentConfig, Segmenter};
-    use crate::synth::{CaptureSpec, synth_blows};
+    use crate::synth::{CaptureSpec, rows_batch, synth_blows};
 
     use super::localise::{ByPhase, localise};
 
@@ -31,15 +30,7 @@ mod tests {
             .iter()
             .enumerate()
             .map(|(i, b)| {
-                let batch = SampleBatch {
-                    source: "c".into(),
-                    seq: 0,
-                    device_time_ns: 0,
-                    host_time_ns: 0,
-                    period_ns: 1e4,
-                    roles: Role::ALL.to_vec(),
-                    values: b.rows.iter().flat_map(|r| [r.load_n, r.disp_m, r.acc_mps2]).collect(),
-                };
+                let batch = rows_batch("c", 0, 0, 1e4, &b.rows);
                 let mut seg = Segmenter::new(SegmentConfig::for_kind(MachineKind::Hammer));
                 let mut cut = Vec::new();
                 seg.push(&batch, &mut cut);
