@@ -150,7 +150,7 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
 }
 
 /// The reference blows of a capture directory, split into fitted and held out.
-fn read_references(
+pub(crate) fn read_references(
     dir: &Path,
     kind: MachineKind,
     bare: bool,

@@ -7,6 +7,7 @@ use anyhow::Context;
 use clap::{Parser, Subcommand};
 
 pub mod demo;
+pub mod diagnose;
 pub mod identify;
 pub mod import;
 pub mod inspect;
@@ -29,6 +30,8 @@ pub enum Command {
     Simulate(simulate::SimulateArgs),
     /// Fit the machine model to reference blows (or bare strikes), with uncertainty.
     Identify(identify::IdentifyArgs),
+    /// Find where the model and the measurement part, and which unmodelled effect explains it.
+    Diagnose(diagnose::DiagnoseArgs),
     /// Run a recording, capture CSV or capture directory through the live pipeline.
     Replay(replay::ReplayArgs),
     /// Turn capture CSV files or a capture directory into an MCAP recording.
@@ -48,6 +51,7 @@ impl Cli {
         match self.command {
             Command::Simulate(args) => simulate::run(args),
             Command::Identify(args) => identify::run(args),
+            Command::Diagnose(args) => diagnose::run(args),
             Command::Replay(args) => replay::run(args),
             Command::Import(args) => import::run(args),
             Command::Inspect(args) => inspect::run(args),

@@ -11,7 +11,7 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
 
-use super::model::ParamSet;
+use super::model::{Param, ParamSet};
 use super::objective::Objective;
 
 /// Residual given to a simulation that failed (pushes the search away, never NaN).
@@ -27,37 +27,37 @@ pub const DETERMINED_REL_SE: f64 = 0.05;
 /// separates the pair only through the uncertainty already in the standard error.
 pub const NOTED_CORR: f64 = 0.95;
 
+/// Residuals of a parameter vector (values, not u); `None` when the model failed.
+pub type ResidualFn<'a> = dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync + 'a;
+
 struct Problem<'a> {
-    obj: &'a Objective,
-    set: &'a ParamSet,
+    params: &'a [Param],
+    f: &'a ResidualFn<'a>,
+    /// Residual count, for the failure fill.
+    len: usize,
     u: DVector<f64>,
     r: DVector<f64>,
 }
 
-impl<'a> Problem<'a> {
-    fn new(obj: &'a Objective, set: &'a ParamSet, u: DVector<f64>) -> Self {
-        let r = residuals(obj, set, u.as_slice());
-        Problem { obj, set, u, r }
-    }
+fn from_u(params: &[Param], u: &[f64]) -> Vec<f64> {
+    params.iter().zip(u).map(|(p, u)| p.from_u(*u)).collect()
 }
 
-fn residuals(obj: &Objective, set: &ParamSet, u: &[f64]) -> DVector<f64> {
-    let m = set.machine(&set.from_u(u));
-    let mut out = Vec::with_capacity(obj.len());
-    if !obj.residuals(&m, &mut out) {
-        out = vec![FAILED_RESIDUAL; obj.len()];
+fn eval(params: &[Param], f: &ResidualFn<'_>, len: usize, u: &[f64]) -> DVector<f64> {
+    match f(&from_u(params, u)) {
+        Some(r) if r.len() == len && r.iter().all(|x| x.is_finite()) => DVector::from_vec(r),
+        _ => DVector::from_element(len, FAILED_RESIDUAL),
     }
-    DVector::from_vec(out)
 }
 
 /// Forward-difference Jacobian of the residuals in u, columns in parallel.
-fn jacobian(obj: &Objective, set: &ParamSet, u: &[f64], r0: &DVector<f64>) -> DMatrix<f64> {
+fn jacobian(params: &[Param], f: &ResidualFn<'_>, u: &[f64], r0: &DVector<f64>) -> DMatrix<f64> {
     let cols: Vec<DVector<f64>> = (0..u.len())
         .into_par_iter()
         .map(|j| {
             let mut up = u.to_vec();
             up[j] += FD_STEP;
-            (residuals(obj, set, &up) - r0) / FD_STEP
+            (eval(params, f, r0.len(), &up) - r0) / FD_STEP
         })
         .collect();
     DMatrix::from_columns(&cols)
@@ -70,7 +70,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
 
     fn set_params(&mut self, x: &DVector<f64>) {
         self.u.copy_from(x);
-        self.r = residuals(self.obj, self.set, self.u.as_slice());
+        self.r = eval(self.params, self.f, self.len, self.u.as_slice());
     }
 
     fn params(&self) -> DVector<f64> {
@@ -82,7 +82,15 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
     }
 
     fn jacobian(&self) -> Option<DMatrix<f64>> {
-        Some(jacobian(self.obj, self.set, self.u.as_slice(), &self.r))
+        Some(jacobian(self.params, self.f, self.u.as_slice(), &self.r))
+    }
+}
+
+/// The residuals of an identification objective as a `ResidualFn`.
+fn machine_residuals<'a>(obj: &'a Objective, set: &'a ParamSet) -> impl Fn(&[f64]) -> Option<Vec<f64>> + Sync + 'a {
+    move |values: &[f64]| {
+        let mut out = Vec::with_capacity(obj.len());
+        obj.residuals(&set.machine(values), &mut out).then_some(out)
     }
 }
 
@@ -96,16 +104,25 @@ pub struct Run {
     pub evaluations: usize,
 }
 
-/// Levenberg–Marquardt from `start` (parameter values).
+/// Levenberg–Marquardt from `start` (parameter values) on an identification objective.
 pub fn local_fit(obj: &Objective, set: &ParamSet, start: &[f64]) -> Run {
-    let u0 = DVector::from_vec(set.to_u(start));
-    let (p, report) = LevenbergMarquardt::new()
-        .with_ftol(1e-10)
-        .with_xtol(1e-9)
-        .with_patience(60)
-        .minimize(Problem::new(obj, set, u0));
+    let f = machine_residuals(obj, set);
+    bounded_fit(&set.params, obj.len(), &f, start)
+}
+
+/// Levenberg–Marquardt on any `len` residuals of the bounded `params`, from `start`.
+pub fn bounded_fit(params: &[Param], len: usize, f: &ResidualFn<'_>, start: &[f64]) -> Run {
+    let u0: Vec<f64> = params.iter().zip(start).map(|(p, v)| p.to_u(*v)).collect();
+    let r0 = eval(params, f, len, &u0);
+    let problem = Problem { params, f, len, u: DVector::from_vec(u0), r: r0 };
+    let (p, report) = LevenbergMarquardt::new().with_ftol(1e-10).with_xtol(1e-9).with_patience(60).minimize(problem);
     let cost = p.r.norm_squared();
-    Run { start: start.to_vec(), values: set.from_u(p.u.as_slice()), cost, evaluations: report.number_of_evaluations }
+    Run {
+        start: start.to_vec(),
+        values: from_u(params, p.u.as_slice()),
+        cost,
+        evaluations: report.number_of_evaluations,
+    }
 }
 
 /// The starting points: the prior's values, then `n - 1` drawn log-uniformly (seeded).
@@ -147,8 +164,9 @@ pub struct Uncertainty {
 /// autocorrelation): neighbouring load samples are not independent measurements.
 pub fn uncertainty(obj: &Objective, set: &ParamSet, values: &[f64]) -> Uncertainty {
     let u = set.to_u(values);
-    let r0 = residuals(obj, set, &u);
-    let mut j = jacobian(obj, set, &u, &r0);
+    let f = machine_residuals(obj, set);
+    let r0 = eval(&set.params, &f, obj.len(), &u);
+    let mut j = jacobian(&set.params, &f, &u, &r0);
     for (c, p) in set.params.iter().enumerate() {
         let d = p.dlnp_du(u[c]);
         j.column_mut(c).scale_mut(1.0 / d);

@@ -1,0 +1,219 @@
+//! `forgemon diagnose` (CONTRACTS.md §6): where the model and the measured blows part,
+//! which library effect closes the gap on held-out blows, and a verdict; `report.json`
+//! and `report.html` in the output directory.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use clap::Args;
+
+use super::read_text;
+use crate::config::{parse_machine, parse_process};
+use crate::diagnose::{Diagnosis, diagnose};
+use crate::identify::objective::Setting;
+use crate::physics::effects::EffectSet;
+use crate::physics::machine::Machine;
+use crate::report::{BarPlot, Color, LinePlot, Page, Series, bar_plot_svg, line_plot_svg};
+
+#[derive(Debug, Args)]
+pub struct DiagnoseArgs {
+    /// The identified machine model.
+    #[arg(long, value_name = "M.toml")]
+    pub machine: PathBuf,
+    /// Capture directory of the calibration billet (effect parameters are fitted here).
+    #[arg(long, value_name = "DIR")]
+    pub calib: PathBuf,
+    /// Capture directory of another billet, used only to measure.
+    #[arg(long, value_name = "DIR")]
+    pub holdout: PathBuf,
+    /// Where report.json and report.html go.
+    #[arg(long, value_name = "OUTDIR")]
+    pub out: PathBuf,
+}
+
+pub fn run(args: DiagnoseArgs) -> anyhow::Result<ExitCode> {
+    let started = Instant::now();
+    let file = parse_machine(&args.machine.display().to_string(), &read_text(&args.machine)?)?;
+    let machine = file.machine;
+    let effects = EffectSet::from_effects(&file.effects);
+    let calib = read_dir(&args.calib, &machine)?;
+    let holdout = read_dir(&args.holdout, &machine)?;
+    let bar = indicatif::ProgressBar::new(11);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("diagnose {bar:40} {pos}/{len} effects and pairs fitted {elapsed}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let d = diagnose(&machine, &effects, calib, holdout, &|| bar.inc(1))
+        .context("the base model cannot simulate these blows")?;
+    bar.finish_and_clear();
+    std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create", args.out.display()))?;
+    let json = d.to_json();
+    let path = args.out.join("report.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&json)?)
+        .with_context(|| format!("{}: cannot write", path.display()))?;
+    let html = args.out.join("report.html");
+    write_html(&d, &machine, &html, started.elapsed().as_secs_f64())?;
+    println!(
+        "baseline nrmse: calib {:.4}, holdout {:.4}; dominant phase {}",
+        d.baseline_calib,
+        d.baseline_holdout,
+        d.by_phase.dominant()
+    );
+    for c in &d.candidates {
+        println!(
+            "{:<36} calib {:.4}  holdout {:.4}  shrink {:+.2}",
+            c.name,
+            c.calib,
+            c.holdout,
+            1.0 - c.holdout / d.baseline_holdout
+        );
+    }
+    println!(
+        "verdict: {} ({:.1} s)",
+        json["verdict"]["effect"].as_str().unwrap_or("none"),
+        started.elapsed().as_secs_f64()
+    );
+    eprintln!("forgemon: wrote {} and {}", path.display(), html.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A capture directory's blows and its process sheet.
+fn read_dir(dir: &Path, machine: &Machine) -> anyhow::Result<(Vec<crate::identify::objective::Reference>, Setting)> {
+    let sheet = dir.join("process.toml");
+    if !sheet.exists() {
+        bail!(
+            "{}: no process.toml: the diagnosis simulates each blow on its billet and needs the process sheet",
+            dir.display()
+        );
+    }
+    let p = parse_process(&sheet.display().to_string(), &read_text(&sheet)?)?;
+    if p.machine != machine.kind() {
+        bail!(
+            "{}: key 'machine' is \"{}\" but the machine is a {}",
+            sheet.display(),
+            p.machine.as_str(),
+            machine.kind().as_str()
+        );
+    }
+    let (refs, _) = super::identify::read_references(dir, machine.kind(), false, &[])?;
+    Ok((refs, Setting::Billet(p)))
+}
+
+fn write_html(d: &Diagnosis, machine: &Machine, path: &Path, elapsed_s: f64) -> anyhow::Result<()> {
+    let verdict = d.verdict.as_ref().map_or("none".to_string(), |v| v.name.clone());
+    let mut page = Page::new("forgemon diagnose: the sim-to-real gap");
+    page.section("Conclusion");
+    let shrink = d.verdict.as_ref().map_or(0.0, |v| 1.0 - v.holdout / d.baseline_holdout);
+    page.paragraph(format!(
+        "The base model misses the measured load by {:.1} % of the peak on the holdout blows (nrmse), most in the {} phase. \
+         Verdict: {verdict}{}. {} (Computed in {elapsed_s:.1} s.)",
+        d.baseline_holdout * 100.0,
+        d.by_phase.dominant(),
+        if d.verdict.is_some() { format!(", which shrinks the holdout error by {:.0} %", shrink * 100.0) } else { String::new() },
+        d.why
+    ));
+    page.paragraph(format!(
+        "The rule: a gap exists only when the baseline holdout error exceeds {}× the sensor noise ({:.4} of the peak); an effect \
+         is real when the mean improvement over the holdout blows exceeds twice its standard error and the holdout error \
+         shrinks by at least {:.0} %; a pair replaces its best single effect only when it removes at least {:.0} % of what that \
+         effect leaves, by the same test. Effect parameters are fitted on the calibration billet only.",
+        crate::diagnose::NOISE_FACTOR,
+        d.noise_nrmse,
+        crate::diagnose::MIN_SHRINK * 100.0,
+        crate::diagnose::MIN_PAIR_SHRINK * 100.0
+    ));
+    page.section("Where the gap lies (calibration blows, base model)");
+    let phases = BarPlot {
+        title: "nrmse by phase".into(),
+        y_label: "RMS error / peak".into(),
+        groups: vec!["impact".into(), "forming".into(), "spring_back".into(), "post".into()],
+        bars: vec![(
+            "base model".into(),
+            vec![d.by_phase.impact, d.by_phase.forming, d.by_phase.spring_back, d.by_phase.post],
+        )],
+    };
+    page.figure(bar_plot_svg(&phases, 800, 320)?, "The error within each phase of the blow.");
+    let bands = BarPlot {
+        title: "nrmse by band".into(),
+        y_label: "RMS error / peak".into(),
+        groups: vec!["low".into(), "mode2".into(), "high".into()],
+        bars: vec![("base model".into(), vec![d.by_band.low, d.by_band.mode2, d.by_band.high])],
+    };
+    page.figure(
+        bar_plot_svg(&bands, 800, 320)?,
+        format!("The error's energy by band around the second mode ({:.0} Hz).", machine.second_mode_hz()),
+    );
+    page.section("Ranking (mean nrmse; parameters fitted on calibration, scored on holdout)");
+    let rows = d
+        .candidates
+        .iter()
+        .map(|c| {
+            let params: Vec<String> = c
+                .effects
+                .iter()
+                .flat_map(|e| e.params())
+                .map(|(k, v)| format!("{k} = {}", crate::report::format_number(v, 3)))
+                .collect();
+            vec![
+                c.name.clone(),
+                params.join(", "),
+                format!("{:.4}", c.calib),
+                format!("{:.4}", c.holdout),
+                format!("{:+.2}", 1.0 - c.holdout / d.baseline_holdout),
+            ]
+        })
+        .collect();
+    page.table(
+        vec!["effect".into(), "fitted parameters".into(), "calib".into(), "holdout".into(), "holdout shrink".into()],
+        rows,
+    );
+    page.section("Holdout blows: measured, base model, and the model with the verdict");
+    let base = d.holdout.obj.simulate(machine);
+    let with = d.verdict.as_ref().and_then(|v| {
+        let mut set = d.holdout.obj.effects;
+        for e in &v.effects {
+            set.apply(e);
+        }
+        d.holdout.obj.with_effects(set).simulate(machine)
+    });
+    for (k, r) in d.holdout.obj.refs.iter().enumerate() {
+        let t: Vec<f64> = (0..r.load_n.len()).map(|i| (i as f64 * r.dt_s - r.t_align_s) * 1e3).collect();
+        let mut plot = LinePlot::new(format!("{} (holdout)", r.label), "time (ms)", "load (kN)");
+        plot.series.push(Series::new("measured", t.clone(), r.load_n.iter().map(|x| x * 1e-3).collect(), Color::Black));
+        if let Some(b) = &base {
+            plot.series.push(
+                Series::new("base model", t.clone(), b[k].load_n.iter().map(|x| x * 1e-3).collect(), Color::Vermillion)
+                    .dashed(),
+            );
+        }
+        if let Some(w) = &with {
+            plot.series.push(Series::new(
+                format!("with {verdict}"),
+                t.clone(),
+                w[k].load_n.iter().map(|x| x * 1e-3).collect(),
+                Color::Blue,
+            ));
+        }
+        page.figure(line_plot_svg(&plot, 900, 360)?, format!("nrmse: base {:.4}", d.baseline_holdout_per_blow[k]));
+        if let Some(b) = &base {
+            let resid: Vec<f64> = r.load_n.iter().zip(&b[k].load_n).map(|(m, s)| m - s).collect();
+            let spec = crate::signal::spectrum::amplitude_spectrum(&resid, r.dt_s, 4, 0);
+            let f_max = 4.0 * machine.second_mode_hz();
+            let n = (1..spec.len()).take_while(|&i| spec.frequency_hz(i) <= f_max).count();
+            let mut sp = LinePlot::new("Residual spectrum (measured − base model)", "frequency (Hz)", "amplitude (N)");
+            sp.log_y = true;
+            sp.series.push(Series::new(
+                "residual",
+                (1..=n).map(|i| spec.frequency_hz(i)).collect(),
+                spec.amplitude[1..=n].to_vec(),
+                Color::Purple,
+            ));
+            sp.markers_x.push((machine.second_mode_hz(), "mode 2".into()));
+            page.figure(line_plot_svg(&sp, 900, 300)?, "Where in frequency the base model misses.");
+        }
+    }
+    page.write(path).with_context(|| format!("{}: cannot write the report", path.display()))?;
+    Ok(())
+}

@@ -1,0 +1,216 @@
+//! Attribution: each effect of the library (CONTRACTS.md §6) with its one or two
+//! parameters fitted on the calibration blows, then scored on the holdout blows.
+//!
+//! A fit is a coarse log-grid over the parameter bounds (the cost is far from convex in
+//! a gap or a time constant) followed by Levenberg–Marquardt (`identify::fit`) from the
+//! best grid point. The residuals are the load errors over each blow's baseline window,
+//! over the peak, so the cost is the mean nrmse² the contract scores.
+
+use crate::identify::fit::bounded_fit;
+use crate::identify::model::Param;
+use crate::identify::objective::Objective;
+use crate::physics::effects::{Effect, EffectSet};
+use crate::physics::machine::Machine;
+
+use super::localise::localise;
+
+/// One library effect: the parameters fitted, with their bounds, and the effect they give.
+#[derive(Debug, Clone)]
+pub struct Candidate {
+    pub name: &'static str,
+    pub params: Vec<Param>,
+    build: fn(&[f64]) -> Effect,
+}
+
+impl Candidate {
+    pub fn effect(&self, values: &[f64]) -> Effect {
+        (self.build)(values)
+    }
+}
+
+/// The library, with bounds wide enough for any machine the papers describe. The second
+/// parameter of `strain_rate` (rate_ref = 10 /s) and `strain_hardening` (eps_ref = 0.2)
+/// only rescale the first and are held; `foundation`'s damper is held at 0.
+pub fn library() -> Vec<Candidate> {
+    let p = |key, lo, hi| Param { key, lo, hi };
+    vec![
+        Candidate {
+            name: "clearance",
+            params: vec![p("gap_m", 1e-6, 5e-3)],
+            build: |v| Effect::Clearance { gap_m: v[0] },
+        },
+        Candidate {
+            name: "elastic_recovery",
+            params: vec![p("k_contact_N_per_m", 1e7, 1e12)],
+            build: |v| Effect::ElasticRecovery { k_contact_n_per_m: v[0] },
+        },
+        Candidate {
+            name: "friction_rise",
+            params: vec![p("exponent", 1e-3, 3.0)],
+            build: |v| Effect::FrictionRise { exponent: v[0] },
+        },
+        Candidate {
+            name: "strain_rate",
+            params: vec![p("m", 1e-3, 0.5)],
+            build: |v| Effect::StrainRate { m: v[0], rate_ref_per_s: 10.0 },
+        },
+        Candidate {
+            name: "strain_hardening",
+            params: vec![p("n", 1e-3, 1.0)],
+            build: |v| Effect::StrainHardening { n: v[0], eps_ref: 0.2 },
+        },
+        Candidate { name: "thermal", params: vec![p("q_dT", 1e-4, 2.0)], build: |v| Effect::Thermal { q_dt: v[0] } },
+        Candidate {
+            name: "foundation",
+            params: vec![p("m3_kg", 10.0, 1e6), p("k3_N_per_m", 1e6, 1e12)],
+            build: |v| Effect::Foundation { m3_kg: v[0], k3_n_per_m: v[1], c3_ns_per_m: 0.0 },
+        },
+        Candidate {
+            name: "sensor_highpass",
+            params: vec![p("tau_s", 1e-4, 10.0)],
+            build: |v| Effect::SensorHighpass { tau_s: v[0] },
+        },
+    ]
+}
+
+/// Blows to fit or score: the objective (references, process, kind) and each blow's
+/// baseline window.
+#[derive(Debug, Clone)]
+pub struct BlowSet {
+    pub obj: Objective,
+    pub windows: Vec<(usize, usize)>,
+    pub mode2_hz: f64,
+}
+
+impl BlowSet {
+    /// Residuals of the model with `effects`: over each blow's window, error over the
+    /// peak, weighted so the sum of squares is the mean over blows of nrmse².
+    pub fn residuals(&self, machine: &Machine, effects: &EffectSet) -> Option<Vec<f64>> {
+        let sims = self.obj.with_effects(*effects).simulate(machine)?;
+        let nb = self.obj.refs.len() as f64;
+        let mut out = Vec::new();
+        for ((r, s), (a, b)) in self.obj.refs.iter().zip(&sims).zip(&self.windows) {
+            let w = 1.0 / (r.peak_n * (((b - a).max(1) as f64) * nb).sqrt());
+            out.extend((*a..*b).map(|i| w * (r.load_n[i] - s.load_n.get(i).copied().unwrap_or(0.0))));
+        }
+        Some(out)
+    }
+
+    pub fn len(&self) -> usize {
+        self.windows.iter().map(|(a, b)| b - a).sum()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Each blow's nrmse (CONTRACTS.md §6) with `effects`.
+    pub fn nrmse(&self, machine: &Machine, effects: &EffectSet) -> Option<Vec<f64>> {
+        let sims = self.obj.with_effects(*effects).simulate(machine)?;
+        Some(self.obj.refs.iter().zip(&sims).map(|(r, s)| localise(r, s, self.mode2_hz).nrmse).collect())
+    }
+}
+
+/// A fitted candidate (or pair).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Fitted {
+    /// `"a"` or `"a+b"`.
+    pub name: String,
+    pub effects: Vec<Effect>,
+    /// Mean nrmse on the calibration and holdout blows, and per holdout blow.
+    pub calib: f64,
+    pub holdout: f64,
+    pub holdout_per_blow: Vec<f64>,
+}
+
+/// Grid points per parameter of the coarse search.
+const GRID: usize = 9;
+/// Local searches from the best grid points.
+const GRID_STARTS: usize = 3;
+
+/// Fit `cands` jointly (one effect, or a pair) on `calib`, starting from `start` when given
+/// (else from the best point of a log grid), and score on `holdout`.
+pub fn fit_candidates(
+    machine: &Machine,
+    base: &EffectSet,
+    cands: &[&Candidate],
+    start: Option<Vec<f64>>,
+    calib: &BlowSet,
+    holdout: &BlowSet,
+) -> Option<Fitted> {
+    let params: Vec<Param> = cands.iter().flat_map(|c| c.params.iter().copied()).collect();
+    let effects_of = |v: &[f64]| -> Vec<Effect> {
+        let mut k = 0;
+        cands
+            .iter()
+            .map(|c| {
+                let n = c.params.len();
+                let e = c.effect(&v[k..k + n]);
+                k += n;
+                e
+            })
+            .collect()
+    };
+    let set_of = |v: &[f64]| {
+        let mut s = *base;
+        for e in effects_of(v) {
+            s.apply(&e);
+        }
+        s
+    };
+    let f = |v: &[f64]| calib.residuals(machine, &set_of(v));
+    let cost = |v: &[f64]| f(v).map_or(f64::INFINITY, |r| r.iter().map(|x| x * x).sum::<f64>());
+    let start = match start {
+        Some(s) => s,
+        None => {
+            // The log grid, every combination (at most GRID² for two parameters).
+            let axes: Vec<Vec<f64>> = params
+                .iter()
+                .map(|p| {
+                    (0..GRID)
+                        .map(|i| (p.lo.ln() + (p.hi.ln() - p.lo.ln()) * (i as f64 + 0.5) / GRID as f64).exp())
+                        .collect()
+                })
+                .collect();
+            let mut points: Vec<Vec<f64>> = vec![Vec::new()];
+            for axis in &axes {
+                points = points
+                    .into_iter()
+                    .flat_map(|pt| axis.iter().map(move |v| [pt.clone(), vec![*v]].concat()))
+                    .collect();
+            }
+            use rayon::prelude::*;
+            let costs: Vec<f64> = points.par_iter().map(|v| cost(v)).collect();
+            let mut order: Vec<usize> = (0..points.len()).collect();
+            order.sort_by(|a, b| costs[*a].total_cmp(&costs[*b]));
+            // Levenberg–Marquardt from the best few grid points (two-parameter costs have
+            // several valleys), keeping the best.
+            let runs: Vec<(f64, Vec<f64>)> = order
+                .iter()
+                .take(GRID_STARTS)
+                .map(|&i| {
+                    let r = bounded_fit(&params, calib.len(), &f, &points[i]);
+                    if r.cost <= costs[i] { (r.cost, r.values) } else { (costs[i], points[i].clone()) }
+                })
+                .collect();
+            let best = runs.into_iter().min_by(|a, b| a.0.total_cmp(&b.0))?;
+            best.1
+        }
+    };
+    let run = bounded_fit(&params, calib.len(), &f, &start);
+    let values = if run.cost <= cost(&start) { run.values } else { start };
+    let set = set_of(&values);
+    let calib_n = calib.nrmse(machine, &set)?;
+    let hold_n = holdout.nrmse(machine, &set)?;
+    Some(Fitted {
+        name: cands.iter().map(|c| c.name).collect::<Vec<_>>().join("+"),
+        effects: effects_of(&values),
+        calib: mean(&calib_n),
+        holdout: mean(&hold_n),
+        holdout_per_blow: hold_n,
+    })
+}
+
+pub fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 }
+}
