@@ -9,8 +9,18 @@ use std::process::{Command, Output};
 use serde_json::Value;
 
 const STEEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/steel-16NiCrMo13.process.toml");
-/// The "identified" machine: a hammer unlike the paper's Table 1.
+const COPPER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/copper-cu99.process.toml");
+/// The "identified" machines: a hammer unlike the paper's Table 1, a press unlike the
+/// press paper's Table 3.
 const HAMMER: &str = "kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n";
+const PRESS: &str = "kind = \"screw_press\"\nm_tool_kg = 2500\nm_ram_kg = 90000\nk_link_N_per_m = 2.1e9\n\
+                     c_link_Ns_per_m = 2.8e5\nk_frame_N_per_m = 8.0e9\nc_frame_Ns_per_m = 5.0e4\nk_sensor_N_per_m = 3.39e10\n";
+
+#[derive(Clone, Copy)]
+enum Kind {
+    Hammer,
+    Press,
+}
 
 fn forgemon(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_forgemon")).args(args).output().unwrap()
@@ -21,22 +31,33 @@ fn ok(out: &Output) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
-/// Two billets (112 mm and 100 mm, five blows each at different speeds) forged with the
-/// hidden `effects`, and the machine file the diagnosis gets (without them).
+/// Two billets (the sheet's height and 90 % of it; five blows each at different speeds)
+/// forged with the hidden `effects`, and the machine file the diagnosis gets (without them).
 fn make_case(name: &str, effects: &[&str]) -> (PathBuf, PathBuf) {
+    make(Kind::Hammer, name, effects)
+}
+
+fn make(kind: Kind, name: &str, effects: &[&str]) -> (PathBuf, PathBuf) {
+    let (machine_text, sheet_path, v0_calib, v0_hold) = match kind {
+        Kind::Hammer => (HAMMER, STEEL, "4.0,4.5,5.0,5.3,5.3", "4.2,4.8,5.1,5.3,5.3"),
+        // Copper on the press at the paper's speeds (0.346 m/s, §3.3).
+        Kind::Press => (PRESS, COPPER, "0.30,0.33,0.36,0.36,0.36", "0.31,0.34,0.35,0.36,0.36"),
+    };
     let dir = std::env::temp_dir().join(format!("forgemon-diagnose-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let machine = dir.join("machine.toml");
-    std::fs::write(&machine, HAMMER).unwrap();
-    let steel = std::fs::read_to_string(STEEL).unwrap();
-    let sheet = &steel[..steel.find("[[blows]]").unwrap_or(steel.len())];
-    std::fs::write(dir.join("a.process.toml"), sheet).unwrap();
-    std::fs::write(dir.join("b.process.toml"), sheet.replace("height_m = 0.112", "height_m = 0.100")).unwrap();
-    for (billet, sheet, v0, seed) in [
-        ("calib", "a.process.toml", "4.0,4.5,5.0,5.3,5.3", "3"),
-        ("holdout", "b.process.toml", "4.2,4.8,5.1,5.3,5.3", "4"),
-    ] {
+    std::fs::write(&machine, machine_text).unwrap();
+    let text = std::fs::read_to_string(sheet_path).unwrap();
+    let sheet: toml::Table = text[..text.find("[[blows]]").unwrap_or(text.len())].parse().unwrap();
+    std::fs::write(dir.join("a.process.toml"), toml::to_string(&sheet).unwrap()).unwrap();
+    let mut b = sheet.clone();
+    let h = b["billet"]["height_m"].as_float().unwrap();
+    b["billet"].as_table_mut().unwrap().insert("height_m".into(), toml::Value::Float(0.9 * h));
+    std::fs::write(dir.join("b.process.toml"), toml::to_string(&b).unwrap()).unwrap();
+    for (billet, sheet, v0, seed) in
+        [("calib", "a.process.toml", v0_calib, "3"), ("holdout", "b.process.toml", v0_hold, "4")]
+    {
         let (m, p, c) = (machine.to_str().unwrap(), dir.join(sheet), dir.join(billet));
         let mut args = vec!["simulate", "--machine", m, "--process", p.to_str().unwrap(), "--v0", v0];
         for e in effects {
@@ -70,7 +91,11 @@ fn diagnose(dir: &Path, machine: &Path) -> Value {
 /// A single hidden effect: the verdict names it and the holdout shrink is ≥ 0.5 (issue
 /// #6's bound). Returns the report.
 fn single(name: &str, effect: &str) -> Value {
-    let (dir, machine) = make_case(name, &[effect]);
+    single_on(Kind::Hammer, name, effect)
+}
+
+fn single_on(kind: Kind, name: &str, effect: &str) -> Value {
+    let (dir, machine) = make(kind, name, &[effect]);
     let r = diagnose(&dir, &machine);
     let expected = effect.split(':').next().unwrap();
     assert_eq!(r["verdict"]["effect"], expected, "{r:#}");
@@ -152,6 +177,62 @@ fn two_effects_are_both_named() {
     names.sort();
     assert_eq!(names, ["elastic_recovery", "friction_rise"], "{r:#}");
     assert!(r["verdict"]["holdout_shrink"].as_f64().unwrap() >= 0.5, "{r:#}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+// The press (copper, 20 kHz, constant-speed approach). Not yet: `clearance` on the press
+// (a 0.3 mm gap is fitted as 0.87 mm and the verdict is "none"; see the closing note).
+
+#[test]
+fn press_elastic_recovery_is_named() {
+    single_on(Kind::Press, "p-elastic", "elastic_recovery:k_contact_N_per_m=5e9");
+}
+
+#[test]
+fn press_friction_rise_is_named() {
+    single_on(Kind::Press, "p-friction", "friction_rise:exponent=1.0");
+}
+
+#[test]
+fn press_strain_rate_is_named() {
+    single_on(Kind::Press, "p-rate", "strain_rate:m=0.1");
+}
+
+#[test]
+fn press_strain_hardening_is_named() {
+    single_on(Kind::Press, "p-hardening", "strain_hardening:n=0.2");
+}
+
+#[test]
+fn press_thermal_is_named() {
+    single_on(Kind::Press, "p-thermal", "thermal:q_dT=0.15");
+}
+
+#[test]
+fn press_foundation_is_named() {
+    single_on(Kind::Press, "p-foundation", "foundation:m3_kg=20000,k3_N_per_m=5e9,c3_Ns_per_m=0");
+}
+
+#[test]
+fn press_sensor_highpass_is_named() {
+    single_on(Kind::Press, "p-highpass", "sensor_highpass:tau_s=0.02");
+}
+
+#[test]
+fn press_no_effect_gives_none() {
+    let (dir, machine) = make(Kind::Press, "p-none", &[]);
+    assert_eq!(diagnose(&dir, &machine)["verdict"]["effect"], "none");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn press_two_effects_are_both_named() {
+    let (dir, machine) =
+        make(Kind::Press, "p-two", &["elastic_recovery:k_contact_N_per_m=5e9", "friction_rise:exponent=1.0"]);
+    let r = diagnose(&dir, &machine);
+    let mut names: Vec<&str> = r["verdict"]["effect"].as_str().unwrap().split('+').collect();
+    names.sort();
+    assert_eq!(names, ["elastic_recovery", "friction_rise"], "{r:#}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -123,18 +123,22 @@ pub struct Fitted {
     pub holdout_per_blow: Vec<f64>,
 }
 
-/// Grid points per parameter of the coarse search.
-const GRID: usize = 9;
+/// Grid points of the coarse search: per parameter of a one-parameter effect, and per
+/// parameter of a two-parameter one (the cost of a gap or a time constant has several
+/// valleys; 17 points put one within a factor 1.7 of any value in the bounds).
+const GRID_1D: usize = 17;
+const GRID_2D: usize = 9;
 /// Local searches from the best grid points.
 const GRID_STARTS: usize = 3;
 
-/// Fit `cands` jointly (one effect, or a pair) on `calib`, starting from `start` when given
-/// (else from the best point of a log grid), and score on `holdout`.
+/// Fit `cands` jointly (one effect, or a pair) on `calib` and score on `holdout`. The
+/// first `held.len()` parameters start at `held` (a single effect's fit, when a second is
+/// added); the others start from the best points of a log grid.
 pub fn fit_candidates(
     machine: &Machine,
     base: &EffectSet,
     cands: &[&Candidate],
-    start: Option<Vec<f64>>,
+    held: &[f64],
     calib: &BlowSet,
     holdout: &BlowSet,
 ) -> Option<Fitted> {
@@ -160,45 +164,39 @@ pub fn fit_candidates(
     };
     let f = |v: &[f64]| calib.residuals(machine, &set_of(v));
     let cost = |v: &[f64]| f(v).map_or(f64::INFINITY, |r| r.iter().map(|x| x * x).sum::<f64>());
-    let start = match start {
-        Some(s) => s,
-        None => {
-            // The log grid, every combination (at most GRID² for two parameters).
-            let axes: Vec<Vec<f64>> = params
-                .iter()
-                .map(|p| {
-                    (0..GRID)
-                        .map(|i| (p.lo.ln() + (p.hi.ln() - p.lo.ln()) * (i as f64 + 0.5) / GRID as f64).exp())
-                        .collect()
-                })
-                .collect();
-            let mut points: Vec<Vec<f64>> = vec![Vec::new()];
-            for axis in &axes {
-                points = points
-                    .into_iter()
-                    .flat_map(|pt| axis.iter().map(move |v| [pt.clone(), vec![*v]].concat()))
-                    .collect();
-            }
-            use rayon::prelude::*;
-            let costs: Vec<f64> = points.par_iter().map(|v| cost(v)).collect();
-            let mut order: Vec<usize> = (0..points.len()).collect();
-            order.sort_by(|a, b| costs[*a].total_cmp(&costs[*b]));
-            // Levenberg–Marquardt from the best few grid points (two-parameter costs have
-            // several valleys), keeping the best.
-            let runs: Vec<(f64, Vec<f64>)> = order
-                .iter()
-                .take(GRID_STARTS)
-                .map(|&i| {
-                    let r = bounded_fit(&params, calib.len(), &f, &points[i]);
-                    if r.cost <= costs[i] { (r.cost, r.values) } else { (costs[i], points[i].clone()) }
-                })
-                .collect();
-            let best = runs.into_iter().min_by(|a, b| a.0.total_cmp(&b.0))?;
-            best.1
-        }
-    };
-    let run = bounded_fit(&params, calib.len(), &f, &start);
-    let values = if run.cost <= cost(&start) { run.values } else { start };
+    // The log grid over the parameters not held, every combination.
+    let free = params.len() - held.len().min(params.len());
+    let grid = if free == 1 { GRID_1D } else { GRID_2D };
+    let axes: Vec<Vec<f64>> = params
+        .iter()
+        .enumerate()
+        .map(|(k, p)| match held.get(k) {
+            Some(v) => vec![*v],
+            None => (0..grid)
+                .map(|i| (p.lo.ln() + (p.hi.ln() - p.lo.ln()) * (i as f64 + 0.5) / grid as f64).exp())
+                .collect(),
+        })
+        .collect();
+    let mut points: Vec<Vec<f64>> = vec![Vec::new()];
+    for axis in &axes {
+        points = points.into_iter().flat_map(|pt| axis.iter().map(move |v| [pt.clone(), vec![*v]].concat())).collect();
+    }
+    use rayon::prelude::*;
+    let costs: Vec<f64> = points.par_iter().map(|v| cost(v)).collect();
+    let mut order: Vec<usize> = (0..points.len()).collect();
+    order.sort_by(|a, b| costs[*a].total_cmp(&costs[*b]));
+    // Levenberg–Marquardt from the best few grid points (the costs have several valleys),
+    // keeping the best.
+    let start = order
+        .iter()
+        .take(GRID_STARTS)
+        .map(|&i| {
+            let r = bounded_fit(&params, calib.len(), &f, &points[i]);
+            if r.cost <= costs[i] { (r.cost, r.values) } else { (costs[i], points[i].clone()) }
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))?
+        .1;
+    let values = start;
     let set = set_of(&values);
     let calib_n = calib.nrmse(machine, &set)?;
     let hold_n = holdout.nrmse(machine, &set)?;

@@ -9,8 +9,8 @@
 //!    its standard error (blow-to-blow scatter) and the holdout shrink is at least
 //!    `MIN_SHRINK`. (Not "every blow improves": `thermal` does nothing on a billet's first
 //!    blow, by its definition.)
-//! 3. The verdict is the real single effect with the lowest holdout error. A pair that
-//!    contains it replaces it when the pair improves on it by the same test with a shrink
+//! 3. The verdict is the real single effect with the lowest holdout error. The best single
+//!    effect is fitted together with each other one; a pair that contains it replaces it when the pair improves on it by the same test with a shrink
 //!    of at least `MIN_PAIR_SHRINK`: the second effect must remove most of what the first
 //!    leaves, since any extra parameter takes up some of a misfit. That threshold is set
 //!    from the withheld-effect suite (a lone clearance leaves a misfit that a friction
@@ -35,8 +35,6 @@ pub const NOISE_FACTOR: f64 = 2.0;
 pub const MIN_SHRINK: f64 = 0.2;
 /// Smallest further shrink of a pair over its best single effect.
 pub const MIN_PAIR_SHRINK: f64 = 0.8;
-/// Pairs tried: of the best `PAIR_POOL` single effects.
-pub const PAIR_POOL: usize = 3;
 
 /// The whole diagnosis.
 #[derive(Debug, Clone)]
@@ -131,37 +129,30 @@ pub fn diagnose(
         .par_iter()
         .enumerate()
         .filter_map(|(i, c)| {
-            let f = attribute::fit_candidates(machine, effects, &[c], None, &calib, &holdout);
+            let f = attribute::fit_candidates(machine, effects, &[c], &[], &calib, &holdout);
             progress();
             f.map(|f| (i, f))
         })
         .collect();
     let mut ranked = singles.clone();
     ranked.sort_by(|a, b| a.1.holdout.total_cmp(&b.1.holdout));
-    let pool: Vec<&(usize, Fitted)> = ranked.iter().take(PAIR_POOL).collect();
-    let mut pairs_in = Vec::new();
-    for a in 0..pool.len() {
-        for b in a + 1..pool.len() {
-            pairs_in.push((pool[a], pool[b]));
-        }
-    }
+    // Pairs: the best single effect with each other one (a second effect that only shows
+    // once the first is in place need not rank high alone).
+    type Ranked<'a> = &'a (usize, Fitted);
+    let pairs_in: Vec<(Ranked, Ranked)> =
+        ranked.first().map(|best| ranked.iter().skip(1).map(|other| (best, other)).collect()).unwrap_or_default();
     let pairs: Vec<Fitted> = pairs_in
         .par_iter()
-        .filter_map(|((ia, fa), (ib, fb))| {
+        .filter_map(|((ia, fa), (ib, _))| {
             let cands: Vec<&Candidate> = vec![&lib[*ia], &lib[*ib]];
-            // The start holds every parameter of the effects; keep the fitted ones.
-            let start: Vec<f64> = cands
+            // The best single effect starts where its own fit ended.
+            let all = fa.effects[0].params();
+            let held: Vec<f64> = lib[*ia]
+                .params
                 .iter()
-                .zip([&fa.effects[0], &fb.effects[0]])
-                .flat_map(|(c, e)| {
-                    let all = e.params();
-                    c.params
-                        .iter()
-                        .map(move |p| all.iter().find(|(k, _)| *k == p.key).map_or(p.lo, |(_, v)| *v))
-                        .collect::<Vec<_>>()
-                })
+                .map(|p| all.iter().find(|(k, _)| *k == p.key).map_or(p.lo, |(_, v)| *v))
                 .collect();
-            let f = attribute::fit_candidates(machine, effects, &cands, Some(start), &calib, &holdout);
+            let f = attribute::fit_candidates(machine, effects, &cands, &held, &calib, &holdout);
             progress();
             f
         })
