@@ -102,16 +102,7 @@ fn single_on(kind: Kind, name: &str, effect: &str) -> Value {
     assert!(r["verdict"]["holdout_shrink"].as_f64().unwrap() >= 0.5, "{r:#}");
     // Every library effect was tried, and the ranking is best first.
     let cands = r["candidates"].as_array().unwrap();
-    for e in [
-        "clearance",
-        "elastic_recovery",
-        "friction_rise",
-        "strain_rate",
-        "strain_hardening",
-        "thermal",
-        "foundation",
-        "sensor_highpass",
-    ] {
+    for e in forgemon::physics::effects::EFFECT_NAMES {
         assert!(cands.iter().any(|c| c["effect"] == e), "{e} missing");
     }
     assert!(cands.windows(2).all(|w| w[0]["holdout"].as_f64() <= w[1]["holdout"].as_f64()));
