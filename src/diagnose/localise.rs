@@ -36,6 +36,17 @@ pub struct ByPhase {
 }
 
 impl ByPhase {
+    /// The mean over blows.
+    pub fn mean(all: &[ByPhase]) -> ByPhase {
+        let k = 1.0 / all.len().max(1) as f64;
+        all.iter().fold(ByPhase::default(), |m, p| ByPhase {
+            impact: m.impact + k * p.impact,
+            forming: m.forming + k * p.forming,
+            spring_back: m.spring_back + k * p.spring_back,
+            post: m.post + k * p.post,
+        })
+    }
+
     /// The phase with the largest error.
     pub fn dominant(&self) -> &'static str {
         let all = [
@@ -54,6 +65,18 @@ pub struct ByBand {
     pub low: f64,
     pub mode2: f64,
     pub high: f64,
+}
+
+impl ByBand {
+    /// The mean over blows.
+    pub fn mean(all: &[ByBand]) -> ByBand {
+        let k = 1.0 / all.len().max(1) as f64;
+        all.iter().fold(ByBand::default(), |m, b| ByBand {
+            low: m.low + k * b.low,
+            mode2: m.mode2 + k * b.mode2,
+            high: m.high + k * b.high,
+        })
+    }
 }
 
 /// One blow's residual, localised.
@@ -176,7 +199,6 @@ mod tests {
             h_end_m: None,
             t_contact_s: 1e-3,
             t_forming_end_s: Some(9e-3),
-            t_load_zero_s: Some(10e-3),
         };
         (r, s)
     }

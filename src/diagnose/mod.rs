@@ -44,7 +44,6 @@ pub struct Diagnosis {
     pub baseline_holdout_per_blow: Vec<f64>,
     pub by_phase: ByPhase,
     pub by_band: ByBand,
-    pub localised: Vec<Localised>,
     /// Every single effect and the pairs tried, best holdout first.
     pub candidates: Vec<Fitted>,
     pub verdict: Option<Fitted>,
@@ -110,18 +109,8 @@ pub fn diagnose(
 ) -> Option<Diagnosis> {
     let (calib, calib_loc) = blow_set(calib.0, calib.1, machine, effects)?;
     let (holdout, hold_loc) = blow_set(holdout.0, holdout.1, machine, effects)?;
-    let nc = calib_loc.len() as f64;
-    let by_phase = ByPhase {
-        impact: calib_loc.iter().map(|l| l.by_phase.impact).sum::<f64>() / nc,
-        forming: calib_loc.iter().map(|l| l.by_phase.forming).sum::<f64>() / nc,
-        spring_back: calib_loc.iter().map(|l| l.by_phase.spring_back).sum::<f64>() / nc,
-        post: calib_loc.iter().map(|l| l.by_phase.post).sum::<f64>() / nc,
-    };
-    let by_band = ByBand {
-        low: calib_loc.iter().map(|l| l.by_band.low).sum::<f64>() / nc,
-        mode2: calib_loc.iter().map(|l| l.by_band.mode2).sum::<f64>() / nc,
-        high: calib_loc.iter().map(|l| l.by_band.high).sum::<f64>() / nc,
-    };
+    let by_phase = ByPhase::mean(&calib_loc.iter().map(|l| l.by_phase).collect::<Vec<_>>());
+    let by_band = ByBand::mean(&calib_loc.iter().map(|l| l.by_band).collect::<Vec<_>>());
     let base_hold: Vec<f64> = hold_loc.iter().map(|l| l.nrmse).collect();
     let base_calib = mean(&calib_loc.iter().map(|l| l.nrmse).collect::<Vec<_>>());
     let lib = library();
@@ -215,7 +204,6 @@ pub fn diagnose(
         baseline_holdout_per_blow: base_hold,
         by_phase,
         by_band,
-        localised: calib_loc,
         candidates,
         verdict,
         noise_nrmse,
@@ -300,15 +288,9 @@ mod tests {
         let obj = Objective::new(refs, vec![true; v0s.len()], Setting::Billet(p), MachineKind::Hammer);
         let sims = obj.simulate(&m).unwrap();
         // Over the blows, as the report's baseline gives it.
-        let mut mean = ByPhase::default();
-        for (r, s) in obj.refs.iter().zip(&sims) {
-            let l = localise(r, s, m.second_mode_hz()).by_phase;
-            let k = 1.0 / v0s.len() as f64;
-            mean.impact += k * l.impact;
-            mean.forming += k * l.forming;
-            mean.spring_back += k * l.spring_back;
-            mean.post += k * l.post;
-        }
+        let mean = ByPhase::mean(
+            &obj.refs.iter().zip(&sims).map(|(r, s)| localise(r, s, m.second_mode_hz()).by_phase).collect::<Vec<_>>(),
+        );
         eprintln!("{effect}: {mean:?}");
         mean.dominant()
     }

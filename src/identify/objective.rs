@@ -157,7 +157,6 @@ pub struct Objective {
     /// typical value sets the envelope window).
     pub mode2_hz: Option<f64>,
     pub setting: Setting,
-    pub kind: MachineKind,
     /// Highest frequency of the spectral term, Hz.
     pub f_max_hz: f64,
     /// Measured spectra, bins 1..=m of each reference.
@@ -171,12 +170,10 @@ pub struct Simulated {
     pub spectrum: Vec<f64>,
     /// Billet height after the blow (for the next blow), m.
     pub h_end_m: Option<f64>,
-    /// The model's first contact, end of forming (`None` for a bare strike) and return of
-    /// the sensor load to zero (the contact's end for a bare strike), s on the window's
-    /// clock (sample i at i·dt).
+    /// The model's first contact and end of forming (`None` for a bare strike), s on the
+    /// window's clock (sample i at i·dt).
     pub t_contact_s: f64,
     pub t_forming_end_s: Option<f64>,
-    pub t_load_zero_s: Option<f64>,
 }
 
 impl Objective {
@@ -211,7 +208,6 @@ impl Objective {
             measured_envelope,
             mode2_hz,
             setting,
-            kind,
             f_max_hz,
             measured_spectra,
         }
@@ -304,14 +300,12 @@ impl Objective {
             // The model's instants on the window's clock (model time 0 is first contact).
             let on_window = |t: f64| t - t_cross + r.t_align_s;
             let forming_end = res.forming.map(|f| f.forming_time_s);
-            let load_zero = res.forming.and_then(|f| f.spring_back_time_s.map(|sb| f.forming_time_s + sb));
             out.push(Simulated {
                 load_n: load,
                 spectrum,
                 h_end_m: res.forming.map(|f| f.h_end_m),
                 t_contact_s: on_window(0.0),
                 t_forming_end_s: forming_end.map(on_window),
-                t_load_zero_s: load_zero.map(on_window).or(Some(on_window(res.contact_time_s))),
             });
         }
         Some(out)
