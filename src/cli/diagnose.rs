@@ -97,7 +97,7 @@ fn read_dir(dir: &Path, machine: &Machine) -> anyhow::Result<(Vec<crate::identif
             machine.kind().as_str()
         );
     }
-    let (refs, _) = super::identify::read_references(dir, machine.kind(), false, &[])?;
+    let (refs, _) = super::identify::read_references(dir, machine.kind(), false, &[], Some(machine))?;
     Ok((refs, Setting::Billet(p)))
 }
 
@@ -107,10 +107,15 @@ fn write_html(d: &Diagnosis, machine: &Machine, path: &Path, elapsed_s: f64) -> 
     page.section("Conclusion");
     let shrink = d.verdict.as_ref().map_or(0.0, |v| 1.0 - v.holdout / d.baseline_holdout);
     page.paragraph(format!(
-        "The base model misses the measured load by {:.1} % of the peak on the holdout blows (nrmse), most in the {} phase. \
+        "The base model misses the measured load by {:.1} % of the peak on the holdout blows (nrmse), most in the {} phase{}. \
          Verdict: {verdict}{}. {} (Computed in {elapsed_s:.1} s.)",
         d.baseline_holdout * 100.0,
         d.by_phase.dominant(),
+        crate::diagnose::indicators::dominant(&d.indicator_summary).map_or(String::new(), |s| format!(
+            "; of the blow's indicators, its {} departs most ({:+.0} %, model against measurement)",
+            s.name.replace('_', " "),
+            s.mean_rel_error * 100.0
+        )),
         if d.verdict.is_some() { format!(", which shrinks the holdout error by {:.0} %", shrink * 100.0) } else { String::new() },
         d.why
     ));
@@ -144,6 +149,46 @@ fn write_html(d: &Diagnosis, machine: &Machine, path: &Path, elapsed_s: f64) -> 
     page.figure(
         bar_plot_svg(&bands, 800, 320)?,
         format!("The error's energy by band around the second mode ({:.0} Hz).", machine.second_mode_hz()),
+    );
+    let present: Vec<_> = d.indicator_summary.iter().filter(|s| s.mean_rel_error.is_finite()).collect();
+    let indicators = BarPlot {
+        title: "indicators: model against measurement".into(),
+        y_label: "relative error".into(),
+        groups: present.iter().map(|s| s.name.to_string()).collect(),
+        bars: vec![("base model".into(), present.iter().map(|s| s.mean_rel_error).collect())],
+    };
+    page.figure(
+        bar_plot_svg(&indicators, 800, 320)?,
+        "(model − measured) / measured over the calibration blows. The phases' lengths come from each blow's own \
+         instants (the measured end of forming is the billet's largest compression, as the model run on the measured \
+         signals sees it), so a forming that runs long shows here even where its load error lands in the next phase.",
+    );
+    let mean_of = |f: fn(&crate::diagnose::indicators::Indicators) -> Option<crate::diagnose::indicators::Pair>| {
+        let v: Vec<_> = d.indicators.iter().filter_map(f).collect();
+        let k = v.len().max(1) as f64;
+        (v.iter().map(|p| p.measured).sum::<f64>() / k, v.iter().map(|p| p.model).sum::<f64>() / k, v.len())
+    };
+    let rows: Vec<Vec<String>> = [
+        ("peak load, kN", 1e-3, mean_of(|i| Some(i.peak_load_n))),
+        ("final load, kN", 1e-3, mean_of(|i| Some(i.final_load_n))),
+        ("forming time, ms", 1e3, mean_of(|i| Some(i.forming_time_s))),
+        ("spring-back time, ms", 1e3, mean_of(|i| Some(i.spring_back_time_s))),
+        ("final height, mm", 1e3, mean_of(|i| i.final_height_m)),
+        ("second-mode frequency, Hz", 1.0, mean_of(|i| i.mode2_frequency_hz)),
+        ("second-mode damping ratio", 1.0, mean_of(|i| i.mode2_damping_ratio)),
+    ]
+    .iter()
+    .map(|(name, scale, (m, s, n))| {
+        if *n == 0 {
+            return vec![name.to_string(), "–".into(), "–".into(), "0".into()];
+        }
+        let f = |x: f64| crate::report::format_number(x * scale, 4);
+        vec![name.to_string(), f(*m), f(*s), n.to_string()]
+    })
+    .collect();
+    page.table(
+        vec!["indicator (mean over blows)".into(), "measured".into(), "base model".into(), "blows".into()],
+        rows,
     );
     page.section("Ranking (mean nrmse; parameters fitted on calibration, scored on holdout)");
     let rows = d

@@ -88,7 +88,7 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
         }
         Setting::Billet(p)
     };
-    let (fit, held) = read_references(&args.reference, kind, args.bare, &args.fit_blows)?;
+    let (fit, held) = read_references(&args.reference, kind, args.bare, &args.fit_blows, None)?;
     let cfg = IdentifyConfig { starts: args.starts.max(1), seed: args.seed, monte_carlo: args.monte_carlo };
     let bar = indicatif::ProgressBar::new((cfg.starts + cfg.monte_carlo) as u64);
     bar.set_style(
@@ -155,6 +155,7 @@ pub(crate) fn read_references(
     kind: MachineKind,
     bare: bool,
     fit_blows: &[usize],
+    locate: Option<&crate::physics::machine::Machine>,
 ) -> anyhow::Result<(Vec<Reference>, Vec<Reference>)> {
     let files = super::capture_dir_files(dir)?;
     let fit_s = crate::estimate::EstimatorConfig::for_kind(kind).fit_s;
@@ -172,7 +173,10 @@ pub(crate) fn read_references(
         for (k, blow) in blows.iter().enumerate() {
             number += 1;
             let label = if blows.len() > 1 { format!("{name} #{}", k + 1) } else { name.clone() };
-            let r = Reference::from_blow(&label, blow, (!bare).then_some(number), fit_s)?;
+            let mut r = Reference::from_blow(&label, blow, (!bare).then_some(number), fit_s)?;
+            if let Some(m) = locate {
+                r.locate_phases(m, blow);
+            }
             if fit_blows.is_empty() || fit_blows.contains(&number) {
                 fit.push(r);
             } else {

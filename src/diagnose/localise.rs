@@ -3,11 +3,11 @@
 //!
 //! - The window runs from the model's first contact until the measured load has returned
 //!   to zero after forming, plus 5 ms.
-//! - Phases (on the model's clock, aligned to the measurement as `identify::objective`
-//!   aligns them): `impact` the first 10 % of the forming time, `forming` the rest up to
-//!   the end of forming, `spring_back` until the measured load returns to zero, `post` the
-//!   5 ms after. Each phase's value is the RMS error within it over the blow's peak, so a
-//!   short phase that is badly wrong stands out.
+//! - Phases: `impact` the first 10 % of the forming time, `forming` the rest up to the end
+//!   of forming, `spring_back` until the load returns to zero, `post` the 5 ms after. The
+//!   measured blow and the model each have their own (`localise` says how a sample where
+//!   they differ is counted). Each phase's value is the RMS error within it over the blow's
+//!   peak, so a short phase that is badly wrong stands out.
 //! - Bands split the residual's energy over the window (Parseval, so the squares of the
 //!   three values add up to the window's nrmse²): `low` below half the second-mode
 //!   frequency, `mode2` from half to twice it, `high` above.
@@ -85,29 +85,77 @@ pub struct Localised {
     pub nrmse: f64,
     pub by_phase: ByPhase,
     pub by_band: ByBand,
-    /// The window, sample indices [start, end).
+    /// The nrmse window, sample indices [start, end).
     pub window: (usize, usize),
-    /// Phase boundaries, sample indices: impact end, forming end, load back at zero.
-    pub boundaries: [usize; 3],
+    /// The measured blow's phase boundaries (`Phases`).
+    pub measured: Phases,
+    /// The model's.
+    pub model: Phases,
+}
+
+/// A blow's phase boundaries, sample indices: first contact, end of impact, end of forming,
+/// load back at zero, end of `post`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Phases(pub [usize; 5]);
+
+impl Phases {
+    /// Boundaries from first contact and the end of forming, with the load back at zero the
+    /// first sample of `load` below `threshold` from the end of forming (or from `not_before`).
+    fn new(contact: usize, forming_end: usize, load: &[f64], threshold: f64, not_before: usize, post: usize) -> Phases {
+        let n = load.len();
+        let contact = contact.min(n);
+        let forming_end = forming_end.clamp(contact, n);
+        let impact_end = contact + ((forming_end - contact) as f64 * IMPACT_FRACTION).round() as usize;
+        let zero = (forming_end.max(not_before)..n).find(|&i| load[i] < threshold).unwrap_or(n);
+        Phases([contact, impact_end, forming_end, zero, (zero + post).min(n)])
+    }
+
+    /// The phase sample `i` is in: -1 before contact, 0..=3 the four phases, 4 after.
+    fn of(&self, i: usize) -> i32 {
+        (0..5).rev().find(|&k| i >= self.0[k]).map_or(-1, |k| k as i32)
+    }
+
+    pub fn contact(&self) -> usize {
+        self.0[0]
+    }
+
+    pub fn forming_end(&self) -> usize {
+        self.0[2]
+    }
+
+    pub fn zero(&self) -> usize {
+        self.0[3]
+    }
 }
 
 /// Localise the residual of `model` against the measured `r`, with the machine's second
 /// mode at `mode2_hz`.
+///
+/// The nrmse window is the contract's: from the model's first contact (aligned on the
+/// measurement) until the measured load is back at zero after forming, plus 5 ms.
+///
+/// By phase: both blows are cut into phases on their own instants, the measured one on
+/// what was measured (`Reference::measured`: the segmenter's contact and the billet's
+/// largest compression as the model run on the measured signals sees it) and the model on
+/// its own. A sample counts to the earlier of the two phases it is in: where the model is
+/// still forming after the billet has stopped, that error is the forming's (the forming
+/// ran long), and where the measured load is still unloading after the model has let go,
+/// it is the spring-back's. Without measured instants the model's serve for both.
 pub fn localise(r: &Reference, model: &Simulated, mode2_hz: f64) -> Localised {
     let n = r.load_n.len();
     let dt = r.dt_s;
     let idx = |t: f64| ((t / dt).round().max(0.0) as usize).min(n);
     let start = idx(model.t_contact_s);
     let i_peak = r.load_n.iter().enumerate().fold(0, |b, (i, v)| if *v > r.load_n[b] { i } else { b });
-    let forming_end = model.t_forming_end_s.map_or(i_peak, idx).max(start);
-    let impact_end = (start + ((forming_end - start) as f64 * IMPACT_FRACTION).round() as usize).min(forming_end);
-    // The measured load back at zero: the first sample below the threshold after the end of
-    // forming (or after the peak, whichever is later).
+    let model_fe = model.t_forming_end_s.map_or(i_peak, idx).max(start);
     let threshold = ZERO_FRACTION * r.peak_n;
-    let from = forming_end.max(i_peak);
-    let zero = (from..n).find(|&i| r.load_n[i] < threshold).unwrap_or(n);
-    let end = (zero + (POST_S / dt).round() as usize).min(n);
-    let resid: Vec<f64> = (0..n).map(|i| r.load_n[i] - model.load_n.get(i).copied().unwrap_or(0.0)).collect();
+    let post = (POST_S / dt).round() as usize;
+    // The contract's window: the measured load back at zero after the end of forming (or
+    // after the peak, whichever is later).
+    let window = Phases::new(start, model_fe, &r.load_n, threshold, i_peak, post);
+    let (end, zero) = (window.0[4], window.zero());
+    let model_load: Vec<f64> = (0..n).map(|i| model.load_n.get(i).copied().unwrap_or(0.0)).collect();
+    let resid: Vec<f64> = (0..n).map(|i| r.load_n[i] - model_load[i]).collect();
     let rms = |a: usize, b: usize| {
         if b <= a {
             return 0.0;
@@ -115,14 +163,28 @@ pub fn localise(r: &Reference, model: &Simulated, mode2_hz: f64) -> Localised {
         (resid[a..b].iter().map(|x| x * x).sum::<f64>() / (b - a) as f64).sqrt() / r.peak_n
     };
     let nrmse = rms(start, end);
-    let by_phase = ByPhase {
-        impact: rms(start, impact_end),
-        forming: rms(impact_end, forming_end),
-        spring_back: rms(forming_end, zero.min(end)),
-        post: rms(zero.min(end), end),
+    let measured = match r.measured {
+        Some(m) => Phases::new(idx(m.contact_s), idx(m.forming_end_s), &r.load_n, threshold, 0, post),
+        None => Phases([start, window.0[1], model_fe, zero.min(end), end]),
     };
+    let modelled = Phases::new(start, model_fe, &model_load, threshold, 0, post);
+    let mut sum = [0.0; 4];
+    let mut count = [0usize; 4];
+    let from = measured.contact().min(modelled.contact());
+    let to = measured.0[4].max(modelled.0[4]);
+    for (i, e) in resid.iter().enumerate().take(to).skip(from) {
+        let (a, b) = (measured.of(i), modelled.of(i));
+        // The earlier of the two phases; before contact on one side, the other's.
+        let k = if a < 0 || b < 0 { a.max(b) } else { a.min(b) };
+        if (0..4).contains(&k) {
+            sum[k as usize] += e * e;
+            count[k as usize] += 1;
+        }
+    }
+    let phase = |k: usize| if count[k] == 0 { 0.0 } else { (sum[k] / count[k] as f64).sqrt() / r.peak_n };
+    let by_phase = ByPhase { impact: phase(0), forming: phase(1), spring_back: phase(2), post: phase(3) };
     let by_band = bands(&resid[start..end.max(start)], dt, mode2_hz, nrmse);
-    Localised { nrmse, by_phase, by_band, window: (start, end), boundaries: [impact_end, forming_end, zero.min(end)] }
+    Localised { nrmse, by_phase, by_band, window: (start, end), measured, model: modelled }
 }
 
 /// Split `nrmse` of the residual `x` by band, in proportion to the energy in each.
@@ -189,6 +251,9 @@ mod tests {
             v0_mps: 4.0,
             dt_s: dt,
             load_n: measured,
+            disp_m: vec![0.0; n],
+            i_window_start: 0,
+            measured: None,
             t_align_s: 1e-3,
             peak_n: peak,
             blow_index: Some(1),
@@ -197,6 +262,7 @@ mod tests {
             load_n: model,
             spectrum: Vec::new(),
             h_end_m: None,
+            h_start_m: None,
             t_contact_s: 1e-3,
             t_forming_end_s: Some(9e-3),
         };

@@ -18,6 +18,7 @@
 //! 4. Otherwise: "none".
 
 pub mod attribute;
+pub mod indicators;
 pub mod localise;
 
 use rayon::prelude::*;
@@ -27,6 +28,7 @@ use crate::identify::objective::{Objective, Reference, Setting};
 use crate::physics::effects::EffectSet;
 use crate::physics::machine::Machine;
 use attribute::{BlowSet, Candidate, Fitted, library, mean};
+use indicators::{Indicators, Summary, indicators, summarise};
 use localise::{ByBand, ByPhase, Localised, localise};
 
 /// The baseline error must exceed this many times the noise for a gap to exist.
@@ -44,6 +46,9 @@ pub struct Diagnosis {
     pub baseline_holdout_per_blow: Vec<f64>,
     pub by_phase: ByPhase,
     pub by_band: ByBand,
+    /// The calibration blows' indicators, and over the blows.
+    pub indicators: Vec<Indicators>,
+    pub indicator_summary: Vec<Summary>,
     /// Every single effect and the pairs tried, best holdout first.
     pub candidates: Vec<Fitted>,
     pub verdict: Option<Fitted>,
@@ -59,14 +64,15 @@ fn blow_set(
     setting: Setting,
     machine: &Machine,
     effects: &EffectSet,
-) -> Option<(BlowSet, Vec<Localised>)> {
+) -> Option<(BlowSet, Vec<Localised>, Vec<Indicators>)> {
     let n = refs.len();
     let obj = Objective::new(refs, vec![true; n], setting, machine.kind()).with_effects(*effects);
     let mode2 = machine.second_mode_hz();
     let sims = obj.simulate(machine)?;
     let loc: Vec<Localised> = obj.refs.iter().zip(&sims).map(|(r, s)| localise(r, s, mode2)).collect();
+    let ind = obj.refs.iter().zip(&sims).zip(&loc).map(|((r, s), l)| indicators(r, s, l, mode2)).collect();
     let windows = loc.iter().map(|l| l.window).collect();
-    Some((BlowSet { obj, windows, mode2_hz: mode2 }, loc))
+    Some((BlowSet { obj, windows, mode2_hz: mode2 }, loc, ind))
 }
 
 /// Sensor noise over the peak: the load's spread before the model's first contact.
@@ -107,8 +113,8 @@ pub fn diagnose(
     holdout: (Vec<Reference>, Setting),
     progress: &(dyn Fn() + Sync),
 ) -> Option<Diagnosis> {
-    let (calib, calib_loc) = blow_set(calib.0, calib.1, machine, effects)?;
-    let (holdout, hold_loc) = blow_set(holdout.0, holdout.1, machine, effects)?;
+    let (calib, calib_loc, calib_ind) = blow_set(calib.0, calib.1, machine, effects)?;
+    let (holdout, hold_loc, _) = blow_set(holdout.0, holdout.1, machine, effects)?;
     let by_phase = ByPhase::mean(&calib_loc.iter().map(|l| l.by_phase).collect::<Vec<_>>());
     let by_band = ByBand::mean(&calib_loc.iter().map(|l| l.by_band).collect::<Vec<_>>());
     let base_hold: Vec<f64> = hold_loc.iter().map(|l| l.nrmse).collect();
@@ -204,6 +210,8 @@ pub fn diagnose(
         baseline_holdout_per_blow: base_hold,
         by_phase,
         by_band,
+        indicator_summary: summarise(&calib_ind),
+        indicators: calib_ind,
         candidates,
         verdict,
         noise_nrmse,
@@ -213,8 +221,13 @@ pub fn diagnose(
     })
 }
 
+/// JSON has no NaN: a missing number is null.
+fn finite(x: f64) -> Value {
+    if x.is_finite() { json!(x) } else { Value::Null }
+}
+
 impl Diagnosis {
-    /// `report.json` (CONTRACTS.md §6).
+    /// `report.json` (CONTRACTS.md §6), with the indicators added to `baseline`.
     pub fn to_json(&self) -> Value {
         let params = |f: &Fitted| -> Value {
             let mut m = serde_json::Map::new();
@@ -234,6 +247,12 @@ impl Diagnosis {
                 "by_phase": self.by_phase,
                 "dominant_phase": self.by_phase.dominant(),
                 "by_band": self.by_band,
+                "indicators": self.indicator_summary.iter().map(|s| (s.name.to_string(), json!({
+                    "mean_rel_error": finite(s.mean_rel_error), "blows": s.blows,
+                    "per_blow_rel_error": s.per_blow_rel_error.iter().map(|x| x.map(finite)).collect::<Vec<_>>(),
+                }))).collect::<serde_json::Map<_, _>>(),
+                "dominant_indicator": indicators::dominant(&self.indicator_summary).map(|s| s.name),
+                "indicators_per_blow": self.indicators,
             },
             "candidates": self.candidates.iter().map(|f| json!({
                 "effect": f.name, "params": params(f), "calib": f.calib, "holdout": f.holdout,
@@ -263,15 +282,26 @@ mod tests {
     use crate::signal::segment::{SegmentConfig, Segmenter};
     use crate::synth::{CaptureSpec, rows_batch, synth_blows};
 
+    use super::indicators::{Summary, dominant, indicators, summarise};
     use super::localise::{ByPhase, localise};
 
-    /// Blows made with a hidden effect, seen through the base model: the phase the residual
-    /// lands in (the first step of the diagnosis).
-    fn dominant_phase(effect: &str) -> &'static str {
-        let m = parse_machine("m", include_str!("../../config/hammer-lg1000.machine.toml")).unwrap().machine;
-        let p = parse_process("p", include_str!("../../config/steel-16NiCrMo13.process.toml")).unwrap();
-        let hidden = EffectSet::from_effects(&[Effect::parse_spec(effect).unwrap()]);
-        let v0s = [3.9, 4.6, 5.3];
+    /// Blows made with a hidden effect, seen through the base model as `diagnose` sees them
+    /// (phases located on the measured signals): the residual by phase over the blows, and
+    /// the indicators.
+    /// The hammer is the withheld-effect suite's (not the paper's), the billet the steel
+    /// sheet's without its measured heights, so the model carries its own heights.
+    fn baseline(effect: &str) -> (ByPhase, Vec<Summary>) {
+        let m =
+            parse_machine("m", "kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n")
+                .unwrap()
+                .machine;
+        let mut p = parse_process("p", include_str!("../../config/steel-16NiCrMo13.process.toml")).unwrap();
+        p.measured_final_heights_m.clear();
+        let hidden = match effect {
+            "none" => EffectSet::NONE,
+            e => EffectSet::from_effects(&[Effect::parse_spec(e).unwrap()]),
+        };
+        let v0s = [4.0, 4.5, 5.0, 5.3, 5.3];
         let blows = synth_blows(&m, &hidden, &p, &v0s, &CaptureSpec::hammer(5)).unwrap();
         let refs: Vec<Reference> = blows
             .iter()
@@ -282,33 +312,73 @@ mod tests {
                 let mut cut = Vec::new();
                 seg.push(&batch, &mut cut);
                 seg.finish(&mut cut);
-                Reference::from_blow("b", &cut[0], Some(i + 1), 0.01).unwrap()
+                let mut r = Reference::from_blow("b", &cut[0], Some(i + 1), 0.01).unwrap();
+                r.locate_phases(&m, &cut[0]);
+                r
             })
             .collect();
         let obj = Objective::new(refs, vec![true; v0s.len()], Setting::Billet(p), MachineKind::Hammer);
         let sims = obj.simulate(&m).unwrap();
-        // Over the blows, as the report's baseline gives it.
-        let mean = ByPhase::mean(
-            &obj.refs.iter().zip(&sims).map(|(r, s)| localise(r, s, m.second_mode_hz()).by_phase).collect::<Vec<_>>(),
-        );
+        let loc: Vec<_> = obj.refs.iter().zip(&sims).map(|(r, s)| localise(r, s, m.second_mode_hz())).collect();
+        let ind: Vec<_> =
+            obj.refs.iter().zip(&sims).zip(&loc).map(|((r, s), l)| indicators(r, s, l, m.second_mode_hz())).collect();
+        // Over the blows, as the report's baseline gives them.
+        let mean = ByPhase::mean(&loc.iter().map(|l| l.by_phase).collect::<Vec<_>>());
+        let summary = summarise(&ind);
         eprintln!("{effect}: {mean:?}");
-        mean.dominant()
+        for s in &summary {
+            eprintln!("  {}: {:+.3}", s.name, s.mean_rel_error);
+        }
+        (mean, summary)
+    }
+
+    fn rel(summary: &[Summary], name: &str) -> f64 {
+        summary.iter().find(|s| s.name == name).unwrap().mean_rel_error
     }
 
     // CONTRACTS.md §6 / issue #6: where an effect has a clear location, the base model's
     // dominant phase says so.
     #[test]
     fn elastic_recovery_shows_in_the_spring_back() {
-        assert_eq!(dominant_phase("elastic_recovery:k_contact_N_per_m=1.5e9"), "spring_back");
+        let (phase, ind) = baseline("elastic_recovery:k_contact_N_per_m=1.5e9");
+        assert_eq!(phase.dominant(), "spring_back");
+        // The papers' gap: the measured spring-back lasts longer than the model's (hammer
+        // paper §4.2: 3.7 ms against 0.8 ms), so the model's is short.
+        assert_eq!(dominant(&ind).unwrap().name, "spring_back_time");
+        assert!(rel(&ind, "spring_back_time") < -0.2);
     }
 
     #[test]
     fn clearance_shows_at_impact() {
-        assert_eq!(dominant_phase("clearance:gap_m=0.0003"), "impact");
+        assert_eq!(baseline("clearance:gap_m=0.0003").0.dominant(), "impact");
     }
 
-    // Not yet: `friction_rise:exponent=1.0` lands in spring_back (0.054) rather than forming
-    // (0.007) on the base model's phase boundaries, because the measured forming ends
-    // earlier and the misplaced unloading dominates. The phases should come from the
-    // measurement (the ram's reversal on the encoder) before that case can pass.
+    // A flow stress the model lacks (friction rising as the billet flattens, a cooling
+    // billet) raises the real load, so the real forming ends sooner: the model forms too
+    // long and ends below the measured final load. Their dominant *phase* is spring_back,
+    // not forming (friction_rise: forming 0.10, spring_back 0.24 on the suite's hammer): the
+    // largest load error is the model still forming, then unloading, after the real billet
+    // has stopped, and a time-domain phase split cannot charge that to the forming that ran
+    // long (see the issue-6 note). The indicators do: the forming time is the largest error.
+    #[test]
+    fn a_missing_flow_stress_shows_as_a_long_forming_time() {
+        for effect in ["friction_rise:exponent=1.0", "thermal:q_dT=0.15"] {
+            let (_, ind) = baseline(effect);
+            assert_eq!(dominant(&ind).unwrap().name, "forming_time", "{effect}");
+            assert!(rel(&ind, "forming_time") > 0.05, "{effect}");
+            assert!(rel(&ind, "final_load") < 0.0, "{effect}");
+        }
+    }
+
+    #[test]
+    fn no_effect_leaves_the_indicators_within_the_sensors() {
+        // 2 kN load noise and 10 µm encoder steps (CaptureSpec::hammer) on a ~1 MN blow of
+        // several ms: every indicator within 2 %. The spring-back time, a few hundred µs
+        // read at a 2 % threshold, within 10 %.
+        let (_, ind) = baseline("none");
+        for s in &ind {
+            let bound = if s.name == "spring_back_time" { 0.10 } else { 0.02 };
+            assert!(s.mean_rel_error.abs() < bound, "{}: {}", s.name, s.mean_rel_error);
+        }
+    }
 }

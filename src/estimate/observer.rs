@@ -27,7 +27,10 @@ pub struct Observed {
     pub damped_j: f64,
     /// Mechanical energy left in the machine at the end of contact.
     pub elastic_j: f64,
-    /// Zeroed sensor load at the end of forming (largest compression), N.
+    /// The end of forming (the first sample on the largest compression's plateau), samples
+    /// from contact.
+    pub forming_end: usize,
+    /// Zeroed sensor load at the end of forming, N.
     pub final_load_n: f64,
     pub peak_load_n: f64,
     /// Billet compression (plastic plus elastic) at each sample from contact, m.
@@ -95,7 +98,8 @@ fn hammer(h: &Hammer, blow: &Blow, v0: f64) -> Observed {
     }
     o.deform_j = o.work_j.iter().sum();
     o.elastic_j = 0.5 * m1 * v1 * v1 + 0.5 * m2 * v2 * v2 + 0.5 * k * x2 * x2;
-    o.final_load_n = fs(end_of_forming(&o.compression_m));
+    o.forming_end = end_of_forming(&o.compression_m);
+    o.final_load_n = fs(o.forming_end);
     o
 }
 
@@ -162,7 +166,8 @@ fn press(p: &ScrewPress, blow: &Blow, v0: f64) -> Observed {
         + 0.5 * kl * st * st
         + 0.5 * f_end * f_end / k_series
         + 0.5 * p.k_frame_n_per_m * xn * xn;
-    o.final_load_n = fs(end_of_forming(&o.compression_m));
+    o.forming_end = end_of_forming(&o.compression_m);
+    o.final_load_n = fs(o.forming_end);
     o
 }
 

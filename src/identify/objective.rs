@@ -60,6 +60,13 @@ pub struct Reference {
     pub dt_s: f64,
     /// Zeroed sensor load over the window, N; sample i at i·dt from the window's start.
     pub load_n: Vec<f64>,
+    /// The ram's encoder position over the window, m, positive down (CONTRACTS.md §1: an
+    /// arbitrary offset, quantised).
+    pub disp_m: Vec<f64>,
+    /// The window's first sample in the segmented blow.
+    pub i_window_start: usize,
+    /// The measured phases' instants, `None` until located (`locate_phases`).
+    pub measured: Option<MeasuredInstants>,
     /// The alignment crossing, s from the window's start.
     pub t_align_s: f64,
     pub peak_n: f64,
@@ -106,15 +113,45 @@ impl Reference {
             v0_mps: v0,
             dt_s: dt,
             load_n: load[start..end].to_vec(),
+            disp_m: blow.samples[start..end].iter().map(|s| s.disp_m).collect(),
+            i_window_start: start,
+            measured: None,
             t_align_s: ((i_cross - 1 - start) as f64 + frac) * dt,
             peak_n: peak,
             blow_index,
         })
     }
 
+    /// Locate first contact (the segmenter's) and the end of forming on the measured signals
+    /// of `blow`, the one this reference was cut from. The end of forming is the billet's
+    /// largest compression, as `machine`'s model run on the measured signals sees it
+    /// (`estimate::observer`, which the live estimate also uses), not the model's.
+    pub fn locate_phases(&mut self, machine: &Machine, blow: &Blow) {
+        let o = crate::estimate::observer::observe(machine, blow, self.v0_mps);
+        let at = |i: usize| (i as f64 - self.i_window_start as f64).max(0.0) * self.dt_s;
+        let threshold = crate::diagnose::localise::ZERO_FRACTION * self.peak_n;
+        let load = |k: usize| blow.samples[blow.i_contact + k].load_n - blow.load_zero_n;
+        let zero = (o.forming_end..o.compression_m.len()).find(|&k| load(k) < threshold);
+        self.measured = (o.deform_j > 0.0).then(|| MeasuredInstants {
+            contact_s: at(blow.i_contact),
+            forming_end_s: at(blow.i_contact + o.forming_end),
+            set_m: zero.map(|k| o.compression_m[k]),
+        });
+    }
+
     pub fn duration_s(&self) -> f64 {
         self.load_n.len() as f64 * self.dt_s
     }
+}
+
+/// Instants of a measured blow, s from its reference window's start.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeasuredInstants {
+    pub contact_s: f64,
+    pub forming_end_s: f64,
+    /// The billet's permanent set: its compression when the load is back at zero, m
+    /// (`None`: the load never came back to zero within the capture).
+    pub set_m: Option<f64>,
 }
 
 /// What the references were struck on.
@@ -170,6 +207,8 @@ pub struct Simulated {
     pub spectrum: Vec<f64>,
     /// Billet height after the blow (for the next blow), m.
     pub h_end_m: Option<f64>,
+    /// Billet height before the blow, m.
+    pub h_start_m: Option<f64>,
     /// The model's first contact and end of forming (`None` for a bare strike), s on the
     /// window's clock (sample i at i·dt).
     pub t_contact_s: f64,
@@ -304,6 +343,7 @@ impl Objective {
                 load_n: load,
                 spectrum,
                 h_end_m: res.forming.map(|f| f.h_end_m),
+                h_start_m: res.forming.map(|_| res.h_start_m),
                 t_contact_s: on_window(0.0),
                 t_forming_end_s: forming_end.map(on_window),
             });

@@ -491,7 +491,10 @@ pub fn bar_plot_svg(plot: &BarPlot, width: u32, height: u32) -> Result<String, R
             .y_desc(&plot.y_label)
             .axis_desc_style(font(AXIS_LABEL_PX))
             .label_style(font(TICK_PX))
-            .y_label_formatter(&|v| format_number(*v, 3))
+            // A tick at zero comes out of the axis arithmetic as ±1e-17.
+            .y_label_formatter(&|v| {
+                format_number(if v.abs() < 1e-9 * (y_range.end - y_range.start) { 0.0 } else { *v }, 3)
+            })
             .light_line_style(plotters::style::BLACK.mix(0.04))
             .bold_line_style(plotters::style::BLACK.mix(0.12))
             .draw()?;
