@@ -194,8 +194,26 @@ fn two_effects_are_both_named() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-// The press (copper, 20 kHz, constant-speed approach). Not yet: `clearance` on the press
-// (a 0.3 mm gap is fitted as 0.87 mm and the verdict is "none"; see the closing note).
+// The press (copper, 20 kHz, constant-speed approach).
+
+/// The library's clearance on a press is dead travel in its massless sensor path: the tool
+/// reaches the billet later, nothing else. At a constant-speed approach that is a pure
+/// delay, which the alignment at 10 % of the peak removes, and a constant gap is
+/// indistinguishable from the encoder's arbitrary offset: the load carries no trace of it.
+/// So the honest answer is that there is no gap to explain. (Captures rendered at the
+/// default tolerance once showed a 680 kN spike at the closure, an integration artefact a
+/// diagnosis could "explain"; `synth::CAPTURE_RTOL`.)
+#[test]
+fn press_clearance_leaves_no_trace_in_the_load() {
+    let (dir, machine) = make(Kind::Press, "p-clearance", &["clearance:gap_m=0.0003"]);
+    let r = diagnose(&dir, &machine);
+    assert_eq!(r["verdict"]["effect"], "none", "{r:#}");
+    // Within the rule's noise band of a gap (2× the sensor noise), plus the base press's
+    // own distance from noise-free captures, which the no-effect case measures (1.5×).
+    let (base, noise) = (r["baseline"]["holdout"].as_f64().unwrap(), r["rule"]["noise_nrmse"].as_f64().unwrap());
+    assert!(base < 3.0 * noise, "{r:#}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
 
 #[test]
 fn press_elastic_recovery_is_named_and_located_in_the_spring_back() {
