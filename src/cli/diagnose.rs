@@ -139,7 +139,11 @@ fn write_html(d: &Diagnosis, machine: &Machine, path: &Path, elapsed_s: f64) -> 
             vec![d.by_phase.impact, d.by_phase.forming, d.by_phase.spring_back, d.by_phase.post],
         )],
     };
-    page.figure(bar_plot_svg(&phases, 800, 320)?, "The error within each phase of the blow.");
+    page.figure(
+        bar_plot_svg(&phases, 800, 320)?,
+        "The RMS load error within each phase of the blow, each blow's phases on its own instants; where model and \
+         measurement are out of step, the error counts to the phase whose length put them out of step.",
+    );
     let bands = BarPlot {
         title: "nrmse by band".into(),
         y_label: "RMS error / peak".into(),
@@ -161,7 +165,7 @@ fn write_html(d: &Diagnosis, machine: &Machine, path: &Path, elapsed_s: f64) -> 
         bar_plot_svg(&indicators, 800, 320)?,
         "(model − measured) / measured over the calibration blows. The phases' lengths come from each blow's own \
          instants (the measured end of forming is the billet's largest compression, as the model run on the measured \
-         signals sees it), so a forming that runs long shows here even where its load error lands in the next phase.",
+         signals sees it).",
     );
     let mean_of = |f: fn(&crate::diagnose::indicators::Indicators) -> Option<crate::diagnose::indicators::Pair>| {
         let v: Vec<_> = d.indicators.iter().filter_map(f).collect();

@@ -354,16 +354,15 @@ mod tests {
     }
 
     // A flow stress the model lacks (friction rising as the billet flattens, a cooling
-    // billet) raises the real load, so the real forming ends sooner: the model forms too
-    // long and ends below the measured final load. Their dominant *phase* is spring_back,
-    // not forming (friction_rise: forming 0.10, spring_back 0.24 on the suite's hammer): the
-    // largest load error is the model still forming, then unloading, after the real billet
-    // has stopped, and a time-domain phase split cannot charge that to the forming that ran
-    // long (see the issue-6 note). The indicators do: the forming time is the largest error.
+    // billet, strain hardening) raises the real load, so the real forming ends sooner: the
+    // model forms too long and ends below the measured final load. Its largest load error
+    // is the model still forming, then unloading, after the real billet has stopped, which
+    // `localise` charges to the forming that ran long.
     #[test]
-    fn a_missing_flow_stress_shows_as_a_long_forming_time() {
-        for effect in ["friction_rise:exponent=1.0", "thermal:q_dT=0.15"] {
-            let (_, ind) = baseline(effect);
+    fn a_missing_flow_stress_shows_in_the_forming() {
+        for effect in ["friction_rise:exponent=1.0", "thermal:q_dT=0.15", "strain_hardening:n=0.2"] {
+            let (phase, ind) = baseline(effect);
+            assert_eq!(phase.dominant(), "forming", "{effect}: {phase:?}");
             assert_eq!(dominant(&ind).unwrap().name, "forming_time", "{effect}");
             assert!(rel(&ind, "forming_time") > 0.05, "{effect}");
             assert!(rel(&ind, "final_load") < 0.0, "{effect}");
