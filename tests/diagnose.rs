@@ -135,18 +135,19 @@ fn clearance_is_named_and_located_at_impact() {
 fn elastic_recovery_is_named_and_located_in_the_spring_back() {
     let r = single("elastic", "elastic_recovery:k_contact_N_per_m=1.5e9");
     assert_eq!(r["baseline"]["dominant_phase"], "spring_back", "{r:#}");
-    // The papers' gap: the real spring-back lasts longer than the model's.
-    assert_eq!(r["baseline"]["dominant_indicator"], "spring_back_time", "{r:#}");
-    assert!(r["baseline"]["indicators"]["spring_back_time"]["mean_rel_error"].as_f64().unwrap() < -0.2, "{r:#}");
+    // The papers' gap: the real spring-back lasts longer than the model's (beyond 5× the
+    // ≤ 1 % of the blow a no-effect hammer shows; src/diagnose/mod.rs's tests).
+    assert!(r["baseline"]["indicators"]["spring_back_time"]["mean_rel_error"].as_f64().unwrap() < -0.05, "{r:#}");
 }
 
 /// A flow stress the model lacks raises the real load, so the real forming ends sooner than
-/// the model's: the gap is in the forming, and the forming time is the indicator that
-/// departs most.
+/// the model's: the gap is in the forming, the model's forming runs long, and it over-forms
+/// the billet (each beyond 5× the ≤ 1 % a no-effect hammer shows).
 fn located_in_the_forming(r: &Value) {
     assert_eq!(r["baseline"]["dominant_phase"], "forming", "{r:#}");
-    assert_eq!(r["baseline"]["dominant_indicator"], "forming_time", "{r:#}");
-    assert!(r["baseline"]["indicators"]["forming_time"]["mean_rel_error"].as_f64().unwrap() > 0.05, "{r:#}");
+    let ind = |n: &str| r["baseline"]["indicators"][n]["mean_rel_error"].as_f64().unwrap();
+    assert!(ind("forming_time") > 0.05, "{r:#}");
+    assert!(ind("final_height") < -0.05, "{r:#}");
 }
 
 #[test]

@@ -1,6 +1,7 @@
 //! Localisation by indicator (issue #6): the numbers a forge engineer reads off a blow,
 //! each taken the same way from the measurement and from the base model, so that the gap
-//! shows as "the model forms 27 % too long" rather than as a load error somewhere.
+//! shows as "the model forms on for 15 % of the blow after the billet stopped" rather than
+//! as a load error somewhere.
 //!
 //! - `peak_load`: the largest load.
 //! - `final_load`: the load at the end of forming, averaged over the last second-mode
@@ -17,6 +18,13 @@
 //!
 //! The same estimator on both sides: its own bias (a ring read from a forced response)
 //! cancels in the comparison.
+//!
+//! Each error is read against a scale that keeps the indicators comparable, so that a
+//! spring-back of 50 µs measured against 0.8 ms modelled is not a "1500 %" error that
+//! outranks a forming 15 % too long: loads against the measured peak (as the nrmse), times
+//! against the measured blow's duration (contact to the load back at zero), the final
+//! height against the measured height reduction of the blow, the ring's frequency and
+//! damping against their measured values.
 
 use serde::Serialize;
 
@@ -24,17 +32,18 @@ use crate::identify::objective::{Reference, Simulated};
 
 use super::localise::Localised;
 
-/// One indicator, measured and modelled.
+/// One indicator, measured and modelled, and the scale its error is read against.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Pair {
     pub measured: f64,
     pub model: f64,
+    pub scale: f64,
 }
 
 impl Pair {
-    /// (model − measured) / |measured|.
+    /// (model − measured) / scale.
     pub fn rel_error(&self) -> f64 {
-        (self.model - self.measured) / self.measured.abs()
+        (self.model - self.measured) / self.scale
     }
 }
 
@@ -82,25 +91,29 @@ pub fn indicators(r: &Reference, model: &Simulated, loc: &Localised, mode2_hz: f
         |load: &[f64], a: usize, b: usize| ring(&load[a.min(load.len())..b.min(load.len())], dt, period, r.peak_n);
     let (ring_m, ring_s) =
         (ring_of(&r.load_n, m.contact(), m.forming_end()), ring_of(model_load, s.contact(), s.forming_end()));
-    let both = |a: Option<f64>, b: Option<f64>| Some(Pair { measured: a?, model: b? });
+    let both = |a: Option<(f64, f64)>, b: Option<(f64, f64)>, pick: fn((f64, f64)) -> f64| {
+        let (a, b) = (pick(a?), pick(b?));
+        Some(Pair { measured: a, model: b, scale: a.abs() })
+    };
     let final_height = r.measured.and_then(|mi| {
-        let h0 = model.h_start_m?;
-        Some(Pair { measured: h0 - mi.set_m?, model: model.h_end_m? })
+        let (h0, set) = (model.h_start_m?, mi.set_m?);
+        (set > 0.0).then_some(Pair { measured: h0 - set, model: model.h_end_m?, scale: set })
     });
+    let load = |measured: f64, model: f64| Pair { measured, model, scale: r.peak_n };
+    let duration = (m.zero() - m.contact()).max(1) as f64 * dt;
+    let time = |measured: usize, model: usize| Pair {
+        measured: measured as f64 * dt,
+        model: model as f64 * dt,
+        scale: duration,
+    };
     Indicators {
-        peak_load_n: Pair { measured: r.peak_n, model: model_load.iter().copied().fold(0.0, f64::max) },
-        final_load_n: Pair { measured: before(&r.load_n, m.forming_end()), model: before(model_load, s.forming_end()) },
-        forming_time_s: Pair {
-            measured: (m.forming_end() - m.contact()) as f64 * dt,
-            model: (s.forming_end() - s.contact()) as f64 * dt,
-        },
-        spring_back_time_s: Pair {
-            measured: (m.zero() - m.forming_end()) as f64 * dt,
-            model: (s.zero() - s.forming_end()) as f64 * dt,
-        },
+        peak_load_n: load(r.peak_n, model_load.iter().copied().fold(0.0, f64::max)),
+        final_load_n: load(before(&r.load_n, m.forming_end()), before(model_load, s.forming_end())),
+        forming_time_s: time(m.forming_end() - m.contact(), s.forming_end() - s.contact()),
+        spring_back_time_s: time(m.zero() - m.forming_end(), s.zero() - s.forming_end()),
         final_height_m: final_height,
-        mode2_frequency_hz: both(ring_m.map(|x| x.0), ring_s.map(|x| x.0)),
-        mode2_damping_ratio: both(ring_m.map(|x| x.1), ring_s.map(|x| x.1)),
+        mode2_frequency_hz: both(ring_m, ring_s, |x| x.0),
+        mode2_damping_ratio: both(ring_m, ring_s, |x| x.1),
     }
 }
 

@@ -282,7 +282,7 @@ mod tests {
     use crate::signal::segment::{SegmentConfig, Segmenter};
     use crate::synth::{CaptureSpec, rows_batch, synth_blows};
 
-    use super::indicators::{Summary, dominant, indicators, summarise};
+    use super::indicators::{Summary, indicators, summarise};
     use super::localise::{ByPhase, localise};
 
     /// Blows made with a hidden effect, seen through the base model as `diagnose` sees them
@@ -342,10 +342,11 @@ mod tests {
     fn elastic_recovery_shows_in_the_spring_back() {
         let (phase, ind) = baseline("elastic_recovery:k_contact_N_per_m=1.5e9");
         assert_eq!(phase.dominant(), "spring_back");
-        // The papers' gap: the measured spring-back lasts longer than the model's (hammer
-        // paper §4.2: 3.7 ms against 0.8 ms), so the model's is short.
-        assert_eq!(dominant(&ind).unwrap().name, "spring_back_time");
-        assert!(rel(&ind, "spring_back_time") < -0.2);
+        // The papers' gap: the real spring-back lasts longer than the model's (hammer paper
+        // §4.2: 3.7 ms against 0.8 ms), and the compliant contact softens the impact, so the
+        // rigid model rings higher. Each beyond 5× what the no-effect case shows (≤ 0.01).
+        assert!(rel(&ind, "spring_back_time") < -0.05);
+        assert!(rel(&ind, "peak_load") > 0.05);
     }
 
     #[test]
@@ -363,21 +364,23 @@ mod tests {
         for effect in ["friction_rise:exponent=1.0", "thermal:q_dT=0.15", "strain_hardening:n=0.2"] {
             let (phase, ind) = baseline(effect);
             assert_eq!(phase.dominant(), "forming", "{effect}: {phase:?}");
-            assert_eq!(dominant(&ind).unwrap().name, "forming_time", "{effect}");
+            // The model forms too long and over-forms the billet, each beyond 5× what the
+            // no-effect case shows (≤ 0.01 of its scale), and ends below the real final load,
+            // beyond the no-effect bound (0.02; thermal's first blow is unchanged, by its
+            // definition, which halves its mean).
             assert!(rel(&ind, "forming_time") > 0.05, "{effect}");
-            assert!(rel(&ind, "final_load") < 0.0, "{effect}");
+            assert!(rel(&ind, "final_load") < -0.02, "{effect}");
+            assert!(rel(&ind, "final_height") < -0.05, "{effect}");
         }
     }
 
     #[test]
     fn no_effect_leaves_the_indicators_within_the_sensors() {
         // 2 kN load noise and 10 µm encoder steps (CaptureSpec::hammer) on a ~1 MN blow of
-        // several ms: every indicator within 2 %. The spring-back time, a few hundred µs
-        // read at a 2 % threshold, within 10 %.
+        // several ms: every indicator within 2 % of its scale.
         let (_, ind) = baseline("none");
         for s in &ind {
-            let bound = if s.name == "spring_back_time" { 0.10 } else { 0.02 };
-            assert!(s.mean_rel_error.abs() < bound, "{}: {}", s.name, s.mean_rel_error);
+            assert!(s.mean_rel_error.abs() < 0.02, "{}: {}", s.name, s.mean_rel_error);
         }
     }
 }
