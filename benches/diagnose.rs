@@ -1,0 +1,81 @@
+//! Speed of a full diagnosis (issue #6 target: 8 effects and pairs, 5 calibration and 5
+//! holdout blows, in ≤ 60 s on the 2-core machine), on the withheld-effect suite's hammer and
+//! press with a hidden `friction_rise`, as `forgemon diagnose` runs it less the file I/O.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use forgemon::config::{parse_machine, parse_process};
+use forgemon::diagnose::diagnose;
+use forgemon::estimate::EstimatorConfig;
+use forgemon::identify::objective::{Reference, Setting};
+use forgemon::physics::effects::{Effect, EffectSet};
+use forgemon::physics::machine::{Machine, MachineKind};
+use forgemon::signal::segment::{SegmentConfig, Segmenter};
+use forgemon::synth::{CaptureSpec, rows_batch, synth_blows};
+
+const HAMMER: &str = "kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n";
+const PRESS: &str = "kind = \"screw_press\"\nm_tool_kg = 2500\nm_ram_kg = 90000\nk_link_N_per_m = 2.1e9\n\
+                     c_link_Ns_per_m = 2.8e5\nk_frame_N_per_m = 8.0e9\nc_frame_Ns_per_m = 5.0e4\nk_sensor_N_per_m = 3.39e10\n";
+
+/// One billet's blows with the hidden effect, read as `diagnose` reads a capture directory.
+fn billet(m: &Machine, sheet: &str, height_factor: f64, v0s: &[f64], seed: u64) -> (Vec<Reference>, Setting) {
+    let kind = m.kind();
+    let mut p = parse_process("p", sheet).unwrap();
+    p.measured_final_heights_m.clear();
+    p.billet.height_m *= height_factor;
+    let spec = match kind {
+        MachineKind::Hammer => CaptureSpec::hammer(seed),
+        MachineKind::ScrewPress => CaptureSpec::press(seed),
+    };
+    let hidden = EffectSet::from_effects(&[Effect::parse_spec("friction_rise:exponent=1.0").unwrap()]);
+    let refs = synth_blows(m, &hidden, &p, v0s, &spec)
+        .unwrap()
+        .iter()
+        .enumerate()
+        .map(|(i, b)| {
+            let batch = rows_batch("c", 0, 0, 1e9 / spec.sample_rate_hz, &b.rows);
+            let mut seg = Segmenter::new(SegmentConfig::for_kind(kind));
+            let mut cut = Vec::new();
+            seg.push(&batch, &mut cut);
+            seg.finish(&mut cut);
+            let mut r = Reference::from_blow("b", &cut[0], Some(i + 1), EstimatorConfig::for_kind(kind).fit_s).unwrap();
+            r.locate_phases(m, &cut[0]);
+            r
+        })
+        .collect();
+    (refs, Setting::Billet(p))
+}
+
+fn bench(c: &mut Criterion) {
+    let mut g = c.benchmark_group("diagnose");
+    g.sample_size(10);
+    for (name, text, sheet, calib, hold) in [
+        (
+            "hammer_8_effects_7_pairs_5_plus_5_blows",
+            HAMMER,
+            include_str!("../config/steel-16NiCrMo13.process.toml"),
+            [4.0, 4.5, 5.0, 5.3, 5.3],
+            [4.2, 4.8, 5.1, 5.3, 5.3],
+        ),
+        (
+            "press_8_effects_7_pairs_5_plus_5_blows",
+            PRESS,
+            include_str!("../config/copper-cu99.process.toml"),
+            [0.30, 0.33, 0.36, 0.36, 0.36],
+            [0.31, 0.34, 0.35, 0.36, 0.36],
+        ),
+    ] {
+        let m = parse_machine("m", text).unwrap().machine;
+        let c_set = billet(&m, sheet, 1.0, &calib, 3);
+        let h_set = billet(&m, sheet, 0.9, &hold, 4);
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                let d = diagnose(&m, &EffectSet::NONE, c_set.clone(), h_set.clone(), &|| {}).unwrap();
+                assert_eq!(d.verdict.map(|v| v.name).as_deref(), Some("friction_rise"));
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
