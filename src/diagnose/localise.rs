@@ -290,7 +290,6 @@ mod tests {
             v0_mps: 4.0,
             dt_s: dt,
             load_n: measured,
-            disp_m: vec![0.0; n],
             i_window_start: 0,
             measured: None,
             t_align_s: 1e-3,

@@ -60,9 +60,6 @@ pub struct Reference {
     pub dt_s: f64,
     /// Zeroed sensor load over the window, N; sample i at i·dt from the window's start.
     pub load_n: Vec<f64>,
-    /// The ram's encoder position over the window, m, positive down (CONTRACTS.md §1: an
-    /// arbitrary offset, quantised).
-    pub disp_m: Vec<f64>,
     /// The window's first sample in the segmented blow.
     pub i_window_start: usize,
     /// The measured phases' instants, `None` until located (`locate_phases`).
@@ -113,7 +110,6 @@ impl Reference {
             v0_mps: v0,
             dt_s: dt,
             load_n: load[start..end].to_vec(),
-            disp_m: blow.samples[start..end].iter().map(|s| s.disp_m).collect(),
             i_window_start: start,
             measured: None,
             t_align_s: ((i_cross - 1 - start) as f64 + frac) * dt,
