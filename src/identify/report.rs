@@ -418,7 +418,7 @@ mod tests {
     /// Writes the sample pages to /tmp/identify-sample.html and /tmp/identify-ragged.html
     /// for a person to look at: `cargo test --release --lib identify::report -- --ignored`.
     #[test]
-    #[ignore]
+    #[ignore = "writes sample pages to /tmp for a person to look at"]
     fn render_the_samples_for_a_person() {
         write_identify_report(&sample(), Path::new("/tmp/identify-sample.html")).unwrap();
         write_identify_report(&ragged(), Path::new("/tmp/identify-ragged.html")).unwrap();
