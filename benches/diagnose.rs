@@ -38,7 +38,7 @@ fn billet(m: &Machine, sheet: &str, height_factor: f64, v0s: &[f64], seed: u64) 
             seg.push(&batch, &mut cut);
             seg.finish(&mut cut);
             let mut r = Reference::from_blow("b", &cut[0], Some(i + 1), EstimatorConfig::for_kind(kind).fit_s).unwrap();
-            r.locate_phases(m, &cut[0]);
+            forgemon::diagnose::localise::locate_phases(&mut r, m, &cut[0]);
             r
         })
         .collect();

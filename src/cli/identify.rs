@@ -175,7 +175,7 @@ pub(crate) fn read_references(
             let label = if blows.len() > 1 { format!("{name} #{}", k + 1) } else { name.clone() };
             let mut r = Reference::from_blow(&label, blow, (!bare).then_some(number), fit_s)?;
             if let Some(m) = locate {
-                r.locate_phases(m, blow);
+                crate::diagnose::localise::locate_phases(&mut r, m, blow);
             }
             if fit_blows.is_empty() || fit_blows.contains(&number) {
                 fit.push(r);

@@ -17,7 +17,9 @@
 use realfft::RealFftPlanner;
 use serde::Serialize;
 
-use crate::identify::objective::{Reference, Simulated};
+use crate::identify::objective::{MeasuredInstants, Reference, Simulated};
+use crate::physics::machine::Machine;
+use crate::signal::segment::Blow;
 
 /// Kept after the load returns to zero, s (CONTRACTS.md §6).
 pub const POST_S: f64 = 5e-3;
@@ -126,6 +128,23 @@ impl Phases {
     pub fn zero(&self) -> usize {
         self.0[3]
     }
+}
+
+/// Locate first contact (the segmenter's) and the end of forming on the measured signals of
+/// `blow`, the one `r` was cut from. The end of forming is the billet's largest
+/// compression, as `machine`'s model run on the measured signals sees it
+/// (`estimate::observer`, which the live estimate also uses), not the model's.
+pub fn locate_phases(r: &mut Reference, machine: &Machine, blow: &Blow) {
+    let o = crate::estimate::observer::observe(machine, blow, r.v0_mps);
+    let at = |i: usize| (i as f64 - r.i_window_start as f64).max(0.0) * r.dt_s;
+    let threshold = ZERO_FRACTION * r.peak_n;
+    let load = |k: usize| blow.samples[blow.i_contact + k].load_n - blow.load_zero_n;
+    let zero = (o.forming_end..o.compression_m.len()).find(|&k| load(k) < threshold);
+    r.measured = (o.deform_j > 0.0).then(|| MeasuredInstants {
+        contact_s: at(blow.i_contact),
+        forming_end_s: at(blow.i_contact + o.forming_end),
+        set_m: zero.map(|k| o.compression_m[k]),
+    });
 }
 
 /// Localise the residual of `model` against the measured `r`, with the machine's second
@@ -264,7 +283,6 @@ fn bands(x: &[f64], dt: f64, mode2_hz: f64, nrmse: f64) -> ByBand {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::identify::objective::MeasuredInstants;
 
     /// A blow: contact at 1 ms, forming to 9 ms, unloading to 10 ms, 20 ms of record, at
     /// 100 kHz, peak 1 MN.

@@ -313,7 +313,7 @@ mod tests {
                 seg.push(&batch, &mut cut);
                 seg.finish(&mut cut);
                 let mut r = Reference::from_blow("b", &cut[0], Some(i + 1), 0.01).unwrap();
-                r.locate_phases(&m, &cut[0]);
+                super::localise::locate_phases(&mut r, &m, &cut[0]);
                 r
             })
             .collect();

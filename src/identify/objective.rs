@@ -62,7 +62,7 @@ pub struct Reference {
     pub load_n: Vec<f64>,
     /// The window's first sample in the segmented blow.
     pub i_window_start: usize,
-    /// The measured phases' instants, `None` until located (`locate_phases`).
+    /// The measured phases' instants, `None` until located (`diagnose::localise::locate_phases`).
     pub measured: Option<MeasuredInstants>,
     /// The alignment crossing, s from the window's start.
     pub t_align_s: f64,
@@ -116,23 +116,6 @@ impl Reference {
             peak_n: peak,
             blow_index,
         })
-    }
-
-    /// Locate first contact (the segmenter's) and the end of forming on the measured signals
-    /// of `blow`, the one this reference was cut from. The end of forming is the billet's
-    /// largest compression, as `machine`'s model run on the measured signals sees it
-    /// (`estimate::observer`, which the live estimate also uses), not the model's.
-    pub fn locate_phases(&mut self, machine: &Machine, blow: &Blow) {
-        let o = crate::estimate::observer::observe(machine, blow, self.v0_mps);
-        let at = |i: usize| (i as f64 - self.i_window_start as f64).max(0.0) * self.dt_s;
-        let threshold = crate::diagnose::localise::ZERO_FRACTION * self.peak_n;
-        let load = |k: usize| blow.samples[blow.i_contact + k].load_n - blow.load_zero_n;
-        let zero = (o.forming_end..o.compression_m.len()).find(|&k| load(k) < threshold);
-        self.measured = (o.deform_j > 0.0).then(|| MeasuredInstants {
-            contact_s: at(blow.i_contact),
-            forming_end_s: at(blow.i_contact + o.forming_end),
-            set_m: zero.map(|k| o.compression_m[k]),
-        });
     }
 
     pub fn duration_s(&self) -> f64 {
