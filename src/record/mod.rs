@@ -23,6 +23,7 @@ pub mod codec;
 pub mod error;
 pub mod message;
 pub mod reader;
+pub mod rotation;
 pub mod schema;
 pub mod writer;
 

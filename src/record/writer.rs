@@ -25,6 +25,8 @@ use crate::signal::sample::SampleBatch;
 use super::codec;
 use super::error::RecordError;
 use super::message::{BlowBoundary, ConfigFile, Gap, Payload, Status};
+pub use super::rotation::Rotation;
+use super::rotation::{Naming, part_path_of};
 use super::schema::{FILE_DESCRIPTOR_SET, MESSAGE_ENCODING, MessageKind, SCHEMA_ENCODING, pb, samples_topic};
 
 /// Close the chunk and `sync_data` after this much log time (DESIGN.md §3: "at least every
@@ -40,33 +42,6 @@ pub const DEFAULT_FILE_STEM: &str = "forgemon";
 pub const FINISHED_EXTENSION: &str = "mcap";
 /// Extension of a recording being written (or left by a crash).
 pub const PART_EXTENSION: &str = "mcap.part";
-
-/// When to start a new file. Both limits may be set; the first one reached rotates.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Rotation {
-    /// Start a new file once the current one holds this many bytes (it may exceed it by
-    /// up to one chunk).
-    pub max_bytes: Option<u64>,
-    /// Start a new file once its messages span this much log time, ns.
-    pub max_duration_ns: Option<u64>,
-}
-
-impl Rotation {
-    /// One file, never rotated.
-    pub const NEVER: Rotation = Rotation { max_bytes: None, max_duration_ns: None };
-
-    pub fn by_size(max_bytes: u64) -> Rotation {
-        Rotation { max_bytes: Some(max_bytes), max_duration_ns: None }
-    }
-
-    pub fn by_duration_ns(max_duration_ns: u64) -> Rotation {
-        Rotation { max_bytes: None, max_duration_ns: Some(max_duration_ns) }
-    }
-
-    pub fn is_never(&self) -> bool {
-        self.max_bytes.is_none() && self.max_duration_ns.is_none()
-    }
-}
 
 /// Chunk compression.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -303,84 +278,6 @@ impl RecordWriter {
         self.current = Some(OpenFile::create(final_path, &self.options)?);
         Ok(())
     }
-}
-
-/// How the files of a recording are named.
-struct Naming {
-    dir: PathBuf,
-    stem: String,
-    /// `STEM-NNNNN.mcap` (rotating or a directory target) or exactly `STEM.mcap`.
-    numbered: bool,
-    next_index: u32,
-}
-
-impl Naming {
-    fn new(path: &Path, rotation: Rotation) -> Result<Naming, RecordError> {
-        let is_file_target = path.extension().is_some_and(|e| e == FINISHED_EXTENSION);
-        let (dir, stem, numbered) = if is_file_target {
-            let stem = path
-                .file_stem()
-                .and_then(|s| s.to_str())
-                .ok_or_else(|| RecordError::BadTarget { path: path.to_path_buf() })?
-                .to_string();
-            let dir = match path.parent() {
-                Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-                _ => PathBuf::from("."),
-            };
-            (dir, stem, !rotation.is_never())
-        } else {
-            std::fs::create_dir_all(path).map_err(|source| RecordError::Io {
-                path: path.to_path_buf(),
-                action: "create directory",
-                source,
-            })?;
-            (path.to_path_buf(), DEFAULT_FILE_STEM.to_string(), true)
-        };
-        let mut naming = Naming { dir, stem, numbered, next_index: 1 };
-        if numbered {
-            naming.next_index = naming.first_free_index()?;
-        }
-        Ok(naming)
-    }
-
-    /// One past the highest `STEM-NNNNN.mcap[.part]` already in the directory, so a
-    /// restarted recorder never overwrites an earlier file.
-    fn first_free_index(&self) -> Result<u32, RecordError> {
-        let entries = std::fs::read_dir(&self.dir).map_err(|source| RecordError::Io {
-            path: self.dir.clone(),
-            action: "list",
-            source,
-        })?;
-        let prefix = format!("{}-", self.stem);
-        let mut highest = 0u32;
-        for entry in entries.flatten() {
-            let name = entry.file_name();
-            let Some(name) = name.to_str() else { continue };
-            let Some(rest) = name.strip_prefix(&prefix) else { continue };
-            let number = rest
-                .strip_suffix(&format!(".{PART_EXTENSION}"))
-                .or_else(|| rest.strip_suffix(&format!(".{FINISHED_EXTENSION}")));
-            if let Some(n) = number.and_then(|n| n.parse::<u32>().ok()) {
-                highest = highest.max(n);
-            }
-        }
-        Ok(highest.saturating_add(1))
-    }
-
-    fn next_path(&mut self) -> Result<PathBuf, RecordError> {
-        if !self.numbered {
-            return Ok(self.dir.join(format!("{}.{FINISHED_EXTENSION}", self.stem)));
-        }
-        let path = self.dir.join(format!("{}-{:05}.{FINISHED_EXTENSION}", self.stem, self.next_index));
-        self.next_index = self.next_index.saturating_add(1);
-        Ok(path)
-    }
-}
-
-fn part_path_of(final_path: &Path) -> PathBuf {
-    let mut name = final_path.as_os_str().to_owned();
-    name.push(".part");
-    PathBuf::from(name)
 }
 
 /// A `File` behind a `BufWriter` that counts the file's length, shared with the writer so
