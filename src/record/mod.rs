@@ -21,6 +21,7 @@
 pub mod batch;
 pub mod codec;
 pub mod error;
+mod file;
 pub mod message;
 pub mod reader;
 pub mod rotation;

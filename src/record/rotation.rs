@@ -118,20 +118,21 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_restarted_recorder_continues_after_the_highest_number() {
+    fn a_restarted_recorder_continues_after_the_highest_number() -> Result<(), Box<dyn std::error::Error>> {
         let dir = std::env::temp_dir().join(format!("forgemon-naming-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::create_dir_all(&dir)?;
         for name in ["forgemon-00003.mcap", "forgemon-00007.mcap.part", "forgemon-x.mcap", "other-00009.mcap"] {
-            std::fs::write(dir.join(name), b"").unwrap();
+            std::fs::write(dir.join(name), b"")?;
         }
-        let mut naming = Naming::new(&dir, Rotation::NEVER).unwrap();
-        assert_eq!(naming.next_path().unwrap(), dir.join("forgemon-00008.mcap"));
-        assert_eq!(naming.next_path().unwrap(), dir.join("forgemon-00009.mcap"));
+        let mut naming = Naming::new(&dir, Rotation::NEVER)?;
+        assert_eq!(naming.next_path()?, dir.join("forgemon-00008.mcap"));
+        assert_eq!(naming.next_path()?, dir.join("forgemon-00009.mcap"));
         assert_eq!(part_path_of(&dir.join("a.mcap")), dir.join("a.mcap.part"));
         // A file target that never rotates is exactly that file.
-        let mut one = Naming::new(&dir.join("run.mcap"), Rotation::NEVER).unwrap();
-        assert_eq!(one.next_path().unwrap(), dir.join("run.mcap"));
+        let mut one = Naming::new(&dir.join("run.mcap"), Rotation::NEVER)?;
+        assert_eq!(one.next_path()?, dir.join("run.mcap"));
         let _ = std::fs::remove_dir_all(&dir);
+        Ok(())
     }
 }
