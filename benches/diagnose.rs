@@ -33,10 +33,7 @@ fn billet(m: &Machine, sheet: &str, height_factor: f64, v0s: &[f64], seed: u64) 
         .enumerate()
         .map(|(i, b)| {
             let batch = rows_batch("c", 0, 0, 1e9 / spec.sample_rate_hz, &b.rows);
-            let mut seg = Segmenter::new(SegmentConfig::for_kind(kind));
-            let mut cut = Vec::new();
-            seg.push(&batch, &mut cut);
-            seg.finish(&mut cut);
+            let cut = Segmenter::cut_all(SegmentConfig::for_kind(kind), [&batch]);
             let mut r = Reference::from_blow("b", &cut[0], Some(i + 1), EstimatorConfig::for_kind(kind).fit_s).unwrap();
             forgemon::diagnose::localise::locate_phases(&mut r, m, &cut[0]);
             r

@@ -19,11 +19,7 @@ fn reference() -> (Reference, Setting) {
         .machine;
     let p = parse_process("p", include_str!("../config/steel-16NiCrMo13.process.toml")).unwrap();
     let b = &synth_blows(&m, &EffectSet::NONE, &p, &[4.2], &CaptureSpec::hammer(3)).unwrap()[0];
-    let batch = rows_batch("c", 0, 0, 1e4, &b.rows);
-    let mut seg = Segmenter::new(SegmentConfig::for_kind(MachineKind::Hammer));
-    let mut blows = Vec::new();
-    seg.push(&batch, &mut blows);
-    seg.finish(&mut blows);
+    let blows = Segmenter::cut_all(SegmentConfig::HAMMER, [&rows_batch("c", 0, 0, 1e4, &b.rows)]);
     (Reference::from_blow("blow_01", &blows[0], Some(1), 0.01).unwrap(), Setting::Billet(p))
 }
 

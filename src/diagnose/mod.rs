@@ -307,11 +307,7 @@ mod tests {
             .iter()
             .enumerate()
             .map(|(i, b)| {
-                let batch = rows_batch("c", 0, 0, 1e4, &b.rows);
-                let mut seg = Segmenter::new(SegmentConfig::for_kind(MachineKind::Hammer));
-                let mut cut = Vec::new();
-                seg.push(&batch, &mut cut);
-                seg.finish(&mut cut);
+                let cut = Segmenter::cut_all(SegmentConfig::HAMMER, [&rows_batch("c", 0, 0, 1e4, &b.rows)]);
                 let mut r = Reference::from_blow("b", &cut[0], Some(i + 1), 0.01).unwrap();
                 super::localise::locate_phases(&mut r, &m, &cut[0]);
                 r

@@ -186,12 +186,7 @@ mod tests {
             let mut text = Vec::new();
             crate::signal::capture::write_capture(&mut text, &b.rows).unwrap();
             let batches = CaptureReader::new("x", text.as_slice(), 0.05).unwrap().read_all().unwrap();
-            let mut seg = Segmenter::new(SegmentConfig::HAMMER);
-            let mut cut = Vec::new();
-            for bt in &batches {
-                seg.push(bt, &mut cut);
-            }
-            seg.finish(&mut cut);
+            let cut = Segmenter::cut_all(SegmentConfig::HAMMER, &batches);
             let e = est.estimate(&cut[0]).unwrap();
             assert!(e.h_end_m.is_none_or(|h| h > 0.0), "{:?}", e.h_end_m);
             heights.push(e.h_end_m);

@@ -188,6 +188,18 @@ impl Segmenter {
         }
     }
 
+    /// Every blow of a whole, finite stream (a capture file, a synthetic session), the last
+    /// one closed as it stands.
+    pub fn cut_all<'a>(cfg: SegmentConfig, batches: impl IntoIterator<Item = &'a SampleBatch>) -> Vec<Blow> {
+        let mut seg = Segmenter::new(cfg);
+        let mut out = Vec::new();
+        for b in batches {
+            seg.push(b, &mut out);
+        }
+        seg.finish(&mut out);
+        out
+    }
+
     /// End of the stream: a blow in progress is closed as it stands.
     pub fn finish(&mut self, out: &mut Vec<Blow>) {
         if let State::InBlow { i_trigger, zero, contact, .. } = self.state {
