@@ -12,7 +12,7 @@ use crate::identify::objective::Objective;
 use crate::physics::effects::{Effect, EffectSet};
 use crate::physics::machine::Machine;
 
-use super::localise::localise;
+use super::localise::nrmse;
 
 /// One library effect: the parameters fitted, with their bounds, and the effect they give.
 #[derive(Debug, Clone)]
@@ -107,7 +107,7 @@ impl BlowSet {
     /// Each blow's nrmse (CONTRACTS.md §6) with `effects`.
     pub fn nrmse(&self, machine: &Machine, effects: &EffectSet) -> Option<Vec<f64>> {
         let sims = self.obj.with_effects(*effects).simulate(machine)?;
-        Some(self.obj.refs.iter().zip(&sims).map(|(r, s)| localise(r, s, self.mode2_hz).nrmse).collect())
+        Some(self.obj.refs.iter().zip(&sims).map(|(r, s)| nrmse(r, s)).collect())
     }
 }
 

@@ -172,24 +172,13 @@ pub fn localise(r: &Reference, model: &Simulated, mode2_hz: f64) -> Localised {
     let n = r.load_n.len();
     let dt = r.dt_s;
     let idx = |t: f64| ((t / dt).round().max(0.0) as usize).min(n);
-    let start = idx(model.t_contact_s);
-    let i_peak = r.load_n.iter().enumerate().fold(0, |b, (i, v)| if *v > r.load_n[b] { i } else { b });
-    let model_fe = model.t_forming_end_s.map_or(i_peak, idx).max(start);
+    let (window, model_fe) = contract_window(r, model);
+    let (start, end, zero) = (window.contact(), window.0[4], window.zero());
     let threshold = ZERO_FRACTION * r.peak_n;
     let post = (POST_S / dt).round() as usize;
-    // The contract's window: the measured load back at zero after the end of forming (or
-    // after the peak, whichever is later).
-    let window = Phases::new(start, model_fe, &r.load_n, threshold, i_peak, post);
-    let (end, zero) = (window.0[4], window.zero());
     let model_load: Vec<f64> = (0..n).map(|i| model.load_n.get(i).copied().unwrap_or(0.0)).collect();
     let resid: Vec<f64> = (0..n).map(|i| r.load_n[i] - model_load[i]).collect();
-    let rms = |a: usize, b: usize| {
-        if b <= a {
-            return 0.0;
-        }
-        (resid[a..b].iter().map(|x| x * x).sum::<f64>() / (b - a) as f64).sqrt() / r.peak_n
-    };
-    let nrmse = rms(start, end);
+    let nrmse = rms_over_peak(&resid[start..end], r.peak_n);
     let measured = match r.measured {
         Some(m) => Phases::new(idx(m.contact_s), idx(m.forming_end_s), &r.load_n, threshold, 0, post),
         None => Phases([start, window.0[1], model_fe, zero.min(end), end]),
@@ -200,6 +189,35 @@ pub fn localise(r: &Reference, model: &Simulated, mode2_hz: f64) -> Localised {
     let by_phase = ByPhase { impact: phase(0), forming: phase(1), spring_back: phase(2), post: phase(3) };
     let by_band = bands(&resid[start..end.max(start)], dt, mode2_hz, nrmse);
     Localised { nrmse, by_phase, by_band, window: (start, end), measured, model: modelled }
+}
+
+/// The nrmse alone (`localise`'s, without the phase and band split), for the fits.
+pub fn nrmse(r: &Reference, model: &Simulated) -> f64 {
+    let (window, _) = contract_window(r, model);
+    let (start, end) = (window.contact(), window.0[4]);
+    let resid: Vec<f64> = (start..end).map(|i| r.load_n[i] - model.load_n.get(i).copied().unwrap_or(0.0)).collect();
+    rms_over_peak(&resid, r.peak_n)
+}
+
+/// The contract's window, as `Phases` on the model's contact and end of forming with the
+/// measured load back at zero after forming (or after the peak, whichever is later); and
+/// the model's end of forming, sample index.
+fn contract_window(r: &Reference, model: &Simulated) -> (Phases, usize) {
+    let n = r.load_n.len();
+    let dt = r.dt_s;
+    let idx = |t: f64| ((t / dt).round().max(0.0) as usize).min(n);
+    let start = idx(model.t_contact_s);
+    let i_peak = r.load_n.iter().enumerate().fold(0, |b, (i, v)| if *v > r.load_n[b] { i } else { b });
+    let model_fe = model.t_forming_end_s.map_or(i_peak, idx).max(start);
+    let post = (POST_S / dt).round() as usize;
+    (Phases::new(start, model_fe, &r.load_n, ZERO_FRACTION * r.peak_n, i_peak, post), model_fe)
+}
+
+fn rms_over_peak(x: &[f64], peak: f64) -> f64 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt() / peak
 }
 
 /// The squared residual charged to each phase, and each phase's measured length (≥ 1
