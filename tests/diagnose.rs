@@ -86,6 +86,10 @@ fn diagnose(dir: &Path, machine: &Path) -> Value {
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.matches("<svg").count() >= 4, "a report with plots");
     let r: Value = serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    // Each holdout blow's caption gives its error before and, with a verdict, after.
+    let verdict = r["verdict"]["effect"].as_str().unwrap();
+    let after = html.matches(&format!(", with {verdict} ")).count();
+    assert_eq!(after, if verdict == "none" { 0 } else { 5 }, "{verdict}");
     // Localisation by indicator (issue #6): every one named, with a value for every blow
     // or an explicit null.
     for name in [

@@ -245,7 +245,11 @@ fn write_html(d: &Diagnosis, machine: &Machine, path: &Path, elapsed_s: f64) -> 
                 Color::Blue,
             ));
         }
-        page.figure(line_plot_svg(&plot, 900, 360)?, format!("nrmse: base {:.4}", d.baseline_holdout_per_blow[k]));
+        let mut caption = format!("nrmse: base {:.4}", d.baseline_holdout_per_blow[k]);
+        if let Some(after) = d.verdict.as_ref().and_then(|v| v.holdout_per_blow.get(k)) {
+            caption += &format!(", with {verdict} {after:.4}");
+        }
+        page.figure(line_plot_svg(&plot, 900, 360)?, caption);
         if let Some(b) = &base {
             let resid: Vec<f64> = r.load_n.iter().zip(&b[k].load_n).map(|(m, s)| m - s).collect();
             let spec = crate::signal::spectrum::amplitude_spectrum(&resid, r.dt_s, 4, 0);
