@@ -115,12 +115,7 @@ impl OpenFile {
         };
         // Magic and header on disk from the start: a crash before the first sync leaves
         // an empty recording, not an empty file.
-        file.mcap.flush().map_err(|e| file.mcap_err(e))?;
-        file.sync_handle.sync_data().map_err(|source| RecordError::Io {
-            path: file.part_path.clone(),
-            action: "sync",
-            source,
-        })?;
+        file.flush_to_disk()?;
         if let Some(dir) = file.part_path.parent() {
             sync_dir(dir);
         }
@@ -201,13 +196,18 @@ impl OpenFile {
         Ok(())
     }
 
-    pub(super) fn flush_and_sync(&mut self) -> Result<(), RecordError> {
+    /// Everything written so far onto the disk: the MCAP writer's buffer, then the file's data.
+    fn flush_to_disk(&mut self) -> Result<(), RecordError> {
         self.mcap.flush().map_err(|e| self.mcap_err(e))?;
         self.sync_handle.sync_data().map_err(|source| RecordError::Io {
             path: self.part_path.clone(),
             action: "sync",
             source,
-        })?;
+        })
+    }
+
+    pub(super) fn flush_and_sync(&mut self) -> Result<(), RecordError> {
+        self.flush_to_disk()?;
         let log_time = self.max_log_time;
         self.last_sync_log_time = log_time;
         self.last_sync = Some(SyncPoint {
