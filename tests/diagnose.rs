@@ -231,16 +231,27 @@ fn two_effects_are_both_named() {
 
 // The press (copper, 20 kHz, constant-speed approach).
 
-/// The library's clearance on a press is dead travel in its massless sensor path: the tool
-/// reaches the billet later, nothing else. At a constant-speed approach that is a pure
-/// delay, which the alignment at 10 % of the peak removes, and a constant gap is
-/// indistinguishable from the encoder's arbitrary offset: the load carries no trace of it.
-/// So the honest answer is that there is no gap to explain. (Captures rendered at the
-/// default tolerance once showed a 680 kN spike at the closure, an integration artefact a
-/// diagnosis could "explain"; `synth::CAPTURE_RTOL`.)
+/// The library's clearance on a press: its lower die (800 kg) rests across a 0.3 mm gap from
+/// the sensor path and has not been caught up (CONTRACTS.md §6, "the lower mass starts at
+/// rest"). Struck by the billet, the die crosses the gap and bounces on the sensor path
+/// while the billet forms: a rectified ring the base press, with no mass there, lacks.
 #[test]
-fn press_clearance_leaves_no_trace_in_the_load() {
-    let (dir, machine) = make(Kind::Press, "p-clearance", &["clearance:gap_m=0.0003"]);
+fn press_clearance_is_named_and_located_at_impact() {
+    let r = single_on(Kind::Press, "p-clearance", "clearance:gap_m=0.0003,m_lower_kg=800");
+    assert_eq!(r["baseline"]["dominant_phase"], "impact", "{r:#}");
+}
+
+/// Without the die (`m_lower_kg` left out) a press's gap is dead travel in a massless sensor
+/// path: the tool reaches the billet later, nothing else. At a constant-speed approach that
+/// is a pure delay, which the alignment at 10 % of the peak removes, and a constant gap is
+/// indistinguishable from the encoder's arbitrary offset: the load carries no trace of it.
+/// So the honest answer is that there is no gap to explain, even with the press's
+/// clearance candidate free to add a die. (Captures rendered at the default tolerance once
+/// showed a 680 kN spike at the closure, an integration artefact a diagnosis could
+/// "explain"; `synth::CAPTURE_RTOL`.)
+#[test]
+fn press_dead_travel_leaves_no_trace_in_the_load() {
+    let (dir, machine) = make(Kind::Press, "p-dead-travel", &["clearance:gap_m=0.0003"]);
     let r = diagnose(&dir, &machine);
     assert_eq!(r["verdict"]["effect"], "none", "{r:#}");
     // Within the rule's noise band of a gap (2× the sensor noise), plus the base press's

@@ -208,6 +208,11 @@ fn bad_files_and_flags_name_the_file_and_key() {
         &["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "3.9", "--effect", "gap:gap_m=1"],
         &["--effect gap:gap_m=1", "unknown effect 'gap'"],
     );
+    let die = "clearance:gap_m=3e-4,m_lower_kg=800";
+    fails_naming(
+        &["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "3.9", "--effect", die],
+        &[die, "m_lower_kg does not apply to a hammer", "m2_kg"],
+    );
     fails_naming(&["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "-3.9"], &["--v0", "-3.9"]);
     fails_naming(&["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "fast"], &["--v0", "fast"]);
     fails_naming(&["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "3.9", "--rtol", "0"], &["--rtol"]);

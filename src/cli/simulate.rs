@@ -96,7 +96,9 @@ fn load_inputs(args: &SimulateArgs) -> anyhow::Result<Inputs> {
     let machine = parse_machine(&args.machine.display().to_string(), &read_text(&args.machine)?)?;
     let mut effects = machine.effects.clone();
     for spec in &args.effects {
-        let e = Effect::parse_spec(spec).with_context(|| format!("--effect {spec}"))?;
+        let e = Effect::parse_spec(spec)
+            .and_then(|e| e.check_machine(machine.machine.kind()).map(|()| e))
+            .with_context(|| format!("--effect {spec}"))?;
         effects.retain(|x| x.name() != e.name());
         effects.push(e);
     }

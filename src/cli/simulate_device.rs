@@ -91,7 +91,8 @@ pub fn run(args: SimulateDeviceArgs) -> anyhow::Result<ExitCode> {
     }
     let mut effects = mf.effects.clone();
     for spec in &args.effects {
-        effects.push(Effect::parse_spec(spec).with_context(|| format!("--effect {spec}"))?);
+        let e = Effect::parse_spec(spec).and_then(|e| e.check_machine(mf.machine.kind()).map(|()| e));
+        effects.push(e.with_context(|| format!("--effect {spec}"))?);
     }
     let mut spec = match mf.machine.kind() {
         MachineKind::Hammer => CaptureSpec::hammer(1),

@@ -53,7 +53,9 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
             for k in sub.table.keys() {
                 params.insert(k.clone(), sub.number(k)?);
             }
-            let e = Effect::from_params(name, &params).map_err(|err| ek.invalid(name, err.to_string()))?;
+            let e = Effect::from_params(name, &params)
+                .and_then(|e| e.check_machine(machine.kind()).map(|()| e))
+                .map_err(|err| ek.invalid(name, err.to_string()))?;
             effects.push(e);
         }
     }
@@ -102,11 +104,22 @@ mod tests {
     fn effects_tables_are_read_and_checked() {
         let text = format!("{HAMMER}[effects.clearance]\ngap_m = 2e-4\n");
         let m = parse_machine("m.toml", &text).unwrap();
-        assert_eq!(m.effects, vec![Effect::Clearance { gap_m: 2e-4 }]);
+        assert_eq!(m.effects, vec![Effect::Clearance { gap_m: 2e-4, m_lower_kg: 0.0 }]);
         let e = parse_machine("m.toml", &format!("{HAMMER}[effects.clearance]\ngap = 2e-4\n")).unwrap_err();
         assert!(
             e.to_string().contains("key 'effects.clearance'") && e.to_string().contains("no parameter 'gap'"),
             "{e}"
         );
+        // The lower die is the press's: a hammer's lower mass is its m2_kg.
+        let die = "[effects.clearance]\ngap_m = 2e-4\nm_lower_kg = 800\n";
+        let e = parse_machine("m.toml", &format!("{HAMMER}{die}")).unwrap_err();
+        assert!(
+            e.to_string().contains("key 'effects.clearance'") && e.to_string().contains("m_lower_kg does not apply"),
+            "{e}"
+        );
+        let press = "kind = \"screw_press\"\nm_tool_kg = 3110\nm_ram_kg = 106000\nk_link_N_per_m = 1.72e9\n\
+                     c_link_Ns_per_m = 3.61e5\nk_frame_N_per_m = 9.74e9\nc_frame_Ns_per_m = 0\nk_sensor_N_per_m = 3.39e10\n";
+        let m = parse_machine("m.toml", &format!("{press}{die}")).unwrap();
+        assert_eq!(m.effects, vec![Effect::Clearance { gap_m: 2e-4, m_lower_kg: 800.0 }]);
     }
 }

@@ -10,7 +10,7 @@ use crate::identify::fit::bounded_fit;
 use crate::identify::model::Param;
 use crate::identify::objective::Objective;
 use crate::physics::effects::{Effect, EffectSet};
-use crate::physics::machine::Machine;
+use crate::physics::machine::{Machine, MachineKind};
 
 use super::localise::nrmse;
 
@@ -28,17 +28,28 @@ impl Candidate {
     }
 }
 
-/// The library, with bounds wide enough for any machine the papers describe. The second
-/// parameter of `strain_rate` (rate_ref = 10 /s) and `strain_hardening` (eps_ref = 0.2)
-/// only rescale the first and are held; `foundation`'s damper is held at 0.
-pub fn library() -> Vec<Candidate> {
+/// The library for a machine of `kind`, with bounds wide enough for any machine the papers
+/// describe. The second parameter of `strain_rate` (rate_ref = 10 /s) and
+/// `strain_hardening` (eps_ref = 0.2) only rescale the first and are held; `foundation`'s
+/// damper is held at 0. A press's `clearance` also fits the lower die that crosses the gap:
+/// the base press has no mass there, and dead travel of a massless path is a pure delay
+/// that leaves no trace in the load.
+pub fn library(kind: MachineKind) -> Vec<Candidate> {
     let p = |key, lo, hi| Param { key, lo, hi };
-    vec![
-        Candidate {
+    let clearance = match kind {
+        MachineKind::Hammer => Candidate {
             name: "clearance",
             params: vec![p("gap_m", 1e-6, 5e-3)],
-            build: |v| Effect::Clearance { gap_m: v[0] },
+            build: |v| Effect::Clearance { gap_m: v[0], m_lower_kg: 0.0 },
         },
+        MachineKind::ScrewPress => Candidate {
+            name: "clearance",
+            params: vec![p("gap_m", 1e-6, 5e-3), p("m_lower_kg", 10.0, 1e5)],
+            build: |v| Effect::Clearance { gap_m: v[0], m_lower_kg: v[1] },
+        },
+    };
+    vec![
+        clearance,
         Candidate {
             name: "elastic_recovery",
             params: vec![p("k_contact_N_per_m", 1e7, 1e12)],

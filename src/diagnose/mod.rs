@@ -119,7 +119,7 @@ pub fn diagnose(
     let by_band = ByBand::mean(&calib_loc.iter().map(|l| l.by_band).collect::<Vec<_>>());
     let base_hold: Vec<f64> = hold_loc.iter().map(|l| l.nrmse).collect();
     let base_calib = mean(&calib_loc.iter().map(|l| l.nrmse).collect::<Vec<_>>());
-    let lib = library();
+    let lib = library(machine.kind());
     let singles: Vec<(usize, Fitted)> = lib
         .par_iter()
         .enumerate()

@@ -164,7 +164,12 @@ impl Observer<N, Mode> for Recorder<'_> {
         }
         // The blow has ended when the tools part with the support path closed: with a
         // clearance, ram and lower tool can fly apart together before the gap has closed.
-        if to.contact == Contact::Free && from.contact != Contact::Free && to.engaged {
+        // A lower mass that has bounced off its support (rising, the gap opening) with the
+        // tools apart ends it too, whichever came first: the model has no gravity to bring
+        // it back.
+        let parted = to.contact == Contact::Free && from.contact != Contact::Free;
+        let lifted = to.contact == Contact::Free && from.engaged && !to.engaged;
+        if (parted || lifted) && (to.engaged || self.plant.support_opening(y)) {
             self.separation = Some((t, *y, to));
         } else if from.contact == Contact::Free && to.contact != Contact::Free {
             self.separation = None;

@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 use std::fmt;
 
 use super::billet::LoadEffects;
+use super::machine::MachineKind;
 
 /// Default reference strain rate of `strain_rate` when the spec leaves it out, 1/s.
 /// Blows of both papers run at 10–40 /s, so the factor stays near 1 at the reference.
@@ -20,14 +21,38 @@ pub const DEFAULT_FOUNDATION_DAMPING: f64 = 0.0;
 /// One effect with its parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Effect {
-    Clearance { gap_m: f64 },
-    ElasticRecovery { k_contact_n_per_m: f64 },
-    FrictionRise { exponent: f64 },
-    StrainRate { m: f64, rate_ref_per_s: f64 },
-    StrainHardening { n: f64, eps_ref: f64 },
-    Thermal { q_dt: f64 },
-    Foundation { m3_kg: f64, k3_n_per_m: f64, c3_ns_per_m: f64 },
-    SensorHighpass { tau_s: f64 },
+    /// `m_lower_kg`: the press's lower die, which the base press model lacks (its sensor path
+    /// is massless). 0 leaves it out: the gap is then dead travel. A hammer's lower mass is
+    /// its machine's `m2_kg`, so there it must be 0.
+    Clearance {
+        gap_m: f64,
+        m_lower_kg: f64,
+    },
+    ElasticRecovery {
+        k_contact_n_per_m: f64,
+    },
+    FrictionRise {
+        exponent: f64,
+    },
+    StrainRate {
+        m: f64,
+        rate_ref_per_s: f64,
+    },
+    StrainHardening {
+        n: f64,
+        eps_ref: f64,
+    },
+    Thermal {
+        q_dt: f64,
+    },
+    Foundation {
+        m3_kg: f64,
+        k3_n_per_m: f64,
+        c3_ns_per_m: f64,
+    },
+    SensorHighpass {
+        tau_s: f64,
+    },
 }
 
 /// What can be wrong with an effect spec; every variant names the effect and the key.
@@ -43,6 +68,8 @@ pub enum EffectError {
     NotANumber { effect: &'static str, param: String, value: String },
     #[error("effect '{effect}': {param} = {value} {why}")]
     OutOfRange { effect: &'static str, param: &'static str, value: f64, why: &'static str },
+    #[error("effect '{effect}': {param} does not apply to a {machine} ({why})")]
+    NotForMachine { effect: &'static str, param: &'static str, machine: &'static str, why: &'static str },
     #[error("effect spec '{spec}' is not NAME or NAME:param=value[,param=value]")]
     Malformed { spec: String },
 }
@@ -77,7 +104,10 @@ impl Effect {
     /// Parameter names and values, with their unit-carrying contract names.
     pub fn params(&self) -> Vec<(&'static str, f64)> {
         match *self {
-            Effect::Clearance { gap_m } => vec![("gap_m", gap_m)],
+            Effect::Clearance { gap_m, m_lower_kg } if m_lower_kg > 0.0 => {
+                vec![("gap_m", gap_m), ("m_lower_kg", m_lower_kg)]
+            }
+            Effect::Clearance { gap_m, .. } => vec![("gap_m", gap_m)],
             Effect::ElasticRecovery { k_contact_n_per_m } => {
                 vec![("k_contact_N_per_m", k_contact_n_per_m)]
             }
@@ -102,7 +132,7 @@ impl Effect {
             .find(|n| *n == name)
             .ok_or_else(|| EffectError::UnknownEffect { name: name.to_string() })?;
         let allowed: &[&'static str] = match effect {
-            "clearance" => &["gap_m"],
+            "clearance" => &["gap_m", "m_lower_kg"],
             "elastic_recovery" => &["k_contact_N_per_m"],
             "friction_rise" => &["exponent"],
             "strain_rate" => &["m", "rate_ref_per_s"],
@@ -117,7 +147,7 @@ impl Effect {
         let req = |p: &'static str| given.get(p).copied().ok_or(EffectError::MissingParam { effect, param: p });
         let opt = |p: &'static str, d: f64| given.get(p).copied().unwrap_or(d);
         let e = match effect {
-            "clearance" => Effect::Clearance { gap_m: req("gap_m")? },
+            "clearance" => Effect::Clearance { gap_m: req("gap_m")?, m_lower_kg: opt("m_lower_kg", 0.0) },
             "elastic_recovery" => Effect::ElasticRecovery { k_contact_n_per_m: req("k_contact_N_per_m")? },
             "friction_rise" => Effect::FrictionRise { exponent: req("exponent")? },
             "strain_rate" => {
@@ -155,14 +185,31 @@ impl Effect {
         Effect::from_params(name, &given)
     }
 
+    /// Whether this effect makes sense on a machine of `kind`.
+    pub fn check_machine(&self, kind: MachineKind) -> Result<(), EffectError> {
+        match (*self, kind) {
+            (Effect::Clearance { m_lower_kg, .. }, MachineKind::Hammer) if m_lower_kg > 0.0 => {
+                Err(EffectError::NotForMachine {
+                    effect: "clearance",
+                    param: "m_lower_kg",
+                    machine: kind.as_str(),
+                    why: "a hammer's lower mass is m2_kg of machine.toml",
+                })
+            }
+            _ => Ok(()),
+        }
+    }
+
     fn validate(&self) -> Result<(), EffectError> {
         let effect = self.name();
         let check = |param: &'static str, value: f64, ok: bool, why: &'static str| {
             if ok && !value.is_nan() { Ok(()) } else { Err(EffectError::OutOfRange { effect, param, value, why }) }
         };
         match *self {
-            Effect::Clearance { gap_m } => {
-                check("gap_m", gap_m, (0.0..f64::INFINITY).contains(&gap_m), "must be finite and >= 0 m")
+            Effect::Clearance { gap_m, m_lower_kg } => {
+                check("gap_m", gap_m, (0.0..f64::INFINITY).contains(&gap_m), "must be finite and >= 0 m")?;
+                let m = m_lower_kg;
+                check("m_lower_kg", m, (0.0..f64::INFINITY).contains(&m), "must be finite and >= 0 kg")
             }
             Effect::ElasticRecovery { k_contact_n_per_m: k } => {
                 check("k_contact_N_per_m", k, k > 0.0, "must be > 0 (infinite is neutral)")
@@ -216,6 +263,8 @@ pub struct EffectSet {
     /// `clearance`: dead travel in the lower tool/sensor path, m. 0 is neutral and keeps
     /// the paper's catch-up assumption (lower mass at the impact speed).
     pub clearance_gap_m: f64,
+    /// `clearance`: the press's lower die, kg, at rest at first contact. 0 is neutral.
+    pub clearance_lower_kg: f64,
     /// `elastic_recovery`: contact compliance in series with the billet. Infinite is neutral.
     pub k_contact_n_per_m: f64,
     /// Load-side effects.
@@ -230,6 +279,7 @@ impl EffectSet {
     /// The base model: every effect neutral.
     pub const NONE: EffectSet = EffectSet {
         clearance_gap_m: 0.0,
+        clearance_lower_kg: 0.0,
         k_contact_n_per_m: f64::INFINITY,
         load: LoadEffects::NEUTRAL,
         foundation: None,
@@ -247,7 +297,10 @@ impl EffectSet {
 
     pub fn apply(&mut self, effect: &Effect) {
         match *effect {
-            Effect::Clearance { gap_m } => self.clearance_gap_m = gap_m,
+            Effect::Clearance { gap_m, m_lower_kg } => {
+                self.clearance_gap_m = gap_m;
+                self.clearance_lower_kg = m_lower_kg;
+            }
             Effect::ElasticRecovery { k_contact_n_per_m } => self.k_contact_n_per_m = k_contact_n_per_m,
             Effect::FrictionRise { exponent } => self.load.friction_exponent = exponent,
             Effect::StrainRate { m, rate_ref_per_s } => {
@@ -280,7 +333,7 @@ mod tests {
     #[test]
     fn every_library_name_parses_and_prints_back() {
         let specs = [
-            "clearance:gap_m=0.0003",
+            "clearance:gap_m=0.0003,m_lower_kg=800",
             "elastic_recovery:k_contact_N_per_m=2.6e9",
             "friction_rise:exponent=0.3",
             "strain_rate:m=0.1,rate_ref_per_s=5",
@@ -310,6 +363,19 @@ mod tests {
         assert!(err.to_string().contains("tau_s = -1"), "{err}");
         let err = Effect::parse_spec("clearance:gap_m").unwrap_err();
         assert!(matches!(err, EffectError::Malformed { .. }), "{err}");
+    }
+
+    #[test]
+    fn a_lower_die_belongs_to_a_press_only() {
+        let e = Effect::parse_spec("clearance:gap_m=3e-4,m_lower_kg=800").unwrap();
+        assert!(e.check_machine(MachineKind::ScrewPress).is_ok());
+        let err = e.check_machine(MachineKind::Hammer).unwrap_err();
+        assert!(err.to_string().contains("m_lower_kg does not apply to a hammer"), "{err}");
+        assert!(Effect::parse_spec("clearance:gap_m=3e-4").unwrap().check_machine(MachineKind::Hammer).is_ok());
+        let err = Effect::parse_spec("clearance:gap_m=3e-4,m_lower_kg=-1").unwrap_err();
+        assert!(err.to_string().contains("m_lower_kg = -1"), "{err}");
+        // Without a die the gap is the old dead travel, and prints back as before.
+        assert_eq!(Effect::parse_spec("clearance:gap_m=3e-4").unwrap().to_string(), "clearance:gap_m=3e-4");
     }
 
     #[test]

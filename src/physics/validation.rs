@@ -435,3 +435,38 @@ fn the_ram_never_passes_through_the_billet() {
         }
     }
 }
+
+/// `clearance` with the press's lower die (`m_lower_kg`): the die starts at rest across the
+/// gap from the sensor path. Only tool and ram bring energy (½ (m_tool + m_ram) v0²); the
+/// die, pushed only through the billet, cannot outrun the tool, so the sensor carries
+/// nothing before the tool has travelled the gap. Then the die strikes the sensor path and
+/// bounces off it while the billet is still forming: the first load pulse is a half period
+/// of the die on the series sensor/frame spring k, between the die alone (pi sqrt(m_die/k))
+/// and the die carrying the tool (pi sqrt((m_die + m_tool)/k)). The base press, with no
+/// mass under the billet, loads without a break until the forming ends.
+#[test]
+fn press_clearance_with_its_die_starts_it_at_rest_and_it_bounces() {
+    let set = EffectSet::from_effects([&Effect::parse_spec("clearance:gap_m=3e-4,m_lower_kg=800").unwrap()]);
+    let Machine::ScrewPress(p) = press() else { unreachable!() };
+    let b = simulate_blow(&blow_plant(&press(), &set, &copper(), 1, 0.030), V_COPPER, &with_trace()).unwrap();
+    assert!(rel(b.energy.kinetic_in_j, 0.5 * (p.m_tool_kg + p.m_ram_kg) * V_COPPER * V_COPPER) < 1e-12);
+    assert!(b.trace.iter().filter(|q| q.t_s < 3e-4 / V_COPPER).all(|q| q.out.sensor_n == 0.0));
+    let i0 = b.trace.iter().position(|q| q.out.sensor_n > 0.0).unwrap();
+    let i1 = i0 + b.trace[i0..].iter().position(|q| q.out.sensor_n <= 0.0).unwrap();
+    let pulse = b.trace[i1].t_s - b.trace[i0].t_s;
+    let k = super::machine::series(p.k_sensor_n_per_m, p.k_frame_n_per_m);
+    let half = |m: f64| std::f64::consts::PI * (m / k).sqrt();
+    assert!((half(800.0)..half(800.0 + p.m_tool_kg)).contains(&pulse), "first pulse {pulse} s");
+    assert!(b.trace[i1].t_s < b.forming.unwrap().forming_time_s, "bounced at {} s", b.trace[i1].t_s);
+    let base =
+        simulate_blow(&blow_plant(&press(), &EffectSet::NONE, &copper(), 1, 0.030), V_COPPER, &with_trace()).unwrap();
+    let t_end = base.forming.unwrap().forming_time_s;
+    let first = base.trace.iter().position(|q| q.out.sensor_n > 0.0).unwrap();
+    assert!(base.trace[first..].iter().take_while(|q| q.t_s < t_end).all(|q| q.out.sensor_n > 0.0));
+    // The ledger closes (CONTRACTS.md §4, 1 %) over the ten copper blows and a bare strike.
+    let bare = simulate_bare(&press(), &set, V_BARE, &SimOptions::default()).unwrap();
+    for (i, blow) in copper_ten(&set).iter().chain([&bare]).enumerate() {
+        let c = blow.energy.closure_error();
+        assert!(c.abs() < 0.01, "run {i}: ledger closes to {c:e} ({:?})", blow.energy);
+    }
+}
