@@ -192,6 +192,12 @@ fn log_range(lo: f64, hi: f64) -> Range<f64> {
     lo..hi
 }
 
+/// A line plot's y axis: the range the data are clamped to, and how many labels at most.
+struct YAxis {
+    clamp: (f64, f64),
+    labels: usize,
+}
+
 /// A run of consecutive drawable points, each x with N y values.
 type Run<const N: usize> = Vec<(f64, [f64; N])>;
 
@@ -276,14 +282,17 @@ pub fn line_plot_svg(plot: &LinePlot, width: u32, height: u32) -> Result<String,
                 None => 1.0..100.0,
             };
             let clamp = (y_range.start, y_range.end);
-            draw_line_plot(root, plot, &data, x_range, y_range.clone().log_scale(), clamp, points.is_empty())
+            // Plotters labels a log axis at 1..9 times each power of ten when it has room for
+            // ten labels; the top of a decade then prints them over each other.
+            let y = YAxis { clamp, labels: 5 };
+            draw_line_plot(root, plot, &data, x_range, y_range.clone().log_scale(), y, points.is_empty())
         } else {
             let y_range = match y_extent {
                 Some((lo, hi)) => padded(lo, hi, 0.05),
                 None => 0.0..1.0,
             };
             let clamp = (y_range.start, y_range.end);
-            draw_line_plot(root, plot, &data, x_range, y_range, clamp, points.is_empty())
+            draw_line_plot(root, plot, &data, x_range, y_range, YAxis { clamp, labels: 10 }, points.is_empty())
         }
     })
 }
@@ -294,7 +303,7 @@ fn draw_line_plot<Y>(
     data: &LineData,
     x_range: Range<f64>,
     y_spec: Y,
-    (y_min, y_max): (f64, f64),
+    YAxis { clamp: (y_min, y_max), labels: y_labels }: YAxis,
     empty: bool,
 ) -> DrawResult
 where
@@ -313,6 +322,7 @@ where
         .y_desc(&plot.y_label)
         .axis_desc_style(font(AXIS_LABEL_PX))
         .label_style(font(TICK_PX))
+        .y_labels(y_labels)
         .x_label_formatter(&|v| format_number(*v, 4))
         .y_label_formatter(&|v| format_number(*v, 3))
         .light_line_style(plotters::style::BLACK.mix(0.04))
@@ -628,6 +638,22 @@ mod tests {
         plot.bands.push(Band { label: "band".into(), x: t, lo: y.clone(), hi: y, color: Color::Orange });
         let svg = line_plot_svg(&plot, 600, 300).unwrap();
         assert!(svg.len() < 60_000, "{} bytes", svg.len());
+    }
+
+    /// A residual spectrum of 1.4 decades (report of the press clearance case): with ten
+    /// labels plotters printed 20000 … 90000 over each other at the top of the decade.
+    #[test]
+    fn a_log_axis_does_not_crowd_its_labels() {
+        let f: Vec<f64> = (1..200).map(|i| i as f64).collect();
+        let a: Vec<f64> = f.iter().map(|x| 5e3 * (x / 8.0).exp().min(24.0)).collect();
+        let mut plot = LinePlot { log_y: true, ..LinePlot::new("spectrum", "f (Hz)", "N") };
+        plot.series.push(Series::new("residual", f, a, Color::Blue));
+        let svg = line_plot_svg(&plot, 600, 300).unwrap();
+        let labels = ["20000", "30000", "40000", "50000", "60000", "70000", "80000", "90000"];
+        let label = |l: &str| svg.contains(&format!(">\n{l}\n</text>"));
+        let shown: Vec<&str> = labels.iter().copied().filter(|l| label(l)).collect();
+        assert!(shown.len() <= 2, "{shown:?}");
+        assert!(label("10000"), "the power of ten is labelled");
     }
 
     #[test]
