@@ -450,13 +450,14 @@ fn press_clearance_with_its_die_starts_it_at_rest_and_it_bounces() {
     let Machine::ScrewPress(p) = press() else { unreachable!() };
     let b = simulate_blow(&blow_plant(&press(), &set, &copper(), 1, 0.030), V_COPPER, &with_trace()).unwrap();
     assert!(rel(b.energy.kinetic_in_j, 0.5 * (p.m_tool_kg + p.m_ram_kg) * V_COPPER * V_COPPER) < 1e-12);
-    assert!(b.trace.iter().filter(|q| q.t_s < 3e-4 / V_COPPER).all(|q| q.out.sensor_n == 0.0));
+    let (gap, die) = (set.clearance_gap_m, set.clearance_lower_kg);
+    assert!(b.trace.iter().filter(|q| q.t_s < gap / V_COPPER).all(|q| q.out.sensor_n == 0.0));
     let i0 = b.trace.iter().position(|q| q.out.sensor_n > 0.0).unwrap();
     let i1 = i0 + b.trace[i0..].iter().position(|q| q.out.sensor_n <= 0.0).unwrap();
     let pulse = b.trace[i1].t_s - b.trace[i0].t_s;
     let k = super::machine::series(p.k_sensor_n_per_m, p.k_frame_n_per_m);
     let half = |m: f64| std::f64::consts::PI * (m / k).sqrt();
-    assert!((half(800.0)..half(800.0 + p.m_tool_kg)).contains(&pulse), "first pulse {pulse} s");
+    assert!((half(die)..half(die + p.m_tool_kg)).contains(&pulse), "first pulse {pulse} s");
     assert!(b.trace[i1].t_s < b.forming.unwrap().forming_time_s, "bounced at {} s", b.trace[i1].t_s);
     let base =
         simulate_blow(&blow_plant(&press(), &EffectSet::NONE, &copper(), 1, 0.030), V_COPPER, &with_trace()).unwrap();
