@@ -34,9 +34,8 @@ fn billet(m: &Machine, sheet: &str, height_factor: f64, v0s: &[f64], seed: u64) 
         .map(|(i, b)| {
             let batch = rows_batch("c", 0, 0, 1e9 / spec.sample_rate_hz, &b.rows);
             let cut = Segmenter::cut_all(SegmentConfig::for_kind(kind), [&batch]);
-            let mut r = Reference::from_blow("b", &cut[0], Some(i + 1), EstimatorConfig::for_kind(kind).fit_s).unwrap();
-            forgemon::diagnose::localise::locate_phases(&mut r, m, &cut[0]);
-            r
+            let fit_s = EstimatorConfig::for_kind(kind).fit_s;
+            forgemon::diagnose::localise::reference("b", &cut[0], Some(i + 1), fit_s, m).unwrap()
         })
         .collect();
     (refs, Setting::Billet(p))

@@ -173,10 +173,11 @@ pub(crate) fn read_references(
         for (k, blow) in blows.iter().enumerate() {
             number += 1;
             let label = if blows.len() > 1 { format!("{name} #{}", k + 1) } else { name.clone() };
-            let mut r = Reference::from_blow(&label, blow, (!bare).then_some(number), fit_s)?;
-            if let Some(m) = locate {
-                crate::diagnose::localise::locate_phases(&mut r, m, blow);
-            }
+            let index = (!bare).then_some(number);
+            let r = match locate {
+                Some(m) => crate::diagnose::localise::reference(&label, blow, index, fit_s, m)?,
+                None => Reference::from_blow(&label, blow, index, fit_s)?,
+            };
             if fit_blows.is_empty() || fit_blows.contains(&number) {
                 fit.push(r);
             } else {

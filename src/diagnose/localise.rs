@@ -17,7 +17,7 @@
 use realfft::RealFftPlanner;
 use serde::Serialize;
 
-use crate::identify::objective::{MeasuredInstants, Reference, Simulated};
+use crate::identify::objective::{MeasuredInstants, Reference, ReferenceError, Simulated};
 use crate::physics::machine::Machine;
 use crate::signal::segment::Blow;
 
@@ -130,11 +130,41 @@ impl Phases {
     }
 }
 
+/// A measured blow as `diagnose` compares it with the model: over the contract's window
+/// (`through_post`), with its phases located (`locate_phases`).
+pub fn reference(
+    label: &str,
+    blow: &Blow,
+    blow_index: Option<usize>,
+    fit_s: f64,
+    machine: &Machine,
+) -> Result<Reference, ReferenceError> {
+    let blow = through_post(blow);
+    let mut r = Reference::from_blow(label, &blow, blow_index, fit_s)?;
+    locate_phases(&mut r, machine, &blow);
+    Ok(r)
+}
+
+/// `blow` with its end moved on to the end of the contract's window: the load back at zero
+/// after its peak, plus `POST_S`, as far as the blow's samples go. The segmenter ends a blow
+/// where the load first stays below its end threshold, which on a press (30 kN) lies above
+/// the zero (2 % of a 1.2 MN peak): cut there, the spring-back would be cut short and `post`
+/// would be empty.
+fn through_post(blow: &Blow) -> Blow {
+    let load = |i: usize| blow.samples[i].load_n - blow.load_zero_n;
+    let n = blow.samples.len();
+    let i_peak = (blow.i_contact..n).fold(blow.i_contact, |b, i| if load(i) > load(b) { i } else { b });
+    let threshold = ZERO_FRACTION * load(i_peak);
+    let post = (POST_S / blow.period_s).round() as usize;
+    let end = (i_peak..n).find(|&i| load(i) < threshold).map_or(n - 1, |zero| (zero + post).min(n - 1));
+    Blow { i_end: blow.i_end.max(end), ..blow.clone() }
+}
+
 /// Locate first contact (the segmenter's) and the end of forming on the measured signals of
 /// `blow`, the one `r` was cut from. The end of forming is the billet's largest
 /// compression, as `machine`'s model run on the measured signals sees it
 /// (`estimate::observer`, which the live estimate also uses), not the model's.
-pub fn locate_phases(r: &mut Reference, machine: &Machine, blow: &Blow) {
+fn locate_phases(r: &mut Reference, machine: &Machine, blow: &Blow) {
     let o = crate::estimate::observer::observe(machine, blow, r.v0_mps);
     let at = |i: usize| (i as f64 - r.i_window_start as f64).max(0.0) * r.dt_s;
     let threshold = ZERO_FRACTION * r.peak_n;
@@ -405,5 +435,43 @@ mod tests {
         // From contact (1 ms) to the load back at zero (just before 10 ms) plus 5 ms.
         assert_eq!(l.window.0, 100);
         assert!((1490..=1500).contains(&l.window.1), "{:?}", l.window);
+    }
+
+    /// The withheld-effect suite's press on the copper sheet's first blow, cut from its
+    /// capture as `diagnose` cuts it.
+    #[test]
+    fn a_press_blow_is_compared_until_its_load_is_back_at_zero_and_5_ms_on() {
+        use crate::config::{parse_machine, parse_process};
+        use crate::physics::effects::EffectSet;
+        use crate::signal::segment::{SegmentConfig, Segmenter};
+        use crate::synth::{CaptureSpec, rows_batch, synth_blows};
+        let m = parse_machine(
+            "m",
+            "kind = \"screw_press\"\nm_tool_kg = 2500\nm_ram_kg = 90000\nk_link_N_per_m = 2.1e9\n\
+             c_link_Ns_per_m = 2.8e5\nk_frame_N_per_m = 8.0e9\nc_frame_Ns_per_m = 5.0e4\nk_sensor_N_per_m = 3.39e10\n",
+        )
+        .unwrap()
+        .machine;
+        let p = parse_process("p", include_str!("../../config/copper-cu99.process.toml")).unwrap();
+        let spec = CaptureSpec::press(3);
+        let b = &synth_blows(&m, &EffectSet::NONE, &p, &[0.30], &spec).unwrap()[0];
+        let cut = Segmenter::cut_all(
+            SegmentConfig::SCREW_PRESS,
+            [&rows_batch("c", 0, 0, 1e9 / spec.sample_rate_hz, &b.rows)],
+        );
+        let fit_s = crate::estimate::EstimatorConfig::for_kind(m.kind()).fit_s;
+        let zero_after_peak = |r: &Reference| {
+            let i_peak = r.load_n.iter().enumerate().fold(0, |b, (i, v)| if *v > r.load_n[b] { i } else { b });
+            (i_peak..r.load_n.len()).find(|&i| r.load_n[i] < ZERO_FRACTION * r.peak_n)
+        };
+        // The segmenter ends the blow where the load stays below its 30 kN: above the zero
+        // (2 % of the peak), so the blow as cut never gets back to zero.
+        let as_cut = Reference::from_blow("b", &cut[0], Some(1), fit_s).unwrap();
+        assert_eq!(zero_after_peak(&as_cut), None, "peak {} N", as_cut.peak_n);
+        let r = reference("b", &cut[0], Some(1), fit_s, &m).unwrap();
+        let zero = zero_after_peak(&r).expect("back at zero");
+        assert_eq!(r.load_n.len(), zero + (POST_S / r.dt_s).round() as usize);
+        // With the load back at zero the billet's permanent set is measured.
+        assert!(r.measured.and_then(|m| m.set_m).is_some(), "{:?}", r.measured);
     }
 }

@@ -308,9 +308,7 @@ mod tests {
             .enumerate()
             .map(|(i, b)| {
                 let cut = Segmenter::cut_all(SegmentConfig::HAMMER, [&rows_batch("c", 0, 0, 1e4, &b.rows)]);
-                let mut r = Reference::from_blow("b", &cut[0], Some(i + 1), 0.01).unwrap();
-                super::localise::locate_phases(&mut r, &m, &cut[0]);
-                r
+                super::localise::reference("b", &cut[0], Some(i + 1), 0.01, &m).unwrap()
             })
             .collect();
         let obj = Objective::new(refs, vec![true; v0s.len()], Setting::Billet(p), MachineKind::Hammer);
