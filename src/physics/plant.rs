@@ -10,6 +10,8 @@
 //! `Free`, `Elastic` and `Plastic`, and the plastic rate follows from the consistency
 //! condition. `integrator` locates every switch.
 
+mod hybrid;
+
 use super::billet::{BilletLaw, STRAIN_RATE_FLOOR_PER_S};
 use super::effects::{EffectSet, Foundation};
 use super::integrator::{Crossing, Guards, Hybrid};
@@ -66,18 +68,6 @@ pub struct Mode {
     pub contact: Contact,
     pub engaged: bool,
 }
-
-// Guard identities.
-const G_TOUCH: u8 = 0;
-const G_REL_VEL_ZERO: u8 = 1;
-const G_STICK_ZERO: u8 = 2;
-const G_STICK_YIELD: u8 = 3;
-const G_OPEN: u8 = 4;
-const G_YIELD: u8 = 5;
-const G_UNLOAD: u8 = 6;
-const G_ENGAGE: u8 = 7;
-const G_DISENGAGE: u8 = 8;
-const G_SENSOR_ZERO: u8 = 9;
 
 /// What sits under the billet.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -406,7 +396,7 @@ impl Plant {
         let mut mode = Mode { contact: Contact::Elastic, engaged };
         if self.rigid() {
             mode.contact = Contact::Free;
-            mode = self.on_event(&mut y, mode, G_TOUCH);
+            mode = self.on_event(&mut y, mode, hybrid::G_TOUCH);
         }
         (y, mode)
     }
@@ -420,71 +410,6 @@ impl Plant {
     /// Energy the moving bodies bring to the blow, J.
     pub fn kinetic_in(&self, y0: &[f64; N]) -> f64 {
         self.mechanical_energy(y0, Mode { contact: Contact::Free, engaged: false })
-    }
-
-    /// Where the rigid contact goes when the billet touches or the bodies stop approaching.
-    fn classify_rigid(&self, y: &mut [f64; N], mode: Mode, approaching: bool) -> Contact {
-        let e = self.eval(y, Mode { contact: Contact::Free, ..mode });
-        let f_l = self.yield_load(e.h_m, e.ddelta_mps);
-        if approaching || e.stick_n >= f_l {
-            y[P] = e.delta_m;
-            if !approaching {
-                // The relative velocity is zero only to the event's tolerance; a negative
-                // remainder would start the flow on the wrong side of its guard, and the
-                // billet would "unform" at the parting velocity.
-                self.common_velocity(y);
-            }
-            Contact::Plastic
-        } else if e.stick_n > 0.0 {
-            self.common_velocity(y);
-            Contact::Stuck
-        } else {
-            Contact::Free
-        }
-    }
-
-    /// Make the contact phase agree with the state after an event. Two guards can cross at
-    /// the same instant (the sensor load and the stick force reach zero together when the
-    /// tools part); the first event leaves the second at exactly zero, where a strict sign
-    /// change can no longer be seen. So a phase whose condition no longer holds ends here.
-    fn settle(&self, y: &mut [f64; N], mode: Mode) -> Mode {
-        let mut next = mode;
-        match mode.contact {
-            Contact::Stuck => {
-                let e = self.eval(y, mode);
-                let f_l = self.yield_load(e.h_m, 0.0);
-                if e.stick_n <= 0.0 {
-                    next.contact = Contact::Free;
-                } else if e.stick_n >= f_l {
-                    y[P] = e.delta_m;
-                    next.contact = Contact::Plastic;
-                }
-            }
-            Contact::Elastic => {
-                let e = self.eval(y, mode);
-                if e.delta_m - y[P] - self.gap_contact_m <= 0.0 && e.ddelta_mps <= 0.0 {
-                    next.contact = Contact::Free;
-                }
-            }
-            // Entering plastic flow where the billet would already be unloading (the rate from
-            // the consistency condition is negative) leaves no guard to end it: it is elastic.
-            Contact::Plastic if !self.rigid() => {
-                if self.eval(y, mode).p_rate_mps < 0.0 {
-                    next.contact = Contact::Elastic;
-                }
-            }
-            // Parting from a rigid contact leaves the gap delta - p at roundoff, and a
-            // positive roundoff would leave the touch guard unarmed: the ram would pass
-            // through the billet. The bodies are touching here, so the gap is exactly zero.
-            Contact::Free if self.rigid() => {
-                let e = self.eval(y, mode);
-                if e.delta_m > y[P] {
-                    y[P] = e.delta_m;
-                }
-            }
-            Contact::Free | Contact::Plastic => {}
-        }
-        next
     }
 
     /// Which state components this plant uses (the others stay zero).
@@ -509,16 +434,6 @@ impl Plant {
             u[Z] = false;
         }
         u
-    }
-
-    /// Give both bodies either side of a rigid contact their common (momentum-weighted)
-    /// velocity. Used where the relative velocity is zero up to the event's tolerance.
-    fn common_velocity(&self, y: &mut [f64; N]) {
-        if let Lower::Mass { m_kg, .. } = self.lower {
-            let v = (self.m_upper_kg * y[VU] + m_kg * y[VL]) / (self.m_upper_kg + m_kg);
-            y[VU] = v;
-            y[VL] = v;
-        }
     }
 
     /// Outputs at a state: (sensor load, billet force, upper position, lower position, height).
@@ -588,138 +503,4 @@ pub struct Outputs {
     pub ram_m: f64,
     pub ram_mps: f64,
     pub ram_acc_mps2: f64,
-}
-
-impl Hybrid<N> for Plant {
-    type Mode = Mode;
-
-    fn rhs(&self, y: &[f64; N], mode: Mode, dy: &mut [f64; N]) {
-        let e = self.eval(y, mode);
-        let (x3v, v3) = if self.foundation.is_some() { (y[X3], y[V3]) } else { (0.0, 0.0) };
-        let _ = x3v;
-        dy[XU] = y[VU];
-        dy[VU] = e.acc_upper;
-        let mut damped = 0.0;
-        if let Some((m, _, c)) = self.ram {
-            dy[XR] = y[VR];
-            dy[VR] = -e.link_n / m;
-            damped += c * (y[VR] - y[VU]).powi(2);
-        } else {
-            dy[XR] = 0.0;
-            dy[VR] = 0.0;
-        }
-        let mut down_n = e.contact_n;
-        match self.lower {
-            Lower::Mass { c_ns_per_m, .. } => {
-                dy[XL] = y[VL];
-                dy[VL] = e.acc_lower;
-                if mode.engaged {
-                    damped += c_ns_per_m * (y[VL] - v3).powi(2);
-                }
-                down_n = e.support_n;
-                dy[XN] = 0.0;
-            }
-            Lower::Chain { c_frame_ns_per_m, .. } => {
-                dy[XL] = 0.0;
-                dy[VL] = 0.0;
-                if self.node {
-                    dy[XN] = e.vn_mps;
-                    damped += c_frame_ns_per_m * (e.vn_mps - v3).powi(2);
-                } else {
-                    dy[XN] = 0.0;
-                }
-            }
-        }
-        if let Some(f) = self.foundation {
-            dy[X3] = y[V3];
-            dy[V3] = self.foundation_acc(y, down_n);
-            damped += f.c3_ns_per_m * y[V3] * y[V3];
-        } else {
-            dy[X3] = 0.0;
-            dy[V3] = 0.0;
-        }
-        dy[P] = e.p_rate_mps;
-        dy[Z] = if self.highpass_tau_s.is_finite() { (e.sensor_raw_n - y[Z]) / self.highpass_tau_s } else { 0.0 };
-        let work = e.contact_n * e.p_rate_mps;
-        dy[WP] = work * e.frictionless_share;
-        dy[WF] = work * (1.0 - e.frictionless_share);
-        dy[WD] = damped;
-    }
-
-    fn guards(&self, y: &[f64; N], dy: &[f64; N], mode: Mode, out: &mut Guards) {
-        let e = self.eval(y, mode);
-        if self.rigid() {
-            match mode.contact {
-                Contact::Free | Contact::Elastic => out.push(G_TOUCH, e.delta_m - y[P], Crossing::Rising),
-                Contact::Plastic => out.push(G_REL_VEL_ZERO, e.ddelta_mps, Crossing::Falling),
-                Contact::Stuck => {
-                    let f_l = self.yield_load(e.h_m, 0.0);
-                    out.push(G_STICK_ZERO, e.stick_n, Crossing::Falling);
-                    out.push(G_STICK_YIELD, e.stick_n - f_l, Crossing::Rising);
-                }
-            }
-        } else {
-            let compression = e.delta_m - y[P] - self.gap_contact_m;
-            match mode.contact {
-                Contact::Free | Contact::Stuck => out.push(G_TOUCH, compression, Crossing::Rising),
-                Contact::Elastic => {
-                    out.push(G_OPEN, compression, Crossing::Falling);
-                    if self.billet.is_some() {
-                        let f_l = self.yield_load(e.h_m, e.ddelta_mps);
-                        out.push(G_YIELD, e.contact_n - f_l, Crossing::Rising);
-                    }
-                }
-                Contact::Plastic => out.push(G_UNLOAD, dy[P], Crossing::Falling),
-            }
-        }
-        if self.gap_support_m > 0.0 {
-            let x3 = if self.foundation.is_some() { y[X3] } else { 0.0 };
-            let closure = y[XL] - x3 - self.gap_support_m;
-            if mode.engaged {
-                out.push(G_DISENGAGE, closure, Crossing::Falling);
-            } else {
-                out.push(G_ENGAGE, closure, Crossing::Rising);
-            }
-        }
-        if mode.contact != Contact::Plastic {
-            out.push(G_SENSOR_ZERO, self.sensor(y, &e), Crossing::Falling);
-        }
-    }
-
-    fn on_event(&self, y: &mut [f64; N], mode: Mode, guard_id: u8) -> Mode {
-        let mut next = mode;
-        match guard_id {
-            G_TOUCH if self.rigid() => {
-                let approaching = y[VU] > if matches!(self.lower, Lower::Mass { .. }) { y[VL] } else { 0.0 };
-                next.contact = self.classify_rigid(y, mode, approaching);
-            }
-            G_TOUCH => next.contact = Contact::Elastic,
-            G_REL_VEL_ZERO => next.contact = self.classify_rigid(y, mode, false),
-            G_STICK_ZERO | G_OPEN => next.contact = Contact::Free,
-            G_STICK_YIELD => {
-                let e = self.eval(y, mode);
-                y[P] = e.delta_m;
-                self.common_velocity(y);
-                next.contact = Contact::Plastic;
-            }
-            G_YIELD => next.contact = Contact::Plastic,
-            G_UNLOAD => {
-                // Leave the yield surface exactly: shift the plastic compression so that the
-                // elastic force equals the flow load (a sub-micrometre correction of the
-                // stabilised drift), which keeps the next yield guard armed.
-                let e = self.eval(y, mode);
-                let f_l = self.upset(e.h_m, e.ddelta_mps).0;
-                y[P] += (e.contact_n - f_l) / self.k_contact_n_per_m;
-                next.contact = Contact::Elastic;
-            }
-            G_ENGAGE => next.engaged = true,
-            G_DISENGAGE => next.engaged = false,
-            _ => {}
-        }
-        self.settle(y, next)
-    }
-
-    fn max_step(&self) -> f64 {
-        self.max_step_s
-    }
 }
