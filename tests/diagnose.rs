@@ -178,17 +178,20 @@ fn elastic_recovery_is_named_and_located_in_the_spring_back() {
 
 /// A flow stress the model lacks raises the real load, so the real forming ends sooner than
 /// the model's: the gap is in the forming, the model's forming runs long, and it over-forms
-/// the billet (each beyond 5× the ≤ 1 % a no-effect hammer or press shows).
-fn located_in_the_forming(r: &Value) {
+/// the billet. Each beyond the ≤ 1 % a no-effect hammer or press shows: the final height by
+/// 5×, the forming time by `forming_time_above` (5× too, but 3× for the press's friction,
+/// which acts only late in the stroke, once the billet is flat: 4.0 % to 4.2 % over capture
+/// seeds 3/4, 11/12 and 21/22).
+fn located_in_the_forming(r: &Value, forming_time_above: f64) {
     assert_eq!(r["baseline"]["dominant_phase"], "forming", "{r:#}");
     let ind = |n: &str| r["baseline"]["indicators"][n]["mean_rel_error"].as_f64().unwrap();
-    assert!(ind("forming_time") > 0.05, "{r:#}");
+    assert!(ind("forming_time") > forming_time_above, "{r:#}");
     assert!(ind("final_height") < -0.05, "{r:#}");
 }
 
 #[test]
 fn friction_rise_is_named_and_located_in_the_forming() {
-    located_in_the_forming(&single("friction", "friction_rise:exponent=1.0"));
+    located_in_the_forming(&single("friction", "friction_rise:exponent=1.0"), 0.05);
 }
 
 #[test]
@@ -198,12 +201,12 @@ fn strain_rate_is_named() {
 
 #[test]
 fn strain_hardening_is_named_and_located_in_the_forming() {
-    located_in_the_forming(&single("hardening", "strain_hardening:n=0.2"));
+    located_in_the_forming(&single("hardening", "strain_hardening:n=0.2"), 0.05);
 }
 
 #[test]
 fn thermal_is_named_and_located_in_the_forming() {
-    located_in_the_forming(&single("thermal", "thermal:q_dT=0.15"));
+    located_in_the_forming(&single("thermal", "thermal:q_dT=0.15"), 0.05);
 }
 
 #[test]
@@ -268,8 +271,8 @@ fn press_elastic_recovery_is_named_and_located_in_the_spring_back() {
 }
 
 #[test]
-fn press_friction_rise_is_named() {
-    single_on(Kind::Press, "p-friction", "friction_rise:exponent=1.0");
+fn press_friction_rise_is_named_and_located_in_the_forming() {
+    located_in_the_forming(&single_on(Kind::Press, "p-friction", "friction_rise:exponent=1.0"), 0.03);
 }
 
 #[test]
@@ -278,13 +281,13 @@ fn press_strain_rate_is_named() {
 }
 
 #[test]
-fn press_strain_hardening_is_named() {
-    single_on(Kind::Press, "p-hardening", "strain_hardening:n=0.2");
+fn press_strain_hardening_is_named_and_located_in_the_forming() {
+    located_in_the_forming(&single_on(Kind::Press, "p-hardening", "strain_hardening:n=0.2"), 0.05);
 }
 
 #[test]
 fn press_thermal_is_named_and_located_in_the_forming() {
-    located_in_the_forming(&single_on(Kind::Press, "p-thermal", "thermal:q_dT=0.15"));
+    located_in_the_forming(&single_on(Kind::Press, "p-thermal", "thermal:q_dT=0.15"), 0.05);
 }
 
 #[test]

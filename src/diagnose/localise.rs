@@ -196,6 +196,15 @@ fn locate_phases(r: &mut Reference, machine: &Machine, blow: &Blow) {
 ///   it lacks) is then still forming, and later still unloading, after the billet has
 ///   stopped: both are the forming's error, not the spring-back's. A measured spring-back
 ///   that outlasts the model's (an elastic contact it lacks) is the spring-back's.
+/// - Where both are in the spring-back (or in `post`) but the model entered it late, or
+///   early, by more than the phase's own length is off, the lag it inherited explains the
+///   residual more than the phase itself does. What shifting the model by that lag removes
+///   is then charged to the phase that caused the lag, as above; what is left is the
+///   phase's. A model that forms too long unloads late, with the right shape: the late
+///   unloading is the forming's. A spring-back that lasts several times the model's (the
+///   hammer paper's 3.7 ms against 0.8 ms) keeps its error, even when the forming's length
+///   is also off. Without this, the press's `friction_rise` and `strain_hardening` cases of
+///   the withheld-effect suite located in the spring-back.
 /// - Each phase's value is the RMS of the error charged to it over the phase's measured
 ///   length: the RMS within the phase when the blows keep step.
 pub fn localise(r: &Reference, model: &Simulated, mode2_hz: f64) -> Localised {
@@ -214,7 +223,7 @@ pub fn localise(r: &Reference, model: &Simulated, mode2_hz: f64) -> Localised {
         None => Phases([start, window.0[1], model_fe, zero.min(end), end]),
     };
     let modelled = Phases::new(start, model_fe, &model_load, threshold, 0, post);
-    let (sum, length) = charge_by_phase(&resid, &measured, &modelled);
+    let (sum, length) = charge_by_phase(&r.load_n, &model_load, &measured, &modelled);
     let phase = |k: usize| (sum[k] / length[k] as f64).sqrt() / r.peak_n;
     let by_phase = ByPhase { impact: phase(0), forming: phase(1), spring_back: phase(2), post: phase(3) };
     let by_band = bands(&resid[start..end.max(start)], dt, mode2_hz, nrmse);
@@ -252,7 +261,13 @@ fn rms_over_peak(x: &[f64], peak: f64) -> f64 {
 
 /// The squared residual charged to each phase, and each phase's measured length (≥ 1
 /// sample): see `localise`.
-fn charge_by_phase(resid: &[f64], measured: &Phases, model: &Phases) -> ([f64; 4], [usize; 4]) {
+fn charge_by_phase(
+    measured_load: &[f64],
+    model_load: &[f64],
+    measured: &Phases,
+    model: &Phases,
+) -> ([f64; 4], [usize; 4]) {
+    let n = measured_load.len().min(model_load.len());
     // How much longer each phase lasts in the model than in the measurement, samples; a late
     // model contact counts to impact.
     let len = |p: &Phases, k: usize| p.0[k + 1] as f64 - p.0[k] as f64;
@@ -261,28 +276,48 @@ fn charge_by_phase(resid: &[f64], measured: &Phases, model: &Phases) -> ([f64; 4
         *d = len(model, k) - len(measured, k);
     }
     longer[0] += model.contact() as f64 - measured.contact() as f64;
+    // Of phases 0..first, the one that contributed most to the model's lag at boundary
+    // `first` (the sum of their excess lengths), if any did in the lag's direction.
+    let culprit = |first: usize| {
+        let lag: f64 = longer[..first].iter().sum();
+        (0..first)
+            .max_by(|x, y| (longer[*x] * lag.signum()).total_cmp(&(longer[*y] * lag.signum())))
+            .filter(|&j| longer[j] * lag.signum() > 0.0)
+    };
     let mut sum = [0.0; 4];
     let from = measured.contact().min(model.contact());
-    let to = measured.0[4].max(model.0[4]).min(resid.len());
-    for (i, e) in resid.iter().enumerate().take(to).skip(from) {
+    let to = measured.0[4].max(model.0[4]).min(n);
+    for i in from..to {
+        let e2 = (measured_load[i] - model_load[i]).powi(2);
         let (a, b) = (measured.of(i), model.of(i));
+        if a == b && (2..4).contains(&a) {
+            // In step after the end of forming, the model may still be late (or early) by
+            // the lag it inherited. Where that lag is larger than this phase's own error in
+            // length, the lag explains the residual: what shifting the model by it removes
+            // is the phase's that caused the lag, what is left is this phase's own.
+            let k = a as usize;
+            let lag = model.0[k] as i64 - measured.0[k] as i64;
+            let j = i as i64 + lag;
+            if longer[k].abs() < lag.abs() as f64 && (0..n as i64).contains(&j) && model.of(j as usize) == a {
+                let own = (measured_load[i] - model_load[j as usize]).powi(2);
+                if let Some(c) = culprit(k).filter(|_| own < e2) {
+                    sum[c] += e2 - own;
+                    sum[k] += own;
+                    continue;
+                }
+            }
+        }
         let k = if a == b {
             a
         } else {
             // Out of step: the blows are on either side of boundaries min(a, b) + 1 ..=
-            // max(a, b). The model lags the measurement there by the sum of the phases'
-            // excess lengths before the first of them; the phase that contributed most to
-            // that lag put them out of step.
+            // max(a, b); the phase that contributed most to the lag at the first of them put
+            // them out of step.
             let first = (a.min(b) + 1).clamp(1, 4) as usize;
-            let lag: f64 = longer[..first].iter().sum();
-            let culprit = (0..first).max_by(|x, y| (longer[*x] * lag.signum()).total_cmp(&(longer[*y] * lag.signum())));
-            match culprit {
-                Some(j) if longer[j] * lag.signum() > 0.0 => j as i32,
-                _ => a.min(b).max(0),
-            }
+            culprit(first).map_or(a.min(b).max(0), |j| j as i32)
         };
         if (0..4).contains(&k) {
-            sum[k as usize] += e * e;
+            sum[k as usize] += e2;
         }
     }
     let mut length = [1usize; 4];
@@ -383,38 +418,92 @@ mod tests {
         assert!(l.by_phase.impact < 1e-12 && l.by_phase.forming < 1e-12);
     }
 
+    /// A trapezoid: contact at 1 ms, `level` until `end`, unloading linearly over `unload`.
+    fn trapezoid(level: f64, end: f64, unload: f64) -> impl Fn(f64) -> f64 {
+        move |t: f64| {
+            if t < 1e-3 {
+                0.0
+            } else if t < end {
+                level
+            } else if t < end + unload {
+                level * (end + unload - t) / unload
+            } else {
+                0.0
+            }
+        }
+    }
+
+    /// `blow`, with the measured load `meas` (forming ending at `meas_end`) and the model's
+    /// `model` (forming ending at `model_end`).
+    fn blow_of(
+        meas: impl Fn(f64) -> f64,
+        meas_end: f64,
+        model: impl Fn(f64) -> f64,
+        model_end: f64,
+    ) -> (Reference, Simulated) {
+        let (mut r, mut s) = blow(|_| 0.0);
+        let dt = r.dt_s;
+        r.load_n = (0..r.load_n.len()).map(|i| meas(i as f64 * dt)).collect();
+        r.peak_n = r.load_n.iter().copied().fold(0.0, f64::max);
+        r.measured = Some(MeasuredInstants { contact_s: 1e-3, forming_end_s: meas_end, set_m: None });
+        s.load_n = (0..s.load_n.len()).map(|i| model(i as f64 * dt)).collect();
+        s.t_forming_end_s = Some(model_end);
+        (r, s)
+    }
+
     #[test]
     fn a_model_that_forms_too_long_is_charged_to_the_forming() {
         // Measured: forming at 1.2 MN from 1 to 7 ms, unloading to 8 ms. Model: 1.0 MN to
         // 9 ms, unloading to 10 ms (a flow stress it lacks). The model still forming, and
         // then unloading, after the billet stopped is the forming's error; the spring-back
         // itself is the same length on both sides.
-        let trapezoid = |level: f64, end: f64| {
-            move |t: f64| {
-                if t < 1e-3 {
-                    0.0
-                } else if t < end {
-                    level
-                } else if t < end + 1e-3 {
-                    level * (end + 1e-3 - t) / 1e-3
-                } else {
-                    0.0
-                }
-            }
-        };
-        let (meas, model) = (trapezoid(1.2e6, 7e-3), trapezoid(1.0e6, 9e-3));
-        let (mut r, mut s) = blow(|_| 0.0);
-        let dt = r.dt_s;
-        r.load_n = (0..r.load_n.len()).map(|i| meas(i as f64 * dt)).collect();
-        r.peak_n = 1.2e6;
-        r.measured = Some(MeasuredInstants { contact_s: 1e-3, forming_end_s: 7e-3, set_m: None });
-        s.load_n = (0..s.load_n.len()).map(|i| model(i as f64 * dt)).collect();
+        let (mut r, s) = blow_of(trapezoid(1.2e6, 7e-3, 1e-3), 7e-3, trapezoid(1.0e6, 9e-3, 1e-3), 9e-3);
         let l = localise(&r, &s, 2000.0);
         assert_eq!(l.by_phase.dominant(), "forming", "{:?}", l.by_phase);
         assert!(l.by_phase.spring_back < 1e-12, "{:?}", l.by_phase);
         // Read on the model's clock alone the unloading would dominate (the old split).
         r.measured = None;
         assert_eq!(localise(&r, &s, 2000.0).by_phase.dominant(), "spring_back");
+    }
+
+    #[test]
+    fn a_spring_back_made_late_by_a_long_forming_is_the_formings_error() {
+        // Measured: 1.05 MN to 7 ms, unloading over 2 ms. Model: 1.0 MN to 7.5 ms, then the
+        // same 2 ms unloading (a flow stress it lacks, press friction_rise in the
+        // withheld-effect suite). Both are unloading from 7.5 to 9 ms, the model 0.5 ms late:
+        // the residual there is the lag, and the lag is the forming's.
+        let (r, s) = blow_of(trapezoid(1.05e6, 7e-3, 2e-3), 7e-3, trapezoid(1.0e6, 7.5e-3, 2e-3), 7.5e-3);
+        let l = localise(&r, &s, 2000.0);
+        assert_eq!(l.by_phase.dominant(), "forming", "{:?}", l.by_phase);
+        // What is left to the spring-back is the 5 % level difference, unloading: shifted by
+        // the lag, the two differ by at most 5 % of the peak.
+        assert!(l.by_phase.spring_back < 0.05, "{:?}", l.by_phase);
+        // Before the shift (charging the in-step residual where it falls) the spring-back
+        // carried it and came out dominant.
+        let [_, _, fe, zero, _] = l.measured.0;
+        let in_step = (l.model.forming_end()..zero).map(|i| (r.load_n[i] - s.load_n[i]).powi(2));
+        let unshifted = (in_step.sum::<f64>() / (zero - fe) as f64).sqrt() / r.peak_n;
+        assert!(unshifted > l.by_phase.forming, "{unshifted} vs {:?}", l.by_phase);
+    }
+
+    #[test]
+    fn a_spring_back_longer_than_the_lag_it_inherits_keeps_its_error() {
+        // Measured: the forming lasts 0.5 ms longer and the unloading 3 ms against the model's
+        // 1 ms (an elastic contact it lacks, hammer paper §4.2). The model's early start
+        // explains less than the unloading's own 2 ms: the residual stays the spring-back's,
+        // sample for sample.
+        let (r, s) = blow_of(trapezoid(1.0e6, 7.5e-3, 3e-3), 7.5e-3, trapezoid(1.0e6, 7e-3, 1e-3), 7e-3);
+        let l = localise(&r, &s, 2000.0);
+        assert_eq!(l.by_phase.dominant(), "spring_back", "{:?}", l.by_phase);
+        // The measured spring-back (7.5 ms to its load back at zero) keeps all its residual.
+        // It also takes the post's lag, which it caused: the measured tail below the zero
+        // (2 % of the peak, 6 samples) against the model's zero load, under 1e-4 of the rest.
+        let [_, _, fe, zero, _] = l.measured.0;
+        assert_eq!(fe, 750);
+        let own = (fe..zero).map(|i| (r.load_n[i] - s.load_n[i]).powi(2));
+        let expected = (own.sum::<f64>() / (zero - fe) as f64).sqrt() / r.peak_n;
+        let more = l.by_phase.spring_back / expected - 1.0;
+        assert!((0.0..1e-4).contains(&more), "{expected} vs {:?}", l.by_phase);
     }
 
     #[test]
