@@ -142,7 +142,9 @@ fn write_html(d: &Diagnosis, machine: &Machine, path: &Path, elapsed_s: f64) -> 
     page.figure(
         bar_plot_svg(&phases, 800, 320)?,
         "The RMS load error within each phase of the blow, each blow's phases on its own instants; where model and \
-         measurement are out of step, the error counts to the phase whose length put them out of step.",
+         measurement are out of step, the error counts to the phase whose length put them out of step, and so does \
+         the part of a spring-back's error that the model's late (or early) start explains, when that start is \
+         further off than the spring-back's own length.",
     );
     let bands = BarPlot {
         title: "nrmse by band".into(),

@@ -19,6 +19,17 @@ pub const SEGMENTS: usize = 8;
 /// that starts late and drains a backlog in one burst, or one starved by a busy host, gives
 /// pairs whose host times are compressed (seen: slopes 30 % off in the first 0.3 s).
 pub const MAX_DRIFT_PPM: f64 = 500.0;
+/// The published mapping follows the fitted one without jumps: a change of the fit smaller
+/// than this is slewed in (as NTP slews a clock), a larger one is a step, taken at once.
+/// Each batch can move the fit's offset by tens of µs (a new fastest batch, a new slope);
+/// stored at once, that is a jump within a role's track, and a 60 µs jump in a ram encoder
+/// at 5 m/s is a 0.3 mm step that a 10 ms approach fit reads as a 1 % speed error.
+pub const MAX_SLEW_NS: f64 = 250_000.0;
+/// Fastest slew, as a rate change: 500 ppm moves the ram encoder's time base so little that
+/// a speed reads 0.05 % off, and takes up 60 µs in 120 ms.
+pub const SLEW_RATE: f64 = 500e-6;
+/// A slewed change is taken up over this much device time, or more (`SLEW_RATE`), ns.
+const SLEW_OVER_NS: f64 = 10_000_000.0;
 
 /// The clock model of one source.
 #[derive(Debug, Clone)]
@@ -28,12 +39,23 @@ pub struct ClockModel {
     origin: Option<(i64, i64)>,
     rate: f64,
     offset_ns: f64,
+    /// The published mapping, continuous across batches: a point (device, host) relative
+    /// to the origin, and its slope.
+    anchor: (f64, f64),
+    map_rate: f64,
 }
 
 impl Default for ClockModel {
     /// No pairs yet: the device clock is taken as the host's (rate 1, offset 0).
     fn default() -> Self {
-        ClockModel { pairs: VecDeque::new(), origin: None, rate: 1.0, offset_ns: 0.0 }
+        ClockModel {
+            pairs: VecDeque::new(),
+            origin: None,
+            rate: 1.0,
+            offset_ns: 0.0,
+            anchor: (0.0, 0.0),
+            map_rate: 1.0,
+        }
     }
 }
 
@@ -74,17 +96,37 @@ impl ClockModel {
             }
         }
         self.offset_ns = self.pairs.iter().map(|(d, h)| h - self.rate * d).fold(f64::INFINITY, f64::min);
-    }
-
-    /// Host time of device time `device_ns` (the device time itself before any pair).
-    pub fn map(&self, device_ns: i64) -> i64 {
-        match self.origin {
-            None => device_ns,
-            Some((d0, h0)) => h0 + (self.offset_ns + self.rate * (device_ns - d0) as f64).round() as i64,
+        // Publish: from where the published mapping stands at this batch, slew toward the
+        // fit, or step onto it.
+        let fitted = self.offset_ns + self.rate * d;
+        let published = self.anchor.1 + self.map_rate * (d - self.anchor.0);
+        let gap = fitted - published;
+        if self.pairs.len() == 1 || gap.abs() > MAX_SLEW_NS {
+            self.anchor = (d, fitted);
+            self.map_rate = self.rate;
+        } else {
+            self.anchor = (d, published);
+            self.map_rate = self.rate + (gap / SLEW_OVER_NS).clamp(-SLEW_RATE, SLEW_RATE);
         }
     }
 
-    /// Host ns per device ns.
+    /// Host time of device time `device_ns` (the device time itself before any pair), on
+    /// the published mapping: the fit, slewed in (`MAX_SLEW_NS`).
+    pub fn map(&self, device_ns: i64) -> i64 {
+        match self.origin {
+            None => device_ns,
+            Some((d0, h0)) => {
+                h0 + (self.anchor.1 + self.map_rate * ((device_ns - d0) as f64 - self.anchor.0)).round() as i64
+            }
+        }
+    }
+
+    /// Host ns per device ns of the published mapping (`map`).
+    pub fn map_rate(&self) -> f64 {
+        self.map_rate
+    }
+
+    /// Host ns per device ns, as fitted.
     pub fn rate(&self) -> f64 {
         self.rate
     }
@@ -153,6 +195,51 @@ mod tests {
         }
         assert!(worst_ns < 500_000, "{worst_ns} ns");
         assert!(m.drift_ppm().abs() <= MAX_DRIFT_PPM, "{}", m.drift_ppm());
+    }
+
+    /// 1 s of 10 ms batches of 100 kHz samples, each received 1 ms after its last sample
+    /// until batch `fast_from`, `faster_ns` sooner from then on (a new fastest batch: the
+    /// fit's offset moves by `faster_ns`). Returns the worst gap between a batch's first
+    /// mapped sample and the previous batch's last beyond one sample period, and the model.
+    fn consecutive_samples(fast_from: i64, faster_ns: i64) -> (f64, ClockModel) {
+        let mut m = ClockModel::new();
+        let (batch_ns, period_ns) = (10_000_000i64, 10_000i64);
+        let mut worst_gap: f64 = 0.0;
+        let mut last_mapped: Option<i64> = None;
+        for k in 0..100 {
+            let first = batch_ns * k;
+            let last = first + batch_ns - period_ns;
+            let delay = if k >= fast_from { 1_000_000 - faster_ns } else { 1_000_000 };
+            m.observe(last, 5_000_000_000 + last + delay);
+            // The merge maps the batch's samples as it arrives: its first sample must follow
+            // the previous batch's last by one sample period.
+            if let Some(prev) = last_mapped {
+                worst_gap = worst_gap.max(((m.map(first) - prev) as f64 - period_ns as f64).abs());
+            }
+            last_mapped = Some(m.map(last));
+        }
+        (worst_gap, m)
+    }
+
+    #[test]
+    fn a_fit_that_moves_by_tens_of_microseconds_is_slewed_in_not_jumped() {
+        let (gap, m) = consecutive_samples(60, 60_000);
+        // At most SLEW_RATE over a batch (5 µs), where the unslewed fit jumps by 60 µs (a
+        // 0.3 mm step in a ram encoder at 5 m/s: a 1 % speed error in the 10 ms approach
+        // fit, seen in the two-DAQ merge test).
+        assert!(gap <= SLEW_RATE * 10e6 + 2.0, "{gap} ns");
+        // And by the end (400 ms after the change) it is on the fit to the nanosecond.
+        let d = 1_000_000_000;
+        let fitted = m.origin.unwrap().1 + (m.offset_ns + m.rate * (d - m.origin.unwrap().0) as f64).round() as i64;
+        assert!((m.map(d) - fitted).abs() <= 1, "{} vs {fitted}", m.map(d));
+    }
+
+    #[test]
+    fn a_fit_that_moves_by_more_than_the_slew_bound_is_a_step() {
+        // A transport 1 ms faster from batch 60 on: the fit's offset moves by 1 ms, more
+        // than MAX_SLEW_NS, and the mapping takes it at once.
+        let (gap, _) = consecutive_samples(60, 1_000_000);
+        assert!((gap - 1e6).abs() < 1e3, "{gap} ns");
     }
 
     #[test]
