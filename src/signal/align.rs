@@ -126,11 +126,6 @@ impl ClockModel {
         self.map_rate
     }
 
-    /// Host ns per device ns, as fitted.
-    pub fn rate(&self) -> f64 {
-        self.rate
-    }
-
     /// Device clock drift against the host, ppm (positive: the device runs slow).
     pub fn drift_ppm(&self) -> f64 {
         (self.rate - 1.0) * 1e6
