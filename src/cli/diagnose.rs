@@ -143,8 +143,8 @@ fn write_html(d: &Diagnosis, machine: &Machine, path: &Path, elapsed_s: f64) -> 
         bar_plot_svg(&phases, 800, 320)?,
         "The RMS load error within each phase of the blow, each blow's phases on its own instants; where model and \
          measurement are out of step, the error counts to the phase whose length put them out of step, and so does \
-         the part of a spring-back's error that the model's late (or early) start explains, when that start is \
-         further off than the spring-back's own length.",
+         the part of a spring-back's (or post's) error that the model's late (or early) start explains, when that \
+         start is further off than the phase's own length.",
     );
     let bands = BarPlot {
         title: "nrmse by band".into(),

@@ -198,9 +198,10 @@ fn locate_phases(r: &mut Reference, machine: &Machine, blow: &Blow) {
 ///   that outlasts the model's (an elastic contact it lacks) is the spring-back's.
 /// - Where both are in the spring-back (or in `post`) but the model entered it late, or
 ///   early, by more than the phase's own length is off, the lag it inherited explains the
-///   residual more than the phase itself does. What shifting the model by that lag removes
-///   is then charged to the phase that caused the lag, as above; what is left is the
-///   phase's. A model that forms too long unloads late, with the right shape: the late
+///   residual more than the phase itself does. What shifting the model by that lag removes,
+///   summed over the phase, is then charged to the phase that caused the lag, as above; what
+///   is left is the phase's. (`post` lasts 5 ms on both sides, so any lag it inherits
+///   counts.) A model that forms too long unloads late, with the right shape: the late
 ///   unloading is the forming's. A spring-back that lasts several times the model's (the
 ///   hammer paper's 3.7 ms against 0.8 ms) keeps its error, even when the forming's length
 ///   is also off. Without this, the press's `friction_rise` and `strain_hardening` cases of
@@ -285,6 +286,9 @@ fn charge_by_phase(
             .filter(|&j| longer[j] * lag.signum() > 0.0)
     };
     let mut sum = [0.0; 4];
+    // In-step spring-back and post samples the lag may explain: their squared residual
+    // as it stands, and with the model shifted by the lag.
+    let mut shiftable = [(0.0, 0.0); 4];
     let from = measured.contact().min(model.contact());
     let to = measured.0[4].max(model.0[4]).min(n);
     for i in from..to {
@@ -293,18 +297,15 @@ fn charge_by_phase(
         if a == b && (2..4).contains(&a) {
             // In step after the end of forming, the model may still be late (or early) by
             // the lag it inherited. Where that lag is larger than this phase's own error in
-            // length, the lag explains the residual: what shifting the model by it removes
-            // is the phase's that caused the lag, what is left is this phase's own.
+            // length, the lag may explain the residual (weighed once the phase is summed).
             let k = a as usize;
             let lag = model.0[k] as i64 - measured.0[k] as i64;
             let j = i as i64 + lag;
             if longer[k].abs() < lag.abs() as f64 && (0..n as i64).contains(&j) && model.of(j as usize) == a {
                 let own = (measured_load[i] - model_load[j as usize]).powi(2);
-                if let Some(c) = culprit(k).filter(|_| own < e2) {
-                    sum[c] += e2 - own;
-                    sum[k] += own;
-                    continue;
-                }
+                shiftable[k].0 += e2;
+                shiftable[k].1 += own;
+                continue;
             }
         }
         let k = if a == b {
@@ -318,6 +319,19 @@ fn charge_by_phase(
         };
         if (0..4).contains(&k) {
             sum[k as usize] += e2;
+        }
+    }
+    // What shifting the model by the lag removes over the phase is the phase's that caused
+    // the lag; what is left is this phase's own. Weighed over the phase, not sample by
+    // sample: per sample, the smaller of two curves that straddle the measurement would
+    // credit the lag with part of any noise.
+    for (k, &(as_is, shifted)) in shiftable.iter().enumerate() {
+        match culprit(k).filter(|_| shifted < as_is) {
+            Some(c) => {
+                sum[c] += as_is - shifted;
+                sum[k] += shifted;
+            }
+            None => sum[k] += as_is,
         }
     }
     let mut length = [1usize; 4];
