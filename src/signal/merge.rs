@@ -233,7 +233,7 @@ fn last_device_ns(b: &SampleBatch) -> i64 {
 /// must keep their order and spacing).
 fn map_f64(clock: &ClockModel, device_ns: f64) -> f64 {
     let whole = device_ns.floor();
-    clock.map(whole as i64) as f64 + (device_ns - whole) * clock.map_rate()
+    clock.map(whole as i64) as f64 + (device_ns - whole) * clock.rate()
 }
 
 #[cfg(test)]
