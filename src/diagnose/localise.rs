@@ -199,13 +199,14 @@ fn locate_phases(r: &mut Reference, machine: &Machine, blow: &Blow) {
 /// - Where both are in the spring-back (or in `post`) but the model entered it late, or
 ///   early, by more than the phase's own length is off, the lag it inherited explains the
 ///   residual more than the phase itself does. What shifting the model by that lag removes,
-///   summed over the phase, is then charged to the phase that caused the lag, as above; what
-///   is left is the phase's. (`post` lasts 5 ms on both sides, so any lag it inherits
-///   counts.) A model that forms too long unloads late, with the right shape: the late
-///   unloading is the forming's. A spring-back that lasts several times the model's (the
-///   hammer paper's 3.7 ms against 0.8 ms) keeps its error, even when the forming's length
-///   is also off. Without this, the press's `friction_rise` and `strain_hardening` cases of
-///   the withheld-effect suite located in the spring-back.
+///   summed over the phase (at the shift between the lags at the phase's start and end that
+///   removes most), is then charged to the phase that caused the lag, as above; what is
+///   left is the phase's. (`post` lasts 5 ms on both sides, so any lag it inherits counts.)
+///   A model that forms too long unloads late, with the right shape: the late unloading is
+///   the forming's. A spring-back that lasts several times the model's (the hammer paper's
+///   3.7 ms against 0.8 ms) keeps its error, even when the forming's length is also off.
+///   Without this, the press's `friction_rise` and `strain_hardening` cases of the
+///   withheld-effect suite located in the spring-back.
 /// - Each phase's value is the RMS of the error charged to it over the phase's measured
 ///   length: the RMS within the phase when the blows keep step.
 pub fn localise(r: &Reference, model: &Simulated, mode2_hz: f64) -> Localised {
@@ -286,29 +287,21 @@ fn charge_by_phase(
             .filter(|&j| longer[j] * lag.signum() > 0.0)
     };
     let mut sum = [0.0; 4];
-    // In-step spring-back and post samples the lag may explain: their squared residual
-    // as it stands, and with the model shifted by the lag.
-    let mut shiftable = [(0.0, 0.0); 4];
+    // After the end of forming the model may still be late (or early) by the lag it
+    // inherited: `lag[k]` samples at the start of phase k, `lag[k] + longer[k]` at its end.
+    // Where that lag is larger than the phase's own error in length, the lag may explain the
+    // residual where both blows are in the phase (weighed below).
+    let lag = |k: usize| model.0[k] as i64 - measured.0[k] as i64;
+    let shiftable = |k: usize| (2..4).contains(&k) && longer[k].abs() < lag(k).abs() as f64 && culprit(k).is_some();
     let from = measured.contact().min(model.contact());
     let to = measured.0[4].max(model.0[4]).min(n);
     for i in from..to {
         let e2 = (measured_load[i] - model_load[i]).powi(2);
         let (a, b) = (measured.of(i), model.of(i));
-        if a == b && (2..4).contains(&a) {
-            // In step after the end of forming, the model may still be late (or early) by
-            // the lag it inherited. Where that lag is larger than this phase's own error in
-            // length, the lag may explain the residual (weighed once the phase is summed).
-            let k = a as usize;
-            let lag = model.0[k] as i64 - measured.0[k] as i64;
-            let j = i as i64 + lag;
-            if longer[k].abs() < lag.abs() as f64 && (0..n as i64).contains(&j) && model.of(j as usize) == a {
-                let own = (measured_load[i] - model_load[j as usize]).powi(2);
-                shiftable[k].0 += e2;
-                shiftable[k].1 += own;
+        let k = if a == b {
+            if a >= 0 && shiftable(a as usize) {
                 continue;
             }
-        }
-        let k = if a == b {
             a
         } else {
             // Out of step: the blows are on either side of boundaries min(a, b) + 1 ..=
@@ -321,18 +314,24 @@ fn charge_by_phase(
             sum[k as usize] += e2;
         }
     }
-    // What shifting the model by the lag removes over the phase is the phase's that caused
-    // the lag; what is left is this phase's own. Weighed over the phase, not sample by
-    // sample: per sample, the smaller of two curves that straddle the measurement would
-    // credit the lag with part of any noise.
-    for (k, &(as_is, shifted)) in shiftable.iter().enumerate() {
-        match culprit(k).filter(|_| shifted < as_is) {
-            Some(c) => {
-                sum[c] += as_is - shifted;
-                sum[k] += shifted;
-            }
-            None => sum[k] += as_is,
+    // What shifting the model removes over the phase, at the shift between the lags at its
+    // start and its end that removes most, is the phase's that caused the lag; what is left
+    // is this phase's own. Weighed over the phase, not sample by sample: per sample, the
+    // nearer of two curves that straddle the measurement would credit the lag with noise.
+    for k in (2..4).filter(|&k| shiftable(k)) {
+        let (lo, hi) = (measured.0[k].max(model.0[k]).max(from), measured.0[k + 1].min(model.0[k + 1]).min(to));
+        let squared = |shift: i64| -> Option<f64> {
+            let (first, last) = (lo as i64 + shift, hi as i64 - 1 + shift);
+            (lo < hi && first >= 0 && last < n as i64)
+                .then(|| (lo..hi).map(|i| (measured_load[i] - model_load[(i as i64 + shift) as usize]).powi(2)).sum())
+        };
+        let as_is = squared(0).unwrap_or(0.0);
+        let (start, end) = (lag(k), lag(k) + longer[k] as i64);
+        let shifted = (start.min(end)..=start.max(end)).filter_map(squared).fold(as_is, f64::min);
+        if let Some(c) = culprit(k) {
+            sum[c] += as_is - shifted;
         }
+        sum[k] += shifted;
     }
     let mut length = [1usize; 4];
     for (k, l) in length.iter_mut().enumerate() {
