@@ -176,22 +176,26 @@ fn elastic_recovery_is_named_and_located_in_the_spring_back() {
     assert!(r["baseline"]["indicators"]["spring_back_time"]["mean_rel_error"].as_f64().unwrap() < -0.05, "{r:#}");
 }
 
+/// The largest mean relative error of forming time and final height on the no-effect
+/// cases of either machine (0.9 % over capture seeds 3/4, 11/12 and 21/22), rounded up.
+const NO_EFFECT_REL_ERROR: f64 = 0.01;
+
 /// A flow stress the model lacks raises the real load, so the real forming ends sooner than
 /// the model's: the gap is in the forming, the model's forming runs long, and it over-forms
-/// the billet. Each beyond the ≤ 1 % a no-effect hammer or press shows: the final height by
-/// 5×, the forming time by `forming_time_above` (5× too, but 3× for the press's friction,
-/// which acts only late in the stroke, once the billet is flat: 4.0 % to 4.2 % over capture
-/// seeds 3/4, 11/12 and 21/22).
-fn located_in_the_forming(r: &Value, forming_time_above: f64) {
+/// the billet. Each beyond the ≤ 1 % (`NO_EFFECT_REL_ERROR`) a no-effect hammer or press
+/// shows: the final height by 5×, the forming time by `forming_time_times` (5 too, but 3 for
+/// the press's friction, which acts only late in the stroke, once the billet is flat: 4.0 %
+/// to 4.2 % over capture seeds 3/4, 11/12 and 21/22).
+fn located_in_the_forming(r: &Value, forming_time_times: f64) {
     assert_eq!(r["baseline"]["dominant_phase"], "forming", "{r:#}");
     let ind = |n: &str| r["baseline"]["indicators"][n]["mean_rel_error"].as_f64().unwrap();
-    assert!(ind("forming_time") > forming_time_above, "{r:#}");
-    assert!(ind("final_height") < -0.05, "{r:#}");
+    assert!(ind("forming_time") > forming_time_times * NO_EFFECT_REL_ERROR, "{r:#}");
+    assert!(ind("final_height") < -5.0 * NO_EFFECT_REL_ERROR, "{r:#}");
 }
 
 #[test]
 fn friction_rise_is_named_and_located_in_the_forming() {
-    located_in_the_forming(&single("friction", "friction_rise:exponent=1.0"), 0.05);
+    located_in_the_forming(&single("friction", "friction_rise:exponent=1.0"), 5.0);
 }
 
 #[test]
@@ -201,12 +205,12 @@ fn strain_rate_is_named() {
 
 #[test]
 fn strain_hardening_is_named_and_located_in_the_forming() {
-    located_in_the_forming(&single("hardening", "strain_hardening:n=0.2"), 0.05);
+    located_in_the_forming(&single("hardening", "strain_hardening:n=0.2"), 5.0);
 }
 
 #[test]
 fn thermal_is_named_and_located_in_the_forming() {
-    located_in_the_forming(&single("thermal", "thermal:q_dT=0.15"), 0.05);
+    located_in_the_forming(&single("thermal", "thermal:q_dT=0.15"), 5.0);
 }
 
 #[test]
@@ -272,7 +276,7 @@ fn press_elastic_recovery_is_named_and_located_in_the_spring_back() {
 
 #[test]
 fn press_friction_rise_is_named_and_located_in_the_forming() {
-    located_in_the_forming(&single_on(Kind::Press, "p-friction", "friction_rise:exponent=1.0"), 0.03);
+    located_in_the_forming(&single_on(Kind::Press, "p-friction", "friction_rise:exponent=1.0"), 3.0);
 }
 
 #[test]
@@ -282,12 +286,12 @@ fn press_strain_rate_is_named() {
 
 #[test]
 fn press_strain_hardening_is_named_and_located_in_the_forming() {
-    located_in_the_forming(&single_on(Kind::Press, "p-hardening", "strain_hardening:n=0.2"), 0.05);
+    located_in_the_forming(&single_on(Kind::Press, "p-hardening", "strain_hardening:n=0.2"), 5.0);
 }
 
 #[test]
 fn press_thermal_is_named_and_located_in_the_forming() {
-    located_in_the_forming(&single_on(Kind::Press, "p-thermal", "thermal:q_dT=0.15"), 0.05);
+    located_in_the_forming(&single_on(Kind::Press, "p-thermal", "thermal:q_dT=0.15"), 5.0);
 }
 
 #[test]

@@ -292,14 +292,16 @@ fn charge_by_phase(
     // Where that lag is larger than the phase's own error in length, the lag may explain the
     // residual where both blows are in the phase (weighed below).
     let lag = |k: usize| model.0[k] as i64 - measured.0[k] as i64;
-    let shiftable = |k: usize| (2..4).contains(&k) && longer[k].abs() < lag(k).abs() as f64 && culprit(k).is_some();
+    // Each phase's culprit where its lag may explain it (decided once, not per sample).
+    let shift_to: [Option<usize>; 4] =
+        std::array::from_fn(|k| culprit(k).filter(|_| (2..4).contains(&k) && longer[k].abs() < lag(k).abs() as f64));
     let from = measured.contact().min(model.contact());
     let to = measured.0[4].max(model.0[4]).min(n);
     for i in from..to {
         let e2 = (measured_load[i] - model_load[i]).powi(2);
         let (a, b) = (measured.of(i), model.of(i));
         let k = if a == b {
-            if a >= 0 && shiftable(a as usize) {
+            if a >= 0 && shift_to[a as usize].is_some() {
                 continue;
             }
             a
@@ -318,7 +320,7 @@ fn charge_by_phase(
     // start and its end that removes most, is the phase's that caused the lag; what is left
     // is this phase's own. Weighed over the phase, not sample by sample: per sample, the
     // nearer of two curves that straddle the measurement would credit the lag with noise.
-    for k in (2..4).filter(|&k| shiftable(k)) {
+    for (k, c) in shift_to.iter().enumerate().filter_map(|(k, c)| c.map(|c| (k, c))) {
         let (lo, hi) = (measured.0[k].max(model.0[k]).max(from), measured.0[k + 1].min(model.0[k + 1]).min(to));
         let squared = |shift: i64| -> Option<f64> {
             let (first, last) = (lo as i64 + shift, hi as i64 - 1 + shift);
@@ -328,9 +330,7 @@ fn charge_by_phase(
         let as_is = squared(0).unwrap_or(0.0);
         let (start, end) = (lag(k), lag(k) + longer[k] as i64);
         let shifted = (start.min(end)..=start.max(end)).filter_map(squared).fold(as_is, f64::min);
-        if let Some(c) = culprit(k) {
-            sum[c] += as_is - shifted;
-        }
+        sum[c] += as_is - shifted;
         sum[k] += shifted;
     }
     let mut length = [1usize; 4];
