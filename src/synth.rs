@@ -88,6 +88,10 @@ impl CaptureSpec {
     }
 }
 
+/// The encoder's reading with the ram on the lower die, m: an arbitrary zero, the same for
+/// every blow and billet of a rendered session.
+pub const ENCODER_AT_LOWER_DIE_M: f64 = 0.5495;
+
 /// One generated blow: the capture and the simulated truth.
 #[derive(Debug, Clone)]
 pub struct SynthBlow {
@@ -152,9 +156,11 @@ fn render(results: Vec<BlowResult>, spec: &CaptureSpec) -> Vec<SynthBlow> {
     let acc_noise = Normal::new(0.0, s.acc_sd_mps2).expect("finite sd");
     let offset = rand_distr::Uniform::new_inclusive(-s.load_offset_n, s.load_offset_n).expect("finite bounds");
     let mut out = Vec::with_capacity(results.len());
-    // The encoder reads the ram from an arbitrary zero; it keeps counting across blows.
-    let mut encoder_zero_m = 0.4375;
     for (i, truth) in results.into_iter().enumerate() {
+        // The encoder reads the ram from an arbitrary zero and keeps counting across blows
+        // and billets: the ram meets a billet of height h at ENCODER_AT_LOWER_DIE_M - h, so
+        // the contact positions of consecutive blows differ by the billet's set.
+        let encoder_zero_m = ENCODER_AT_LOWER_DIE_M - truth.h_start_m;
         let t_contact = spec.t_origin_s + spec.pre_s + i as f64 * spec.blow_interval_s;
         let load_offset = offset.sample(&mut rng);
         let v0 = truth.v0_mps;
@@ -180,9 +186,6 @@ fn render(results: Vec<BlowResult>, spec: &CaptureSpec) -> Vec<SynthBlow> {
         }
         for (k, p) in truth.trace.iter().enumerate() {
             emit(k as i64, p.out.sensor_n, p.out.ram_m, p.out.ram_acc_mps2, &mut rng);
-        }
-        if let Some(last) = truth.trace.last() {
-            encoder_zero_m += last.out.ram_m;
         }
         out.push(SynthBlow { rows, truth, t_contact_s: t_contact });
     }

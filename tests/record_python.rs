@@ -39,23 +39,28 @@ fn alert(blow: u32) -> Alert {
 }
 
 fn result(blow: u32, with_sheet: bool) -> BlowEstimate {
+    // Without a sheet the blow is also an incomplete one: no energies, a gap.
+    let whole = with_sheet;
     BlowEstimate {
         blow,
         t_contact_s: 81.2031 + f64::from(blow),
         v_impact_mps: 5.21,
-        kinetic_in_j: 14931.0,
-        plastic_j: 6020.0,
+        kinetic_in_j: whole.then_some(14931.0),
+        plastic_j: whole.then_some(6020.0),
         friction_j: with_sheet.then_some(6900.0),
-        damped_j: 520.0,
-        elastic_j: 1490.0,
-        efficiency: 0.403,
+        damped_j: whole.then_some(520.0),
+        elastic_j: whole.then_some(1490.0),
+        efficiency: whole.then_some(0.403),
         final_load_n: 2.1e6,
         h_end_m: with_sheet.then_some(0.0124),
-        class: if with_sheet { BlowClass::Hard } else { BlowClass::Intermediate },
+        class: if with_sheet { BlowClass::Hard } else { BlowClass::Incomplete },
         alert: with_sheet.then(|| alert(blow)),
         t_end_s: 81.2152 + f64::from(blow),
         peak_load_n: 2.6e6,
-        residual: -0.012,
+        residual: whole.then_some(-0.012),
+        gap_s: if whole { 0.0 } else { 0.0125 },
+        h_start_m: with_sheet.then_some(0.0151),
+        height_check: None,
     }
 }
 
@@ -200,8 +205,11 @@ fn python_mcap_protobuf_decodes_every_channel() {
         let blow = i as u32 + 1;
         let want = result(blow, blow != 2);
         assert_eq!(r["blow"], blow);
-        assert_eq!(f(&r["efficiency"]), want.efficiency);
-        assert_eq!(f(&r["kinetic_in_J"]), want.kinetic_in_j);
+        assert_eq!(r["efficiency"].as_f64(), want.efficiency, "blow {blow}");
+        assert_eq!(r["kinetic_in_J"].as_f64(), want.kinetic_in_j, "blow {blow}");
+        assert_eq!(r["plastic_J"].as_f64(), want.plastic_j, "blow {blow}");
+        assert_eq!(r["residual"].as_f64(), want.residual, "blow {blow}");
+        assert_eq!(f(&r["gap_s"]), want.gap_s, "blow {blow}");
         assert_eq!(f(&r["final_load_N"]), want.final_load_n);
         assert_eq!(f(&r["t_contact_s"]), want.t_contact_s);
         assert_eq!(r["class"], want.class.as_str());

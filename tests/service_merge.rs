@@ -143,12 +143,13 @@ fn roles_from_two_daqs_on_their_own_clocks_are_merged() {
     // Every blow of both billets, none extra (the reference finds them all too).
     assert_eq!(reference.len(), 2 * V0S.len());
     assert_eq!(live.len(), reference.len(), "live blows: {live:?}");
-    let worst = live.iter().zip(&reference).map(|(l, r)| (l.efficiency - r.efficiency).abs()).fold(0.0, f64::max);
+    let eff = |e: &forgemon::estimate::BlowEstimate| e.efficiency.expect("a whole blow has an efficiency");
+    let worst = live.iter().zip(&reference).map(|(l, r)| (eff(l) - eff(r)).abs()).fold(0.0, f64::max);
     eprintln!("merged vs one DAQ: worst efficiency difference {worst:.4}");
     for (l, r) in live.iter().zip(&reference) {
         // Issue #3's replay tolerances against the truth: efficiency within 0.03, impact
         // speed within 1 %. The merge may cost no more than that against one DAQ.
-        assert!((l.efficiency - r.efficiency).abs() < 0.03, "blow {}: {} vs {}", l.blow, l.efficiency, r.efficiency);
+        assert!((eff(l) - eff(r)).abs() < 0.03, "blow {}: {} vs {}", l.blow, eff(l), eff(r));
         assert!(
             (l.v_impact_mps / r.v_impact_mps - 1.0).abs() < 0.01,
             "blow {}: {} vs {} m/s",

@@ -90,19 +90,26 @@ impl AlertRules {
         self.last_fired.clear();
     }
 
-    /// Judge one blow; at most one alert (elastic blows first, then model health).
+    /// Judge one blow; at most one alert (elastic blows first, then model health). An
+    /// incomplete blow (no efficiency) raises none and is not remembered: it neither counts
+    /// toward the low-efficiency window nor breaks it.
     pub fn on_blow(&mut self, b: &BlowEstimate) -> Option<Alert> {
+        let (Some(efficiency), Some(plastic_j), Some(kinetic_in_j), Some(elastic_j), Some(residual)) =
+            (b.efficiency, b.plastic_j, b.kinetic_in_j, b.elastic_j, b.residual)
+        else {
+            return None;
+        };
         let c = self.cfg;
-        self.recent.push_back(b.efficiency);
+        self.recent.push_back(efficiency);
         while self.recent.len() > c.n_window.max(1) {
             self.recent.pop_front();
         }
         let low = self.recent.iter().filter(|e| **e < c.low_efficiency).count();
         let mut figures = BTreeMap::from([
-            ("efficiency".to_string(), b.efficiency),
-            ("plastic_J".to_string(), b.plastic_j),
-            ("kinetic_in_J".to_string(), b.kinetic_in_j),
-            ("elastic_J".to_string(), b.elastic_j),
+            ("efficiency".to_string(), efficiency),
+            ("plastic_J".to_string(), plastic_j),
+            ("kinetic_in_J".to_string(), kinetic_in_j),
+            ("elastic_J".to_string(), elastic_j),
         ]);
         let candidate = if c.on_hard_blow && b.class == BlowClass::Hard {
             Some((
@@ -111,9 +118,9 @@ impl AlertRules {
                     "blow {} was hard: only {:.0} % of its {:.0} J went into the billet and {:.0} J came back as elastic energy; \
                      the part is finished or too cold, and further blows only load the dies and the machine",
                     b.blow,
-                    100.0 * b.efficiency,
-                    b.kinetic_in_j,
-                    b.elastic_j
+                    100.0 * efficiency,
+                    kinetic_in_j,
+                    elastic_j
                 ),
             ))
         } else if c.k_low > 0 && low >= c.k_low {
@@ -125,17 +132,17 @@ impl AlertRules {
                     self.recent.len(),
                     100.0 * c.low_efficiency,
                     b.blow,
-                    100.0 * b.efficiency
+                    100.0 * efficiency
                 ),
             ))
-        } else if b.residual.abs() > c.residual_limit {
-            figures.insert("residual".to_string(), b.residual);
+        } else if residual.abs() > c.residual_limit {
+            figures.insert("residual".to_string(), residual);
             Some((
                 AlertKind::ModelHealth,
                 format!(
                     "blow {}: the energy balance misses by {:.1} % of the energy in (limit {:.0} %): the machine no longer behaves like its identified model",
                     b.blow,
-                    100.0 * b.residual,
+                    100.0 * residual,
                     100.0 * c.residual_limit
                 ),
             ))
@@ -163,20 +170,52 @@ mod tests {
             blow: n,
             t_contact_s: n as f64,
             v_impact_mps: 4.0,
-            kinetic_in_j: 6000.0,
-            plastic_j: 6000.0 * efficiency,
+            kinetic_in_j: Some(6000.0),
+            plastic_j: Some(6000.0 * efficiency),
             friction_j: None,
-            damped_j: 100.0,
-            elastic_j: 6000.0 * (1.0 - efficiency) - 100.0,
-            efficiency,
+            damped_j: Some(100.0),
+            elastic_j: Some(6000.0 * (1.0 - efficiency) - 100.0),
+            efficiency: Some(efficiency),
             final_load_n: 1e6,
             h_end_m: None,
             class: cfg.classify(efficiency),
             alert: None,
             t_end_s: n as f64 + 0.01,
             peak_load_n: 1e6,
-            residual,
+            residual: Some(residual),
+            gap_s: 0.0,
+            h_start_m: None,
+            height_check: None,
         }
+    }
+
+    fn incomplete(n: u32) -> BlowEstimate {
+        BlowEstimate {
+            kinetic_in_j: None,
+            plastic_j: None,
+            damped_j: None,
+            elastic_j: None,
+            efficiency: None,
+            residual: None,
+            class: BlowClass::Incomplete,
+            gap_s: 0.01,
+            ..blow(n, 0.3, 0.0)
+        }
+    }
+
+    /// Issue 15: a blow cut by a lost frame must never set the PLC coil, nor fill the
+    /// low-efficiency window, nor break a run of low blows either.
+    #[test]
+    fn an_incomplete_blow_never_alerts_and_is_not_counted() {
+        let mut r = AlertRules::new(AlertConfig::default());
+        assert_eq!(r.on_blow(&incomplete(1)), None);
+        assert_eq!(r.on_blow(&blow(2, 0.55, 0.0)), None);
+        assert_eq!(r.on_blow(&incomplete(3)), None);
+        assert_eq!(r.on_blow(&blow(4, 0.58, 0.0)), None);
+        assert_eq!(r.on_blow(&incomplete(5)), None);
+        // The third low blow of the window alerts: the incomplete ones were not counted.
+        let a = r.on_blow(&blow(6, 0.57, 0.0)).unwrap();
+        assert!(a.reason.starts_with("3 of the last 3 blows"), "{}", a.reason);
     }
 
     #[test]

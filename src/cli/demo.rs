@@ -114,10 +114,15 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
                 println!("blow  billet  impact m/s  plastic J  efficiency                    class");
             })),
             on_blow: Some(Box::new(move |e| {
-                let bar_len = (e.efficiency.clamp(0.0, 1.0) * 24.0).round() as usize;
-                let bar: String = "#".repeat(bar_len) + &".".repeat(24 - bar_len);
                 let billet = (e.blow as usize - 1) / blows_per_billet + 1;
-                println!("{:>4}  {:>6}  {:>10.2}  {:>9.0}  [{bar}] {:.2}  {}", e.blow, billet, e.v_impact_mps, e.plastic_j, e.efficiency, e.class.as_str());
+                match (e.plastic_j, e.efficiency) {
+                    (Some(plastic_j), Some(efficiency)) => {
+                        let bar_len = (efficiency.clamp(0.0, 1.0) * 24.0).round() as usize;
+                        let bar: String = "#".repeat(bar_len) + &".".repeat(24 - bar_len);
+                        println!("{:>4}  {:>6}  {:>10.2}  {plastic_j:>9.0}  [{bar}] {efficiency:.2}  {}", e.blow, billet, e.v_impact_mps, e.class.as_str());
+                    }
+                    _ => println!("{:>4}  {:>6}  {:>10.2}  {:>9}  {:<31}  {} ({:.1} ms lost)", e.blow, billet, e.v_impact_mps, "-", "(not estimated: samples lost)", e.class.as_str(), e.gap_s * 1e3),
+                }
                 if let Some(a) = &e.alert {
                     println!("      ALERT {}: {}", a.kind.as_str(), a.reason);
                 }

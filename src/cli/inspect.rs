@@ -54,7 +54,7 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
             Payload::Boundary(_) => boundaries += 1,
             Payload::Result(r) => {
                 *classes.entry(r.class.as_str().to_string()).or_default() += 1;
-                efficiency.push(r.efficiency);
+                efficiency.extend(r.efficiency);
             }
             Payload::Alert(a) => *alerts.entry(a.kind.as_str().to_string()).or_default() += 1,
             Payload::Gap(g) => {

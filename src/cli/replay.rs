@@ -98,57 +98,55 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     }
     let mut events = Vec::new();
     let (mut blows, mut rejected) = (0u64, 0u64);
-    let mut handle = |events: &mut Vec<PipelineEvent>,
-                      writer: &mut Option<RecordWriter>,
-                      w: &mut dyn Write|
-     -> anyhow::Result<()> {
-        for ev in events.drain(..) {
-            match ev {
-                PipelineEvent::Blow { cut, estimate } => {
-                    blows += 1;
-                    if let Some(rec) = writer.as_mut() {
-                        let t_ns = (cut.t_end_s * 1e9).round() as i64;
-                        let boundary = BlowBoundary {
-                            blow: estimate.blow,
-                            t_trigger_s: cut.t_trigger_s,
-                            t_contact_s: cut.t_contact_s,
-                            t_end_s: cut.t_end_s,
-                            source: String::new(),
-                        };
-                        rec.write_payload(t_ns, &Payload::Boundary(boundary))?;
-                        rec.write_result(t_ns, &estimate)?;
-                        if let Some(a) = &estimate.alert {
-                            rec.write_alert(t_ns, a)?;
+    let mut handle =
+        |events: &mut Vec<PipelineEvent>, writer: &mut Option<RecordWriter>, w: &mut dyn Write| -> anyhow::Result<()> {
+            for ev in events.drain(..) {
+                match ev {
+                    PipelineEvent::Blow { cut, estimate } => {
+                        blows += 1;
+                        if let Some(rec) = writer.as_mut() {
+                            let t_ns = (cut.t_end_s * 1e9).round() as i64;
+                            let boundary = BlowBoundary {
+                                blow: estimate.blow,
+                                t_trigger_s: cut.t_trigger_s,
+                                t_contact_s: cut.t_contact_s,
+                                t_end_s: cut.t_end_s,
+                                source: String::new(),
+                            };
+                            rec.write_payload(t_ns, &Payload::Boundary(boundary))?;
+                            rec.write_result(t_ns, &estimate)?;
+                            if let Some(a) = &estimate.alert {
+                                rec.write_alert(t_ns, a)?;
+                            }
+                        }
+                        if args.json {
+                            writeln!(w, "{}", serde_json::to_string(&estimate)?)?;
+                        } else {
+                            writeln!(
+                                w,
+                                "{:>4}  {:>12.4}  {:>6.3}  {:>9}  {:>9}  {:>9}  {:>10}  {:<12}  {:>8.0}  {:>8}  {}",
+                                estimate.blow,
+                                estimate.t_contact_s,
+                                estimate.v_impact_mps,
+                                or_dash(estimate.kinetic_in_j, 0),
+                                or_dash(estimate.plastic_j, 0),
+                                or_dash(estimate.elastic_j, 0),
+                                or_dash(estimate.efficiency, 3),
+                                estimate.class.as_str(),
+                                estimate.final_load_n / 1e3,
+                                estimate.h_end_m.map_or("-".to_string(), |h| format!("{:.2}", h * 1e3)),
+                                estimate.alert.as_ref().map_or(String::new(), |a| a.reason.clone()),
+                            )?;
                         }
                     }
-                    if args.json {
-                        writeln!(w, "{}", serde_json::to_string(&estimate)?)?;
-                    } else {
-                        writeln!(
-                            w,
-                            "{:>4}  {:>12.4}  {:>6.3}  {:>9.0}  {:>9.0}  {:>9.0}  {:>10.3}  {:<12}  {:>8.0}  {:>8}  {}",
-                            estimate.blow,
-                            estimate.t_contact_s,
-                            estimate.v_impact_mps,
-                            estimate.kinetic_in_j,
-                            estimate.plastic_j,
-                            estimate.elastic_j,
-                            estimate.efficiency,
-                            estimate.class.as_str(),
-                            estimate.final_load_n / 1e3,
-                            estimate.h_end_m.map_or("-".to_string(), |h| format!("{:.2}", h * 1e3)),
-                            estimate.alert.as_ref().map_or(String::new(), |a| a.reason.clone()),
-                        )?;
+                    PipelineEvent::Rejected { cut, error } => {
+                        rejected += 1;
+                        eprintln!("forgemon: blow at t = {:.6} s not estimated: {error}", cut.t_contact_s);
                     }
                 }
-                PipelineEvent::Rejected { cut, error } => {
-                    rejected += 1;
-                    eprintln!("forgemon: blow at t = {:.6} s not estimated: {error}", cut.t_contact_s);
-                }
             }
-        }
-        Ok(())
-    };
+            Ok(())
+        };
     match input {
         Input::Files(files) => {
             for path in files {
@@ -255,4 +253,9 @@ fn open_input(path: &Path) -> anyhow::Result<(Input, Option<String>)> {
         bail!("{}: no such file or directory", path.display());
     }
     Ok((Input::Files(vec![path.to_path_buf()]), None))
+}
+
+/// A figure of the table, or `-` where the blow has none (an incomplete blow).
+fn or_dash(v: Option<f64>, decimals: usize) -> String {
+    v.map_or("-".to_string(), |v| format!("{v:.decimals$}"))
 }

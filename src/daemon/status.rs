@@ -114,7 +114,7 @@ impl StatusSnapshot {
     pub fn on_blow(&mut self, e: &BlowEstimate) {
         self.blows += 1;
         self.alerts += u64::from(e.alert.is_some());
-        self.last_efficiency = Some(e.efficiency);
+        self.last_efficiency = e.efficiency;
         self.last_class = Some(e.class.as_str().to_string());
         self.last_blow = Some(e.clone());
     }

@@ -16,6 +16,9 @@ pub enum ApproachError {
     NotApproaching { v_mps: f64 },
 }
 
+/// Samples left out of the fit just before contact (the anti-alias filter's smear).
+pub const GUARD_SAMPLES: usize = 2;
+
 /// Fewest samples of a fit.
 pub const MIN_FIT_SAMPLES: usize = 20;
 
@@ -24,6 +27,10 @@ pub const MIN_FIT_SAMPLES: usize = 20;
 pub struct ApproachFit {
     pub v_impact_mps: f64,
     pub acc_mps2: f64,
+    /// The encoder's position of the ram at contact, m, from the fitted parabola: where the
+    /// ram met the billet, to about one sample's travel (the contact instant is known to a
+    /// sample).
+    pub x_contact_m: f64,
 }
 
 /// Fit over `samples[i_contact - n .. i_contact]`, `n` samples of the window `fit_s`
@@ -34,7 +41,7 @@ pub fn fit_impact_speed(
     fit_s: f64,
     period_s: f64,
 ) -> Result<ApproachFit, ApproachError> {
-    let guard = 2usize;
+    let guard = GUARD_SAMPLES;
     let end = i_contact.saturating_sub(guard);
     let want = (fit_s / period_s).round() as usize;
     let start = end.saturating_sub(want);
@@ -60,7 +67,8 @@ pub fn fit_impact_speed(
     if !(v.is_finite() && v > 0.0) {
         return Err(ApproachError::NotApproaching { v_mps: v });
     }
-    Ok(ApproachFit { v_impact_mps: v, acc_mps2: acc })
+    let x_contact_m = (sy - v * st) / nf;
+    Ok(ApproachFit { v_impact_mps: v, acc_mps2: acc, x_contact_m })
 }
 
 #[cfg(test)]
@@ -75,12 +83,20 @@ mod tests {
             .map(|k| {
                 let t = k as f64 * dt;
                 let x = 3.9 * t + 0.5 * 9.81 * t * t;
-                Sample { t_s: 50.0 + t, load_n: 0.0, disp_m: ((0.3 + x) / 10e-6).round() * 10e-6, acc_mps2: 9.81 }
+                Sample {
+                    t_s: 50.0 + t,
+                    load_n: 0.0,
+                    disp_m: ((0.3 + x) / 10e-6).round() * 10e-6,
+                    acc_mps2: 9.81,
+                    filled: false,
+                }
             })
             .collect();
         let fit = fit_impact_speed(&samples, 2000, 0.01, dt).unwrap();
         // 10 µm over a 39 mm window: far below the 1 % of issue #3.
         assert!((fit.v_impact_mps - 3.9).abs() < 1e-3, "{fit:?}");
+        // The contact position: the encoder's 10 µm step, half of it either way.
+        assert!((fit.x_contact_m - 0.3).abs() < 5e-6, "{fit:?}");
     }
 
     #[test]

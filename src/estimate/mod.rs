@@ -7,7 +7,7 @@ pub mod approach;
 pub mod observer;
 pub mod result;
 
-pub use result::{BlowClass, BlowEstimate};
+pub use result::{BlowClass, BlowEstimate, HeightCheck};
 
 use crate::physics::billet::{BilletLaw, LoadEffects};
 use crate::physics::machine::{Machine, MachineKind};
@@ -29,11 +29,18 @@ pub struct EstimatorConfig {
     pub intermediate_min: f64,
     /// Length of the approach window of the impact-speed fit, s.
     pub fit_s: f64,
+    /// The ram encoder's resolution, m (CONTRACTS.md §1: "quantised, for example 10 µm").
+    pub encoder_resolution_m: f64,
+    /// The resolution of the process sheet's measured heights, m: a digital caliper reads
+    /// 0.01 mm and is good to ±0.02 mm over 100 mm (DIN 862).
+    pub caliper_resolution_m: f64,
 }
 
 impl EstimatorConfig {
     pub const DEFAULT_SOFT_MIN: f64 = 0.75;
     pub const DEFAULT_INTERMEDIATE_MIN: f64 = 0.50;
+    pub const DEFAULT_ENCODER_RESOLUTION_M: f64 = 10e-6;
+    pub const DEFAULT_CALIPER_RESOLUTION_M: f64 = 0.02e-3;
 
     pub fn for_kind(kind: MachineKind) -> Self {
         EstimatorConfig {
@@ -44,6 +51,8 @@ impl EstimatorConfig {
                 MachineKind::Hammer => 0.010,
                 MachineKind::ScrewPress => 0.050,
             },
+            encoder_resolution_m: Self::DEFAULT_ENCODER_RESOLUTION_M,
+            caliper_resolution_m: Self::DEFAULT_CALIPER_RESOLUTION_M,
         }
     }
 
@@ -75,15 +84,20 @@ pub struct Estimator {
     machine: Machine,
     process: Option<Process>,
     cfg: EstimatorConfig,
-    /// Billet height before the next blow.
+    /// Billet height before the next blow, from the model observer's compression.
     h_m: Option<f64>,
+    /// The last blow's encoder contact position and start height, m: the link of the
+    /// encoder's height chain.
+    chain: Option<(f64, f64)>,
     blows: u32,
+    /// Blows on the present billet, this one included once estimated.
+    billet_blows: usize,
 }
 
 impl Estimator {
     pub fn new(machine: Machine, process: Option<Process>, cfg: EstimatorConfig) -> Self {
         let h_m = process.as_ref().map(|p| p.billet.height_m);
-        Estimator { machine, process, cfg, h_m, blows: 0 }
+        Estimator { machine, process, cfg, h_m, chain: None, blows: 0, billet_blows: 0 }
     }
 
     pub fn config(&self) -> &EstimatorConfig {
@@ -98,18 +112,59 @@ impl Estimator {
     /// A new billet from the process sheet: its height starts again from the sheet's.
     pub fn new_billet(&mut self) {
         self.h_m = self.process.as_ref().map(|p| p.billet.height_m);
+        self.chain = None;
+        self.billet_blows = 0;
+    }
+
+    /// The longest hole bridged inside a blow, s: a tenth of the machine's second-mode
+    /// period (49 µs on the LG1000's 2049 Hz, 0.36 ms on the SPR 400's 275 Hz). Linear
+    /// interpolation across it misses at most 1 − cos(π/10) ≈ 5 % of the ring's amplitude
+    /// for that instant, a negligible share of the blow's work.
+    pub fn max_bridged_s(&self) -> f64 {
+        BRIDGE_FRACTION_OF_MODE_PERIOD / self.machine.second_mode_hz()
     }
 
     /// Estimate the next blow.
     pub fn estimate(&mut self, blow: &Blow) -> Result<BlowEstimate, EstimateError> {
         self.blows += 1;
+        self.billet_blows += 1;
         let n = self.blows;
         let fit = fit_impact_speed(&blow.samples, blow.i_contact, self.cfg.fit_s, blow.period_s)
             .map_err(|source| EstimateError::Approach { blow: n, source })?;
         let v0 = fit.v_impact_mps;
+        let gap_s = self.gap_s(blow);
+        let (h_start_m, height_check) = self.start_height(fit.x_contact_m, v0 * blow.period_s);
+        let mut e = BlowEstimate {
+            blow: n,
+            t_contact_s: blow.samples[blow.i_contact].t_s,
+            v_impact_mps: v0,
+            kinetic_in_j: None,
+            plastic_j: None,
+            friction_j: None,
+            damped_j: None,
+            elastic_j: None,
+            efficiency: None,
+            final_load_n: 0.0,
+            h_end_m: None,
+            class: BlowClass::Incomplete,
+            alert: None,
+            t_end_s: blow.samples[blow.i_end].t_s,
+            peak_load_n: 0.0,
+            residual: None,
+            gap_s,
+            h_start_m,
+            height_check,
+        };
+        self.chain = h_start_m.map(|h| (fit.x_contact_m, h));
+        if blow.lost_s > 0.0 || gap_s > self.max_bridged_s() {
+            // Cut short or holed beyond bridging: nothing after the hole is known, not even
+            // the billet's height (the encoder chain takes it up again at the next blow).
+            self.h_m = None;
+            return Ok(e);
+        }
         let o = observer::observe(&self.machine, blow, v0);
         let max_comp = o.compression_m.iter().copied().fold(0.0, f64::max);
-        let (plastic_j, friction_j, h_end_m) = match (&self.process, self.h_m) {
+        let (plastic_j, friction_j, h_end_m) = match (&self.process, h_start_m) {
             (Some(p), Some(h0)) => {
                 let law =
                     BilletLaw::new(p.billet.clone(), p.material.clone(), p.friction, LoadEffects::NEUTRAL, n as usize);
@@ -127,6 +182,7 @@ impl Estimator {
                 if h_end < MIN_TRACKED_HEIGHT_FRACTION * p.billet.height_m {
                     // Lost track of the billet: report the work unsplit and no height.
                     self.h_m = None;
+                    self.chain = None;
                     (o.deform_j, None, None)
                 } else {
                     self.h_m = Some(h_end);
@@ -135,29 +191,62 @@ impl Estimator {
             }
             _ => (o.deform_j, None, None),
         };
-        let efficiency = plastic_j / o.kinetic_in_j;
-        let residual = (o.kinetic_in_j - o.deform_j - o.damped_j - o.elastic_j) / o.kinetic_in_j;
-        let t_contact_s = blow.samples[blow.i_contact].t_s;
-        Ok(BlowEstimate {
-            blow: n,
-            t_contact_s,
-            v_impact_mps: v0,
-            kinetic_in_j: o.kinetic_in_j,
-            plastic_j,
-            friction_j,
-            damped_j: o.damped_j,
-            elastic_j: o.elastic_j,
-            efficiency,
-            final_load_n: o.final_load_n,
-            h_end_m,
-            class: self.cfg.classify(efficiency),
-            alert: None,
-            t_end_s: blow.samples[blow.i_end].t_s,
-            peak_load_n: o.peak_load_n,
-            residual,
-        })
+        // Noise can make a soft blow's work a hair above the energy in, or a bounce's below
+        // zero; a fraction outside [0, 1] is never reported (CONTRACTS.md §5).
+        let efficiency = (plastic_j / o.kinetic_in_j).clamp(0.0, 1.0);
+        e.kinetic_in_j = Some(o.kinetic_in_j);
+        e.plastic_j = Some(plastic_j);
+        e.friction_j = friction_j;
+        e.damped_j = Some(o.damped_j);
+        e.elastic_j = Some(o.elastic_j);
+        e.efficiency = Some(efficiency);
+        e.final_load_n = o.final_load_n;
+        e.h_end_m = h_end_m;
+        e.class = self.cfg.classify(efficiency);
+        e.peak_load_n = o.peak_load_n;
+        e.residual = Some((o.kinetic_in_j - o.deform_j - o.damped_j - o.elastic_j) / o.kinetic_in_j);
+        Ok(e)
+    }
+
+    /// Time lost inside the blow: interpolated samples from the start of the approach fit
+    /// to the blow's end, and any time cut off by a break in the stream.
+    fn gap_s(&self, blow: &Blow) -> f64 {
+        let fit_n = (self.cfg.fit_s / blow.period_s).ceil() as usize + approach::GUARD_SAMPLES;
+        let from = blow.i_contact.saturating_sub(fit_n);
+        blow.filled_in(from..blow.i_end + 1) as f64 * blow.period_s + blow.lost_s
+    }
+
+    /// The billet's height before this blow: the one tracked through the last blow, or, when
+    /// that was lost (an incomplete blow), the encoder's chain from the last contact: the ram
+    /// meets the billet lower by exactly the height the billet lost. The chain is also
+    /// checked against the sheet's measured height after the blow before.
+    fn start_height(&self, x_contact_m: f64, sample_travel_m: f64) -> (Option<f64>, Option<HeightCheck>) {
+        let tolerance_m = self.cfg.encoder_resolution_m + self.cfg.caliper_resolution_m + sample_travel_m;
+        // A billet does not grow: a contact higher than the last one (beyond the tolerance)
+        // breaks the chain (another billet, or the part turned over).
+        let chained = self
+            .chain
+            .map(|(x_prev, h_prev)| (h_prev - (x_contact_m - x_prev), h_prev))
+            .filter(|(h, h_prev)| *h <= h_prev + tolerance_m && *h > 0.0)
+            .map(|(h, _)| h);
+        let sheet = self
+            .process
+            .as_ref()
+            .and_then(|p| self.billet_blows.checked_sub(2).and_then(|i| p.measured_final_heights_m.get(i).copied()));
+        let check = chained.zip(sheet).map(|(encoder_m, sheet_m)| HeightCheck {
+            sheet_m,
+            encoder_m,
+            tolerance_m,
+            agree: (sheet_m - encoder_m).abs() <= tolerance_m,
+        });
+        let h = if self.process.is_some() { self.h_m.or(chained) } else { None };
+        (h, check)
     }
 }
+
+/// Fraction of the second-mode period that a hole inside a blow may last and still be
+/// bridged by interpolation (`Estimator::max_bridged_s`).
+pub const BRIDGE_FRACTION_OF_MODE_PERIOD: f64 = 0.1;
 
 #[cfg(test)]
 mod tests {

@@ -12,6 +12,9 @@ pub enum BlowClass {
     Soft,
     Intermediate,
     Hard,
+    /// Samples were lost inside the blow and it could not be estimated through the hole
+    /// (CONTRACTS.md §5): no energies, no efficiency, never an alert.
+    Incomplete,
 }
 
 impl BlowClass {
@@ -20,8 +23,23 @@ impl BlowClass {
             BlowClass::Soft => "soft",
             BlowClass::Intermediate => "intermediate",
             BlowClass::Hard => "hard",
+            BlowClass::Incomplete => "incomplete",
         }
     }
+}
+
+/// The billet's start height from the encoder against the process sheet's measured height
+/// after the blow before (issue 15: measured heights are measurements, cross-checked).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct HeightCheck {
+    /// The sheet's measured height after the previous blow, m.
+    pub sheet_m: f64,
+    /// The start height chained from the encoder's contact positions, m.
+    pub encoder_m: f64,
+    /// The encoder's and caliper's resolutions and one sample's travel at impact, m.
+    pub tolerance_m: f64,
+    /// `|sheet_m - encoder_m| <= tolerance_m`.
+    pub agree: bool,
 }
 
 /// One blow as measured and estimated. Field names and units are those of CONTRACTS.md §5;
@@ -32,19 +50,21 @@ pub struct BlowEstimate {
     /// Device time of first contact, s (the recording's own time origin).
     pub t_contact_s: f64,
     pub v_impact_mps: f64,
+    /// The energies and the efficiency are `None` on an incomplete blow (CONTRACTS.md §5).
     #[serde(rename = "kinetic_in_J")]
-    pub kinetic_in_j: f64,
+    pub kinetic_in_j: Option<f64>,
     /// Plastic work; without a process sheet, plastic plus friction work.
     #[serde(rename = "plastic_J")]
-    pub plastic_j: f64,
+    pub plastic_j: Option<f64>,
     /// `None` without a process sheet.
     #[serde(rename = "friction_J")]
     pub friction_j: Option<f64>,
     #[serde(rename = "damped_J")]
-    pub damped_j: f64,
+    pub damped_j: Option<f64>,
     #[serde(rename = "elastic_J")]
-    pub elastic_j: f64,
-    pub efficiency: f64,
+    pub elastic_j: Option<f64>,
+    /// In [0, 1].
+    pub efficiency: Option<f64>,
     #[serde(rename = "final_load_N")]
     pub final_load_n: f64,
     /// Billet height after the blow, m, tracked from the process sheet; `None` without one.
@@ -57,5 +77,19 @@ pub struct BlowEstimate {
     #[serde(rename = "peak_load_N")]
     pub peak_load_n: f64,
     /// Energy-balance residual `(in - out) / in`: the model-health figure (DESIGN.md §2.4).
-    pub residual: f64,
+    pub residual: Option<f64>,
+    /// Time lost inside the blow, s: samples interpolated across holes between the start of
+    /// the approach fit and the blow's end, plus any time a break in the stream cut off.
+    pub gap_s: f64,
+    /// Billet height before the blow, m, when known.
+    pub h_start_m: Option<f64>,
+    /// The encoder's start height against the sheet's measurement, where both exist.
+    pub height_check: Option<HeightCheck>,
+}
+
+impl BlowEstimate {
+    /// Whether the blow was estimated whole (not `incomplete`).
+    pub fn is_complete(&self) -> bool {
+        self.class != BlowClass::Incomplete
+    }
 }

@@ -12,7 +12,7 @@
 use prost::Message;
 
 use crate::alert::{Alert, AlertKind};
-use crate::estimate::{BlowClass, BlowEstimate};
+use crate::estimate::{BlowClass, BlowEstimate, HeightCheck};
 use crate::signal::sample::{Role, SampleBatch};
 
 use super::error::DecodeError;
@@ -244,6 +244,14 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
         t_end_s: r.t_end_s,
         peak_load_n: r.peak_load_n,
         residual: r.residual,
+        gap_s: r.gap_s,
+        h_start_m: r.h_start_m,
+        height_check: r.height_check.map(|h| pb::HeightCheck {
+            sheet_m: h.sheet_m,
+            encoder_m: h.encoder_m,
+            tolerance_m: h.tolerance_m,
+            agree: h.agree,
+        }),
     }
 }
 
@@ -252,25 +260,37 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
         "soft" => BlowClass::Soft,
         "intermediate" => BlowClass::Intermediate,
         "hard" => BlowClass::Hard,
+        "incomplete" => BlowClass::Incomplete,
         _ => return Err(DecodeError::UnknownClass { class: r.class }),
     };
+    // A complete blow always has its energies; a writer from before they were optional left
+    // a 0 out.
+    let energy = |v: Option<f64>| if class == BlowClass::Incomplete { v } else { Some(v.unwrap_or(0.0)) };
     Ok(BlowEstimate {
         blow: r.blow,
         t_contact_s: r.t_contact_s,
         v_impact_mps: r.v_impact_mps,
-        kinetic_in_j: r.kinetic_in_j,
-        plastic_j: r.plastic_j,
+        kinetic_in_j: energy(r.kinetic_in_j),
+        plastic_j: energy(r.plastic_j),
         friction_j: r.friction_j,
-        damped_j: r.damped_j,
-        elastic_j: r.elastic_j,
-        efficiency: r.efficiency,
+        damped_j: energy(r.damped_j),
+        elastic_j: energy(r.elastic_j),
+        efficiency: energy(r.efficiency),
         final_load_n: r.final_load_n,
         h_end_m: r.h_end_m,
         class,
         alert: r.alert.map(alert_from_pb).transpose()?,
         t_end_s: r.t_end_s,
         peak_load_n: r.peak_load_n,
-        residual: r.residual,
+        residual: energy(r.residual),
+        gap_s: r.gap_s,
+        h_start_m: r.h_start_m,
+        height_check: r.height_check.map(|h| HeightCheck {
+            sheet_m: h.sheet_m,
+            encoder_m: h.encoder_m,
+            tolerance_m: h.tolerance_m,
+            agree: h.agree,
+        }),
     })
 }
 
@@ -471,19 +491,27 @@ mod tests {
             blow: 3,
             t_contact_s: 81.2031,
             v_impact_mps: 5.21,
-            kinetic_in_j: 14931.0,
-            plastic_j: 6020.0,
+            kinetic_in_j: Some(14931.0),
+            plastic_j: Some(6020.0),
             friction_j: with_optional.then_some(6900.0),
-            damped_j: 520.0,
-            elastic_j: 1490.0,
-            efficiency: 0.403,
+            damped_j: Some(520.0),
+            elastic_j: Some(1490.0),
+            efficiency: Some(0.403),
             final_load_n: 2.1e6,
             h_end_m: with_optional.then_some(0.0124),
             class: BlowClass::Intermediate,
             alert: with_optional.then(|| alert(AlertKind::ElasticBlow)),
             t_end_s: 81.2152,
             peak_load_n: 2.6e6,
-            residual: -0.012,
+            residual: Some(-0.012),
+            gap_s: if with_optional { 2e-5 } else { 0.0 },
+            h_start_m: with_optional.then_some(0.0151),
+            height_check: with_optional.then_some(HeightCheck {
+                sheet_m: 0.0150,
+                encoder_m: 0.0151,
+                tolerance_m: 8e-5,
+                agree: false,
+            }),
         }
     }
 
@@ -511,6 +539,17 @@ mod tests {
             Payload::Result(Box::new(estimate(false))),
             Payload::Result(Box::new(BlowEstimate { class: BlowClass::Soft, ..estimate(false) })),
             Payload::Result(Box::new(BlowEstimate { class: BlowClass::Hard, ..estimate(false) })),
+            Payload::Result(Box::new(BlowEstimate {
+                class: BlowClass::Incomplete,
+                kinetic_in_j: None,
+                plastic_j: None,
+                damped_j: None,
+                elastic_j: None,
+                efficiency: None,
+                residual: None,
+                gap_s: 0.01,
+                ..estimate(false)
+            })),
             Payload::Alert(alert(AlertKind::ElasticBlow)),
             Payload::Alert(alert(AlertKind::ModelHealth)),
             Payload::Gap(Gap { source: "daq0".into(), t_s: 12.5, samples_lost: 400, reason: "sequence_jump".into() }),

@@ -75,6 +75,10 @@ pub struct Sample {
     pub load_n: f64,
     pub disp_m: f64,
     pub acc_mps2: f64,
+    /// Not measured: interpolated across a hole in the stream (`Segmenter::hole`), so that
+    /// a blow keeps one uniform time grid. The estimator decides whether a blow with such
+    /// samples can still be trusted.
+    pub filled: bool,
 }
 
 /// A segmented blow: the samples from the start of the pre-trigger buffer to the end.
@@ -90,6 +94,17 @@ pub struct Blow {
     /// Load zero from the pre-trigger window, N.
     pub load_zero_n: f64,
     pub period_s: f64,
+    /// Time lost inside the blow that no sample stands for, s: the stream broke (a hole
+    /// longer than a blow, a link pulled, the end of a file) while the tools were still
+    /// loaded. A blow with any is cut short and cannot be estimated whole.
+    pub lost_s: f64,
+}
+
+impl Blow {
+    /// Samples interpolated across holes within `range` (indices into `samples`).
+    pub fn filled_in(&self, range: std::ops::Range<usize>) -> usize {
+        self.samples.get(range).map_or(0, |s| s.iter().filter(|s| s.filled).count())
+    }
 }
 
 /// Counters of what the segmenter saw.
@@ -104,6 +119,10 @@ pub struct SegmentStats {
     pub cut_at_max_length: u64,
     /// Batches that lacked a role, or held a non-finite value.
     pub batches_dropped: u64,
+    /// Samples interpolated across holes no longer than a blow.
+    pub samples_filled: u64,
+    /// Blows cut short by a break in the stream while the tools were loaded.
+    pub blows_cut_short: u64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -132,6 +151,10 @@ pub struct Segmenter {
     blow: Vec<Sample>,
     period_s: f64,
     stats: SegmentStats,
+    /// The last sample stepped, the left end of a hole's interpolation.
+    last: Option<Sample>,
+    /// Samples missing before the next one pushed (`hole`).
+    pending_fill: usize,
 }
 
 impl Segmenter {
@@ -144,6 +167,24 @@ impl Segmenter {
             blow: Vec::new(),
             period_s: 0.0,
             stats: SegmentStats::default(),
+            last: None,
+            pending_fill: 0,
+        }
+    }
+
+    /// `missing` samples were lost before the next batch (a lost frame, a dropped line, a
+    /// device-time slip). A hole no longer than the longest blow is bridged: the next push
+    /// first steps `missing` samples interpolated linearly between the samples on either
+    /// side, flagged `filled`, so a blow in progress stays one blow on one time grid. A
+    /// longer hole breaks the stream: a blow in progress is closed as it stands, and if the
+    /// tools were still loaded it is marked cut short by the time it lost (at most the rest
+    /// of the longest blow).
+    pub fn hole(&mut self, missing: usize, out: &mut Vec<Blow>) {
+        let hole_s = missing as f64 * self.period_s;
+        if self.last.is_some() && self.period_s > 0.0 && hole_s <= self.cfg.max_blow_s {
+            self.pending_fill += missing;
+        } else {
+            self.finish_losing(hole_s, out);
         }
     }
 
@@ -183,8 +224,37 @@ impl Segmenter {
         }
         let nc = batch.roles.len();
         for (i, chunk) in batch.values.chunks_exact(nc).enumerate() {
-            let s = Sample { t_s: batch.time_s(i), load_n: chunk[il], disp_m: chunk[id], acc_mps2: chunk[ia] };
+            let s = Sample {
+                t_s: batch.time_s(i),
+                load_n: chunk[il],
+                disp_m: chunk[id],
+                acc_mps2: chunk[ia],
+                filled: false,
+            };
+            self.fill_to(&s, out);
             self.step(s, out);
+        }
+    }
+
+    /// Step the samples of a pending hole, interpolated from the last sample to `next`.
+    fn fill_to(&mut self, next: &Sample, out: &mut Vec<Blow>) {
+        let missing = std::mem::take(&mut self.pending_fill);
+        let Some(a) = self.last.filter(|_| missing > 0) else { return };
+        let n = (missing + 1) as f64;
+        let lerp = |x: f64, y: f64, f: f64| x + (y - x) * f;
+        for j in 1..=missing {
+            let f = j as f64 / n;
+            self.stats.samples_filled += 1;
+            self.step(
+                Sample {
+                    t_s: lerp(a.t_s, next.t_s, f),
+                    load_n: lerp(a.load_n, next.load_n, f),
+                    disp_m: lerp(a.disp_m, next.disp_m, f),
+                    acc_mps2: lerp(a.acc_mps2, next.acc_mps2, f),
+                    filled: true,
+                },
+                out,
+            );
         }
     }
 
@@ -200,21 +270,40 @@ impl Segmenter {
         out
     }
 
-    /// End of the stream: a blow in progress is closed as it stands.
+    /// End of the stream: a blow in progress is closed as it stands. Where the tools were
+    /// still loaded at the last sample (the load above the end level), the blow is cut short
+    /// by an unknown time: it is marked with the time left to the longest blow.
     pub fn finish(&mut self, out: &mut Vec<Blow>) {
-        if let State::InBlow { i_trigger, zero, contact, .. } = self.state {
+        self.finish_losing(f64::INFINITY, out);
+    }
+
+    /// End of the stream after a hole of `hole_s`.
+    fn finish_losing(&mut self, hole_s: f64, out: &mut Vec<Blow>) {
+        if let State::InBlow { i_trigger, zero, contact, quiet } = self.state {
             let n = self.blow.len();
-            self.close(i_trigger, zero, contact, n.saturating_sub(1), out);
+            let loaded = contact.is_some() && quiet == 0;
+            let lost_s = if loaded {
+                self.stats.blows_cut_short += 1;
+                let left_s = self.cfg.max_blow_s - (self.blow[n - 1].t_s - self.blow[i_trigger].t_s);
+                hole_s.min(left_s).max(self.period_s)
+            } else {
+                0.0
+            };
+            self.close_with(i_trigger, zero, contact, n.saturating_sub(1), lost_s, out);
         }
         self.state = State::Armed;
         self.ring.clear();
+        self.last = None;
+        self.pending_fill = 0;
     }
 
     fn step(&mut self, s: Sample, out: &mut Vec<Blow>) {
         self.stats.samples += 1;
+        self.last = Some(s);
         match self.state {
             State::Armed => {
-                if s.acc_mps2 < -self.cfg.trigger_acc_mps2 {
+                // A sample interpolated across a hole never arms a trigger by itself.
+                if s.acc_mps2 < -self.cfg.trigger_acc_mps2 && !s.filled {
                     self.stats.triggers += 1;
                     self.blow.clear();
                     self.blow.extend(self.ring.drain(..));
@@ -300,8 +389,21 @@ impl Segmenter {
     }
 
     fn close(&mut self, i_trigger: usize, load_zero_n: f64, contact: Option<usize>, i_end: usize, out: &mut Vec<Blow>) {
+        self.close_with(i_trigger, load_zero_n, contact, i_end, 0.0, out);
+    }
+
+    fn close_with(
+        &mut self,
+        i_trigger: usize,
+        load_zero_n: f64,
+        contact: Option<usize>,
+        i_end: usize,
+        lost_s: f64,
+        out: &mut Vec<Blow>,
+    ) {
         match contact {
-            Some(i_contact) if i_end > i_contact => {
+            // A blow cut short right at its contact is still a blow (an incomplete one).
+            Some(i_contact) if i_end > i_contact || lost_s > 0.0 => {
                 self.stats.blows += 1;
                 out.push(Blow {
                     samples: std::mem::take(&mut self.blow),
@@ -310,6 +412,7 @@ impl Segmenter {
                     i_end,
                     load_zero_n,
                     period_s: self.period_s,
+                    lost_s,
                 });
             }
             _ => {

@@ -60,15 +60,19 @@ def describe(schema_name, msg):
             "blow": msg.blow,
             "t_contact_s": msg.t_contact_s,
             "v_impact_mps": msg.v_impact_mps,
-            "kinetic_in_J": msg.kinetic_in_J,
-            "plastic_J": msg.plastic_J,
+            "kinetic_in_J": optional(msg, "kinetic_in_J"),
+            "plastic_J": optional(msg, "plastic_J"),
             "friction_J": optional(msg, "friction_J"),
-            "efficiency": msg.efficiency,
+            "damped_J": optional(msg, "damped_J"),
+            "elastic_J": optional(msg, "elastic_J"),
+            "efficiency": optional(msg, "efficiency"),
             "final_load_N": msg.final_load_N,
             "h_end_m": optional(msg, "h_end_m"),
             "class": getattr(msg, "class"),
             "alert": alert_dict(msg.alert) if msg.HasField("alert") else None,
-            "residual": msg.residual,
+            "residual": optional(msg, "residual"),
+            "gap_s": msg.gap_s,
+            "h_start_m": optional(msg, "h_start_m"),
         }
     if schema_name == "forgemon.Alert":
         return alert_dict(msg)
