@@ -97,6 +97,7 @@ fn roles_from_two_daqs_on_their_own_clocks_are_merged() {
         machine_text: MACHINE.to_string(),
         process: Some(parse_process("p", STEEL).unwrap()),
         process_text: Some(STEEL.to_string()),
+        backpressure: forgemon::acquire::Backpressure::DropOldest,
     };
     let live = Arc::new(Mutex::new(Vec::<BlowEstimate>::new()));
     let seen = live.clone();

@@ -72,6 +72,32 @@ impl Counters {
     }
 }
 
+/// What a source does when the service cannot keep up (issue 15, DESIGN.md §4–§5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Backpressure {
+    /// A live device cannot wait: the source never blocks, and the service's queue drops
+    /// its oldest events when full, counting them (`daemon::LIVE_QUEUE_EVENTS`).
+    #[default]
+    DropOldest,
+    /// The source can wait (a simulated device run `--fast`, a file): it reads its input
+    /// only while the channel has room for what one read can produce, so nothing is lost.
+    Wait,
+}
+
+/// Free channel slots a waiting source wants before it reads more: one read of
+/// `READ_BUF_BYTES` completes at most a few frames, so this is ample.
+pub const WAIT_HEADROOM_EVENTS: usize = 64;
+
+/// Under `Backpressure::Wait`, return once the channel has room for a read's events (or
+/// the receiver is gone); under `DropOldest`, at once.
+pub async fn room(tx: &tokio::sync::mpsc::Sender<SourceEvent>, policy: Backpressure) {
+    if policy == Backpressure::Wait {
+        // The permits are released at once: only the room is wanted, the events are sent
+        // by `offer` as they are decoded.
+        let _ = tx.reserve_many(WAIT_HEADROOM_EVENTS.min(tx.max_capacity())).await;
+    }
+}
+
 /// Send without waiting: a full channel drops the event and counts it (DESIGN.md §4:
 /// backpressure never stalls acquisition). Returns false once the receiver is gone.
 pub fn offer(tx: &tokio::sync::mpsc::Sender<SourceEvent>, event: SourceEvent, counters: &mut Counters) -> bool {

@@ -12,8 +12,8 @@ use anyhow::Context;
 use clap::Args;
 use tokio::sync::{mpsc, watch};
 
-use crate::acquire::ChannelSpec;
 use crate::acquire::serial::driver::{SerialConfig, SerialFormat, run_on_stream, system_clock_ns};
+use crate::acquire::{Backpressure, ChannelSpec};
 use crate::config::service::ServiceConfig;
 use crate::config::{parse_machine, parse_process};
 use crate::daemon::{Control, Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
@@ -85,7 +85,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         machine_text: MACHINE.to_string(),
         process: Some(parse_process("steel-16NiCrMo13.process.toml", STEEL)?),
         process_text: Some(STEEL.to_string()),
+        // Run fast, the simulated device waits for the service; in real time it cannot.
+        backpressure: if args.fast { Backpressure::Wait } else { Backpressure::DropOldest },
     };
+    let parts_backpressure = parts.backpressure;
     super::run::init_logging("error");
     let rt = tokio::runtime::Runtime::new()?;
     let blows_per_billet = 8;
@@ -104,7 +107,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
             })
             .await
         });
-        let cfg = SerialConfig::new("daq", "pty", 0, SerialFormat::Binary, demo_channels());
+        let cfg = SerialConfig {
+            backpressure: parts_backpressure,
+            ..SerialConfig::new("daq", "pty", 0, SerialFormat::Binary, demo_channels())
+        };
         tokio::spawn(run_on_stream(cfg, slave, system_clock_ns, tx, shutdown_rx));
         let dir = args.dir.clone();
         let hooks = Hooks {
@@ -133,11 +139,13 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         let summary = serve(parts, rx, shutdown_tx, stop_rx, hooks, Some((control_tx, control_rx))).await?;
         let stats = device.await.context("the simulated device task")??;
         println!(
-            "forgemon demo: {} blows, {} alerts, {} samples ({} frames from the device); recorded {}",
+            "forgemon demo: {} blows ({} incomplete), {} alerts, {} samples ({} frames from the device, {} events dropped); recorded {}",
             summary.blows,
+            summary.incomplete_blows,
             summary.alerts,
             summary.samples,
             stats.frames,
+            summary.dropped_events,
             summary.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
         );
         Ok::<_, anyhow::Error>(())

@@ -70,7 +70,16 @@ pub fn load_parts(config_path: &Path) -> anyhow::Result<ServiceParts> {
         roles.push((s.name(), r));
     }
     check_roles(&config_path.display().to_string(), &roles)?;
-    Ok(ServiceParts { config, config_path: config_path.to_path_buf(), machine, machine_text, process, process_text })
+    Ok(ServiceParts {
+        config,
+        config_path: config_path.to_path_buf(),
+        machine,
+        machine_text,
+        process,
+        process_text,
+        // A real DAQ cannot wait for the service.
+        backpressure: crate::acquire::Backpressure::DropOldest,
+    })
 }
 
 /// Every blow needs the load, the ram position and the acceleration: from one source, or
@@ -147,7 +156,14 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         let _hold_open = tx;
         let (_stop_tx, stop_rx) = watch::channel(false);
         let summary = serve(parts, rx, shutdown_tx, stop_rx, Hooks::default(), None).await?;
-        tracing::info!(samples = summary.samples, blows = summary.blows, alerts = summary.alerts, "stopped");
+        tracing::info!(
+            samples = summary.samples,
+            blows = summary.blows,
+            incomplete = summary.incomplete_blows,
+            alerts = summary.alerts,
+            dropped_events = summary.dropped_events,
+            "stopped"
+        );
         Ok::<_, anyhow::Error>(())
     })?;
     Ok(ExitCode::SUCCESS)

@@ -7,6 +7,7 @@
 //! The sources are spawned by the caller and speak `acquire::SourceEvent` on one channel,
 //! so the service neither knows nor cares which transport (or simulated device) feeds it.
 
+pub mod queue;
 pub mod sinks;
 pub mod status;
 
@@ -27,8 +28,9 @@ use crate::record::{BlowBoundary, Payload, RecordOptions, RecordWriter, Rotation
 use crate::signal::merge::Merger;
 use status::{SharedStatus, StatusSnapshot};
 
-/// Capacity of the channel from the sources to the service; a full channel drops events
-/// at the source and counts them (acquisition never waits).
+/// Capacity of the channel from the sources to the service. Live, a relay empties it into
+/// the drop-oldest queue (`queue::LIVE_QUEUE_EVENTS`) as fast as it fills; a source that can
+/// wait waits for room in it.
 pub const SOURCE_CHANNEL_CAPACITY: usize = 1024;
 
 /// Everything the service needs, read and validated.
@@ -39,6 +41,8 @@ pub struct ServiceParts {
     pub machine_text: String,
     pub process: Option<Process>,
     pub process_text: Option<String>,
+    /// Whether the sources can wait for the service (a simulated device run fast) or not.
+    pub backpressure: crate::acquire::Backpressure,
 }
 
 /// Commands to the running service (from the status endpoint or a front end).
@@ -81,6 +85,10 @@ pub struct Summary {
     pub samples: u64,
     pub blows: u64,
     pub alerts: u64,
+    /// Events the live queue dropped because the pipeline fell behind.
+    pub dropped_events: u64,
+    /// Blows reported incomplete (samples lost inside them).
+    pub incomplete_blows: u64,
     pub files: Vec<PathBuf>,
 }
 
@@ -93,7 +101,7 @@ pub fn host_now_ns() -> i64 {
 /// has hung up. `shutdown` tells the sources to stop.
 pub async fn serve(
     parts: ServiceParts,
-    mut rx: mpsc::Receiver<SourceEvent>,
+    rx: mpsc::Receiver<SourceEvent>,
     shutdown: watch::Sender<bool>,
     mut stop: watch::Receiver<bool>,
     mut hooks: Hooks,
@@ -143,13 +151,33 @@ pub async fn serve(
     // systemd's watchdog wants a ping at least every WATCHDOG_USEC; ping at half of it.
     let watchdog = sd_notify::watchdog_enabled();
     let mut tick = tokio::time::interval(watchdog.map_or(Duration::from_secs(1), |d| d / 2));
+    let mut rx = queue::SourceQueue::new(rx, parts.backpressure);
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     tracing::info!(listen = %cfg.http_listen, dir = %cfg.recording_dir.display(), "forgemon service ready");
 
     loop {
         tokio::select! {
             ev = rx.recv() => {
-                let Some(ev) = ev else { break };
+                let ev = match ev {
+                    None => break,
+                    Some(queue::Received::Event(ev)) => ev,
+                    Some(queue::Received::Dropped(n)) => {
+                        // The pipeline fell behind a live source: the oldest events went.
+                        // Their samples' hole shows in the device times, so a blow they
+                        // fell in is reported incomplete.
+                        summary.dropped_events += n;
+                        tracing::warn!(events = n, "the pipeline fell behind: oldest events dropped");
+                        let gap = crate::record::Gap {
+                            source: "service".into(),
+                            t_s: 0.0,
+                            samples_lost: 0,
+                            reason: format!("backpressure: {n} events dropped"),
+                        };
+                        let _ = writer.write_gap(host_now_ns(), &gap);
+                        status.lock().map(|mut s| s.dropped_events += n).ok();
+                        continue;
+                    }
+                };
                 match ev {
                     SourceEvent::Batch(batch) => {
                         if let Err(e) = writer.write_samples(&batch) {
@@ -239,6 +267,7 @@ fn on_event(
     match e {
         PipelineEvent::Blow { cut, estimate } => {
             summary.blows += 1;
+            summary.incomplete_blows += u64::from(!estimate.is_complete());
             let boundary = BlowBoundary {
                 blow: estimate.blow,
                 t_trigger_s: cut.t_trigger_s,

@@ -50,6 +50,10 @@ pub struct StatusSnapshot {
     pub samples: u64,
     pub blows: u64,
     pub alerts: u64,
+    /// Blows reported incomplete (samples lost inside them).
+    pub incomplete_blows: u64,
+    /// Events the live queue dropped because the pipeline fell behind.
+    pub dropped_events: u64,
     pub last_efficiency: Option<f64>,
     pub last_class: Option<String>,
     pub last_blow: Option<BlowEstimate>,
@@ -73,6 +77,8 @@ impl StatusSnapshot {
             samples: 0,
             blows: 0,
             alerts: 0,
+            incomplete_blows: 0,
+            dropped_events: 0,
             last_efficiency: None,
             last_class: None,
             last_blow: None,
@@ -114,6 +120,7 @@ impl StatusSnapshot {
     pub fn on_blow(&mut self, e: &BlowEstimate) {
         self.blows += 1;
         self.alerts += u64::from(e.alert.is_some());
+        self.incomplete_blows += u64::from(!e.is_complete());
         self.last_efficiency = e.efficiency;
         self.last_class = Some(e.class.as_str().to_string());
         self.last_blow = Some(e.clone());
@@ -133,6 +140,18 @@ impl StatusSnapshot {
         };
         metric("samples_total", "counter", "Samples received.", per_source(&|s| s.samples as f64));
         metric("drops_total", "counter", "Events dropped at a full pipeline channel.", per_source(&|s| s.drops as f64));
+        metric(
+            "queue_dropped_events_total",
+            "counter",
+            "Oldest events the live queue dropped because the pipeline fell behind.",
+            vec![(String::new(), self.dropped_events as f64)],
+        );
+        metric(
+            "incomplete_blows_total",
+            "counter",
+            "Blows with samples lost inside them, reported without energies.",
+            vec![(String::new(), self.incomplete_blows as f64)],
+        );
         metric("gaps_total", "counter", "Gaps in the sample stream.", per_source(&|s| s.gaps as f64));
         metric("samples_lost_total", "counter", "Samples lost in gaps.", per_source(&|s| s.samples_lost as f64));
         metric("crc_errors_total", "counter", "Frames with a bad CRC.", per_source(&|s| s.crc_errors as f64));

@@ -14,7 +14,7 @@ use tokio::sync::{mpsc, watch};
 use super::ascii::{AsciiEvent, DEFAULT_ASCII_BATCH_S, LineDecoder};
 use super::frame::FrameDecoder;
 use super::tracker::FrameTracker;
-use crate::acquire::{BACKOFF_START_MS, ChannelSpec, Counters, SourceEvent, next_backoff_ms, offer};
+use crate::acquire::{BACKOFF_START_MS, Backpressure, ChannelSpec, Counters, SourceEvent, next_backoff_ms, offer};
 
 /// Interval between periodic status reports, ms.
 pub const DEFAULT_STATUS_INTERVAL_MS: u64 = 1000;
@@ -46,6 +46,9 @@ pub struct SerialConfig {
     pub status_interval_ms: u64,
     /// ASCII only: batch length, s.
     pub ascii_batch_s: f64,
+    /// Whether the device can wait for the service (`Backpressure::Wait`, a simulated
+    /// device run fast) or not (a real DAQ: the default).
+    pub backpressure: Backpressure,
 }
 
 impl SerialConfig {
@@ -65,6 +68,7 @@ impl SerialConfig {
             channels,
             status_interval_ms: DEFAULT_STATUS_INTERVAL_MS,
             ascii_batch_s: DEFAULT_ASCII_BATCH_S,
+            backpressure: Backpressure::DropOldest,
         }
     }
 }
@@ -247,6 +251,7 @@ impl SerialSource {
             if *shutdown.borrow() {
                 return StreamEnd::Shutdown;
             }
+            crate::acquire::room(tx, self.cfg.backpressure).await;
             tokio::select! {
                 read = reader.read(&mut buf) => match read {
                     Ok(0) => return StreamEnd::Eof,
