@@ -106,4 +106,16 @@ fn a_sheet_whose_heights_rise_by_caliper_noise_is_kept_with_a_warning() {
     assert!(out.status.success(), "{err}");
     assert!(err.contains(warning), "{err}");
     assert_eq!(String::from_utf8_lossy(&out.stdout).lines().count(), 4, "one JSON line per blow");
+    // identify starts each later blow from the sheet's height after the one before: the
+    // rise changes a start height by 0.1 mm and nothing else. Few starts keep it cheap.
+    let out_machine = tmp("noisy.machine.toml");
+    let o = out_machine.to_str().unwrap();
+    let args = ["identify", "--kind", "hammer", "--reference", c, "-o", o, "--starts", "2", "--monte-carlo", "10"];
+    let out = forgemon(&args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains(warning), "{err}");
+    // What identify wrote loads as a machine file.
+    let out = forgemon(&["simulate", "--machine", o, "--process", p, "--v0", "3.9"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
