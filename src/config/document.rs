@@ -252,13 +252,13 @@ fn expected_in_words(expected: &str) -> String {
 }
 
 /// The known name that `key` is most likely a typing error of: at most one edit in three
-/// characters (at most 3), a transposition counting as one, case ignored.
+/// characters (at most 2), a transposition counting as one, case ignored.
 pub(crate) fn suggest<'k>(key: &str, known: &[&'k str]) -> Option<&'k str> {
     let key = key.to_lowercase();
     known
         .iter()
         .map(|k| (strsim::damerau_levenshtein(&key, &k.to_lowercase()), *k))
-        .filter(|(d, k)| *d <= (k.chars().count() / 3).clamp(1, 3))
+        .filter(|(d, k)| *d <= (k.chars().count() / 3).clamp(1, 2))
         .min_by_key(|(d, _)| *d)
         .map(|(_, k)| k)
 }

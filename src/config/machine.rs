@@ -5,7 +5,8 @@
 //! and the `[identify]` table that `forgemon identify` writes (ignored here). The contract
 //! allows other extra keys (uncertainties, provenance), so any other key is accepted and
 //! ignored, unless it looks like a typing error: a near miss of a known key ("did you
-//! mean"), or a parameter of the other machine kind. Effect parameters are checked by
+//! mean"), or a parameter of the other machine kind. A known key with a suffix
+//! (`k_N_per_m_std_error`) is an annotation, not a near miss. Effect parameters are checked by
 //! `Effect::from_params`, which knows each effect's names.
 
 use std::collections::BTreeMap;
@@ -101,7 +102,9 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
         if other.contains(&key) {
             return Err(doc.invalid(key, format!("is a {other_kind} parameter, but kind = \"{kind}\"")));
         }
-        if let Some(s) = suggest(key, &known) {
+        // A known key with a suffix (`k_N_per_m_std_error`) annotates it: an extra.
+        let annotates = known.iter().any(|k| key.strip_prefix(k).is_some_and(|rest| rest.starts_with('_')));
+        if !annotates && let Some(s) = suggest(key, &known) {
             return Err(ConfigError::UnknownKey {
                 place: doc.place(key),
                 key: key.to_string(),
@@ -231,7 +234,7 @@ mod tests {
         let e = err(&format!("{HAMMER}m_ram_kg = 1000\n"));
         assert_eq!(e, "m.toml:6:1: key 'm_ram_kg' is a screw_press parameter, but kind = \"hammer\"");
         // Provenance and uncertainties are allowed (CONTRACTS.md §3).
-        let extra = "operator = \"jd\"\nm1_kg_std_error = 12.5\n[provenance]\nfrom = \"bench\"\n";
+        let extra = "operator = \"jd\"\nm1_kg_std_error = 12.5\nk_N_per_m_se = 1e7\n[provenance]\nfrom = \"bench\"\n";
         assert_eq!(
             parse_machine("m.toml", &format!("{HAMMER}{extra}")).unwrap().machine,
             parse_machine("m.toml", HAMMER).unwrap().machine
