@@ -9,8 +9,8 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::Args;
 
-use super::read_text;
-use crate::config::{parse_machine, parse_process};
+use super::{parse_process_warn, read_text};
+use crate::config::parse_machine;
 use crate::diagnose::{Diagnosis, diagnose};
 use crate::identify::objective::Setting;
 use crate::physics::effects::EffectSet;
@@ -88,7 +88,7 @@ fn read_dir(dir: &Path, machine: &Machine) -> anyhow::Result<(Vec<crate::identif
             dir.display()
         );
     }
-    let p = parse_process(&sheet.display().to_string(), &read_text(&sheet)?)?;
+    let p = parse_process_warn(&sheet.display().to_string(), &read_text(&sheet)?)?;
     if p.machine != machine.kind() {
         bail!(
             "{}: key 'machine' is \"{}\" but the machine is a {}",

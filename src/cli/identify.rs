@@ -9,8 +9,8 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::Args;
 
-use super::read_text;
-use crate::config::{parse_machine, parse_process};
+use super::{parse_process_warn, read_text};
+use crate::config::parse_machine;
 use crate::identify::model::default_prior;
 use crate::identify::objective::{Reference, Setting};
 use crate::identify::{IdentifyConfig, identify};
@@ -82,7 +82,7 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
                 path.display()
             );
         }
-        let p = parse_process(&path.display().to_string(), &read_text(&path)?)?;
+        let p = parse_process_warn(&path.display().to_string(), &read_text(&path)?)?;
         if p.machine != kind {
             bail!("{}: key 'machine' is \"{}\" but --kind is {}", path.display(), p.machine.as_str(), kind.as_str());
         }

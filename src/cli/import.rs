@@ -8,8 +8,8 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::Args;
 
-use super::read_text;
-use crate::config::{parse_machine, parse_process};
+use super::{parse_process_warn, read_text};
+use crate::config::parse_machine;
 use crate::record::{RecordWriter, Rotation};
 
 #[derive(Debug, Args)]
@@ -41,7 +41,7 @@ pub fn run(args: ImportArgs) -> anyhow::Result<ExitCode> {
     }
     let process_text = process.as_ref().map(|p| read_text(p).map(|t| (p, t))).transpose()?;
     if let Some((p, t)) = &process_text {
-        parse_process(&p.display().to_string(), t)?;
+        parse_process_warn(&p.display().to_string(), t)?;
     }
     let mut w = RecordWriter::create(&args.out, Rotation::default())
         .with_context(|| format!("{}: cannot record", args.out.display()))?;

@@ -67,6 +67,19 @@ pub(crate) fn read_text(path: &Path) -> anyhow::Result<String> {
     std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))
 }
 
+/// Parse a process sheet (CONTRACTS.md §2) and print its warnings (a measured height that
+/// rises, kept as measured) to stderr as `forgemon: warning: ...`.
+pub(crate) fn parse_process_warn(
+    origin: &str,
+    text: &str,
+) -> Result<crate::physics::process::Process, crate::config::ConfigError> {
+    let sheet = crate::config::parse_process_sheet(origin, text)?;
+    for w in &sheet.warnings {
+        eprintln!("forgemon: warning: {w}");
+    }
+    Ok(sheet.value)
+}
+
 /// Source name of samples read from capture files: the captures of a directory are one
 /// machine, whatever file each came from.
 pub(crate) const CAPTURE_SOURCE: &str = "capture";

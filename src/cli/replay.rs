@@ -8,8 +8,8 @@ use std::process::ExitCode;
 use anyhow::{Context, bail};
 use clap::Args;
 
-use super::read_text;
-use crate::config::{parse_machine, parse_process};
+use super::{parse_process_warn, read_text};
+use crate::config::parse_machine;
 use crate::daemon::{CONTROL_SOURCE, NEW_BILLET_STATE};
 use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline, PipelineConfig, PipelineEvent};
@@ -61,7 +61,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     };
     let process: Option<Process> = match &process_text {
         Some((origin, text)) => {
-            let p = parse_process(origin, text)?;
+            let p = parse_process_warn(origin, text)?;
             if p.machine != machine.kind() {
                 bail!(
                     "{origin}: key 'machine' is \"{}\" but {} has kind \"{}\"",

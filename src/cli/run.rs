@@ -9,12 +9,12 @@ use anyhow::{Context, bail};
 use clap::Args;
 use tokio::sync::{mpsc, watch};
 
-use super::read_text;
+use super::{parse_process_warn, read_text};
 use crate::acquire::modbus::Mode;
 use crate::acquire::modbus::registers::Signal;
 use crate::acquire::serial::driver::{SerialConfig, SerialFormat as WireFormat};
+use crate::config::parse_machine;
 use crate::config::service::{SerialFormat, ServiceConfig, SourceSpec, parse_service};
-use crate::config::{parse_machine, parse_process};
 use crate::daemon::{Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
 use crate::signal::sample::Role;
 
@@ -35,7 +35,7 @@ pub fn load_parts(config_path: &Path) -> anyhow::Result<ServiceParts> {
     let (process, process_text) = match &config.process_path {
         Some(p) => {
             let t = read_text(p).context("key 'process'")?;
-            let proc_ = parse_process(&p.display().to_string(), &t)?;
+            let proc_ = parse_process_warn(&p.display().to_string(), &t)?;
             if proc_.machine != machine.kind() {
                 bail!(
                     "{}: key 'machine' is \"{}\" but {} has kind \"{}\"",

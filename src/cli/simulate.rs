@@ -9,8 +9,9 @@ use anyhow::{Context, bail};
 use clap::Args;
 use serde_json::{Value, json};
 
-use super::read_text;
-use crate::config::{MachineFile, parse_machine, parse_process};
+use super::{parse_process_warn, read_text};
+use crate::config::limits::IMPACT_SPEED_MPS;
+use crate::config::{MachineFile, parse_machine};
 use crate::physics::blow::{BlowResult, DEFAULT_RTOL, POST_WINDOW_S, SimOptions};
 use crate::physics::effects::{Effect, EffectSet};
 use crate::physics::integrator::Method;
@@ -107,7 +108,7 @@ fn load_inputs(args: &SimulateArgs) -> anyhow::Result<Inputs> {
 }
 
 fn load_process(path: &Path, machine: &MachineFile, machine_path: &Path) -> anyhow::Result<Process> {
-    let p = parse_process(&path.display().to_string(), &read_text(path)?)?;
+    let p = parse_process_warn(&path.display().to_string(), &read_text(path)?)?;
     if p.machine != machine.machine.kind() {
         bail!(
             "{}: key 'machine' is \"{}\" but {} has kind \"{}\"",
@@ -136,8 +137,8 @@ fn options(args: &SimulateArgs) -> anyhow::Result<SimOptions> {
 pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
     let inputs = load_inputs(&args)?;
     let opts = options(&args)?;
-    if let Some(bad) = args.v0.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
-        bail!("--v0: impact speed {bad} m/s must be finite and > 0");
+    if let Some((bad, why)) = args.v0.iter().find_map(|v| IMPACT_SPEED_MPS.check(*v).err().map(|w| (v, w))) {
+        bail!("--v0: impact speed {bad} m/s {why}");
     }
     let mut out = json!({});
     let results: Vec<BlowResult>;

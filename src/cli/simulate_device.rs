@@ -12,8 +12,8 @@ use clap::{Args, ValueEnum};
 use tokio::sync::watch;
 use tokio_serial::SerialPort;
 
-use super::read_text;
-use crate::config::{parse_machine, parse_process};
+use super::{parse_process_warn, read_text};
+use crate::config::parse_machine;
 use crate::physics::effects::{Effect, EffectSet};
 use crate::physics::machine::MachineKind;
 use crate::simdevice::{BilletPlan, SerialDeviceSpec, SerialFaults, SimMachine, drive_serial};
@@ -82,7 +82,7 @@ pub struct SimulateDeviceArgs {
 
 pub fn run(args: SimulateDeviceArgs) -> anyhow::Result<ExitCode> {
     let mf = parse_machine(&args.machine.display().to_string(), &read_text(&args.machine)?)?;
-    let process = parse_process(&args.process.display().to_string(), &read_text(&args.process)?)?;
+    let process = parse_process_warn(&args.process.display().to_string(), &read_text(&args.process)?)?;
     if process.machine != mf.machine.kind() {
         anyhow::bail!("{}: key 'machine' does not match {}", args.process.display(), args.machine.display());
     }

@@ -1,124 +1,106 @@
-//! Reading the TOML files of CONTRACTS.md §2–§3 into the physics' types.
+//! Reading the TOML files of CONTRACTS.md §2–§3 and the service configuration into typed
+//! values.
 //!
-//! Each file is parsed to a TOML table, then validated once into a typed value, with every
-//! error naming the file and the key. Pure code: the caller reads the file and passes its
-//! text and name.
+//! Each file is parsed with spans (`document.rs`), deserialized by serde into raw structs
+//! that deny unknown keys, then validated once (`limits.rs` names every physical range)
+//! into the typed value. Every error names the file, the line and column, and the dotted
+//! key, and a misspelt key gets "did you mean". Pure code: the caller reads the file and
+//! passes its text and name; nothing here opens a file.
 
+mod document;
+pub(crate) mod keys;
+pub mod limits;
 pub mod machine;
 pub mod process;
 pub mod service;
+mod source;
 
 pub use machine::{MachineFile, parse_machine};
-pub use process::parse_process;
+pub use process::{parse_process, parse_process_sheet};
 
-use crate::physics::machine::MachineKind;
+pub(crate) use keys::Keys;
 
-/// What is wrong with a configuration file. The message names the file and the key.
+use std::fmt;
+
+/// Where in a file: 1-based line and column (the column counts characters).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Position {
+    pub line: usize,
+    pub column: usize,
+}
+
+/// The file an error is in and, when known, where: shown as `origin:line:column`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Place {
+    pub origin: String,
+    pub at: Option<Position>,
+}
+
+impl Place {
+    /// The file, without a position yet.
+    pub fn file(origin: &str) -> Self {
+        Place { origin: origin.to_string(), at: None }
+    }
+}
+
+impl fmt::Display for Place {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.at {
+            Some(p) => write!(f, "{}:{}:{}", self.origin, p.line, p.column),
+            None => f.write_str(&self.origin),
+        }
+    }
+}
+
+/// What is wrong with a configuration file. The message names the file, the position
+/// and the key.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ConfigError {
-    #[error("{origin}: not valid TOML: {message}")]
-    Syntax { origin: String, message: String },
-    #[error("{origin}: missing key '{key}'")]
-    Missing { origin: String, key: String },
-    #[error("{origin}: key '{key}' {why}")]
-    Invalid { origin: String, key: String, why: String },
+    #[error("{place}: not valid TOML: {message}")]
+    Syntax { place: Place, message: String },
+    /// `table` is the dotted key of the table the key is in, empty at the top level.
+    #[error("{place}: unknown key '{key}' {}{}", in_table(table), did_you_mean(suggestion))]
+    UnknownKey { place: Place, key: String, table: String, suggestion: Option<String> },
+    #[error("{place}: missing key '{key}'")]
+    Missing { place: Place, key: String },
+    #[error("{place}: key '{key}' {why}")]
+    Invalid { place: Place, key: String, why: String },
 }
 
-/// Typed access to a TOML table with errors that name `origin` and the dotted key.
-pub(crate) struct Keys<'a> {
-    pub origin: &'a str,
-    pub prefix: String,
-    pub table: &'a toml::Table,
+fn in_table(table: &str) -> String {
+    if table.is_empty() { "at the top level".into() } else { format!("in [{table}]") }
 }
 
-impl<'a> Keys<'a> {
-    pub fn root(origin: &'a str, table: &'a toml::Table) -> Self {
-        Keys { origin, prefix: String::new(), table }
-    }
+fn did_you_mean(suggestion: &Option<String>) -> String {
+    suggestion.as_ref().map(|s| format!("; did you mean '{s}'?")).unwrap_or_default()
+}
 
-    pub fn path(&self, key: &str) -> String {
-        if self.prefix.is_empty() { key.to_string() } else { format!("{}.{key}", self.prefix) }
-    }
-
-    pub fn invalid(&self, key: &str, why: impl Into<String>) -> ConfigError {
-        ConfigError::Invalid { origin: self.origin.to_string(), key: self.path(key), why: why.into() }
-    }
-
-    pub fn missing(&self, key: &str) -> ConfigError {
-        ConfigError::Missing { origin: self.origin.to_string(), key: self.path(key) }
-    }
-
-    /// A sub-table.
-    pub fn table(&self, key: &str) -> Result<Keys<'a>, ConfigError> {
-        match self.table.get(key) {
-            Some(toml::Value::Table(t)) => Ok(Keys { origin: self.origin, prefix: self.path(key), table: t }),
-            Some(_) => Err(self.invalid(key, "must be a table")),
-            None => Err(self.missing(key)),
+impl ConfigError {
+    /// The dotted key the error is about.
+    pub fn key(&self) -> Option<&str> {
+        match self {
+            ConfigError::Syntax { .. } => None,
+            ConfigError::UnknownKey { key, .. }
+            | ConfigError::Missing { key, .. }
+            | ConfigError::Invalid { key, .. } => Some(key),
         }
     }
 
-    pub fn string(&self, key: &str) -> Result<&'a str, ConfigError> {
-        match self.table.get(key) {
-            Some(toml::Value::String(s)) => Ok(s),
-            Some(_) => Err(self.invalid(key, "must be a string")),
-            None => Err(self.missing(key)),
+    pub(crate) fn place_mut(&mut self) -> &mut Place {
+        match self {
+            ConfigError::Syntax { place, .. }
+            | ConfigError::UnknownKey { place, .. }
+            | ConfigError::Missing { place, .. }
+            | ConfigError::Invalid { place, .. } => place,
         }
-    }
-
-    /// An optional number (integers are accepted as numbers).
-    pub fn opt_number(&self, key: &str) -> Result<Option<f64>, ConfigError> {
-        match self.table.get(key) {
-            Some(toml::Value::Float(x)) => Ok(Some(*x)),
-            Some(toml::Value::Integer(i)) => Ok(Some(*i as f64)),
-            Some(v) => Err(self.invalid(key, format!("must be a number, not {}", v.type_str()))),
-            None => Ok(None),
-        }
-    }
-
-    pub fn number(&self, key: &str) -> Result<f64, ConfigError> {
-        self.opt_number(key)?.ok_or_else(|| self.missing(key))
-    }
-
-    /// A finite number > 0.
-    pub fn positive(&self, key: &str) -> Result<f64, ConfigError> {
-        let x = self.number(key)?;
-        if x.is_finite() && x > 0.0 {
-            Ok(x)
-        } else {
-            Err(self.invalid(key, format!("must be finite and > 0, got {x}")))
-        }
-    }
-
-    /// A finite number >= 0.
-    pub fn non_negative(&self, key: &str) -> Result<f64, ConfigError> {
-        let x = self.number(key)?;
-        if x.is_finite() && x >= 0.0 {
-            Ok(x)
-        } else {
-            Err(self.invalid(key, format!("must be finite and >= 0, got {x}")))
-        }
-    }
-
-    /// A finite number.
-    pub fn finite(&self, key: &str) -> Result<f64, ConfigError> {
-        let x = self.number(key)?;
-        if x.is_finite() { Ok(x) } else { Err(self.invalid(key, format!("must be finite, got {x}"))) }
     }
 }
 
-/// The machine kind under `key` ("hammer" | "screw_press"), as both files spell it.
-pub(crate) fn machine_kind(keys: &Keys<'_>, key: &str) -> Result<MachineKind, ConfigError> {
-    match keys.string(key)? {
-        "hammer" => Ok(MachineKind::Hammer),
-        "screw_press" => Ok(MachineKind::ScrewPress),
-        other => Err(keys.invalid(key, format!("must be \"hammer\" or \"screw_press\", got \"{other}\""))),
-    }
-}
-
-/// Parse `text` as a TOML table, naming `origin` (and the line) on a syntax error.
-pub(crate) fn parse_table(origin: &str, text: &str) -> Result<toml::Table, ConfigError> {
-    text.parse::<toml::Table>().map_err(|e| ConfigError::Syntax {
-        origin: origin.to_string(),
-        message: e.to_string().trim().replace('\n', " "),
-    })
+/// A value read from a file, with what the reader should be told about it but that does
+/// not stop it (for example a measured height that rises by caliper noise). Each warning
+/// names the file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Parsed<T> {
+    pub value: T,
+    pub warnings: Vec<String>,
 }

@@ -1,15 +1,21 @@
 //! The service's configuration (`forgemon run --config FILE`): the machine and process
 //! files, the recording, the status endpoint, the alert rules and sinks, and the sources.
-//! Read once, validated completely (every error names the key) before anything is opened.
-//! Relative paths are taken from the configuration file's directory.
+//! Read once, validated completely before anything is opened: every table denies unknown
+//! keys ("did you mean"), every number is checked against its range (`limits.rs`), and
+//! every error names the file, line, column and key. Relative paths are taken from the
+//! configuration file's directory. The sources' tables are in `source.rs`.
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
-use super::{ConfigError, Keys, parse_table};
+use serde::Deserialize;
+use serde::de::IgnoredAny;
+
+use super::document::Document;
+use super::limits::{ALERT_WINDOW_BLOWS, DEBOUNCE_BLOWS, EFFICIENCY, RESIDUAL_LIMIT, ROTATE_BYTES, ROTATE_SECONDS};
+use super::{ConfigError, source};
 use crate::acquire::ChannelSpec;
 use crate::alert::AlertConfig;
-use crate::signal::sample::Role;
 
 /// Default status/metrics address: loopback only.
 pub const DEFAULT_HTTP_LISTEN: &str = "127.0.0.1:9187";
@@ -75,112 +81,92 @@ pub struct ServiceConfig {
     pub sources: Vec<SourceSpec>,
 }
 
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawService {
+    machine: String,
+    process: Option<String>,
+    recording: RawRecording,
+    http: Option<RawHttp>,
+    alerts: Option<RawAlerts>,
+    /// Each read by its `kind` (`source.rs`).
+    sources: Vec<IgnoredAny>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRecording {
+    dir: String,
+    rotate_bytes: Option<u64>,
+    rotate_seconds: Option<u64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawHttp {
+    listen: String,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAlerts {
+    hard_blow: Option<bool>,
+    low_efficiency: Option<f64>,
+    k_low: Option<u64>,
+    n_window: Option<u64>,
+    residual_limit: Option<f64>,
+    debounce_blows: Option<u64>,
+    webhook: Option<String>,
+    plc_coil: Option<RawPlcCoil>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPlcCoil {
+    address: String,
+    unit: u8,
+    coil: u16,
+}
+
 /// Parse the text of the service configuration `origin`, whose directory is `base`.
 pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceConfig, ConfigError> {
-    let table = parse_table(origin, text)?;
-    let keys = Keys::root(origin, &table);
+    let doc = Document::parse(origin, text)?;
+    let raw: RawService = doc.read()?;
     let path = |s: &str| {
         let p = PathBuf::from(s);
         if p.is_absolute() { p } else { base.join(p) }
     };
-    let machine_path = path(keys.string("machine")?);
-    let process_path = table.contains_key("process").then(|| keys.string("process")).transpose()?.map(path);
-
-    let rec = keys.table("recording")?;
-    let recording_dir = path(rec.string("dir")?);
-    let rotate_bytes = match rec.opt_number("rotate_bytes")? {
-        Some(_) => rec.positive("rotate_bytes")? as u64,
+    let rec = &raw.recording;
+    let rotate_bytes = match rec.rotate_bytes {
+        Some(b) => doc.in_whole_range("recording.rotate_bytes", b, &ROTATE_BYTES)?,
         None => DEFAULT_ROTATE_BYTES,
     };
-    let rotate_seconds = match rec.opt_number("rotate_seconds")? {
-        Some(_) => rec.positive("rotate_seconds")? as u64,
+    let rotate_seconds = match rec.rotate_seconds {
+        Some(s) => doc.in_whole_range("recording.rotate_seconds", s, &ROTATE_SECONDS)?,
         None => DEFAULT_ROTATE_SECONDS,
     };
-
-    let http_listen = match table.get("http") {
+    let http_listen = match &raw.http {
         None => DEFAULT_HTTP_LISTEN.parse().expect("a valid default address"),
-        Some(_) => {
-            let h = keys.table("http")?;
-            let s = h.string("listen")?;
-            s.parse().map_err(|_| h.invalid("listen", format!("'{s}' is not an address:port")))?
-        }
+        Some(h) => address(&doc, "http.listen", &h.listen)?,
     };
-
-    let mut alerts = AlertConfig::default();
-    let (mut webhook, mut plc_coil) = (None, None);
-    if table.contains_key("alerts") {
-        let a = keys.table("alerts")?;
-        if let Some(x) = a.opt_number("low_efficiency")? {
-            alerts.low_efficiency =
-                if (0.0..=1.0).contains(&x) { x } else { return Err(a.invalid("low_efficiency", "must be in [0, 1]")) };
-        }
-        if a.opt_number("k_low")?.is_some() {
-            alerts.k_low = a.non_negative("k_low")? as usize;
-        }
-        if a.opt_number("n_window")?.is_some() {
-            alerts.n_window = a.positive("n_window")? as usize;
-        }
-        if alerts.k_low > alerts.n_window {
-            return Err(a.invalid("k_low", format!("{} exceeds n_window {}", alerts.k_low, alerts.n_window)));
-        }
-        if a.opt_number("residual_limit")?.is_some() {
-            alerts.residual_limit = a.positive("residual_limit")?;
-        }
-        if a.opt_number("debounce_blows")?.is_some() {
-            alerts.debounce_blows = a.non_negative("debounce_blows")? as u32;
-        }
-        if a.table.contains_key("hard_blow") {
-            alerts.on_hard_blow = match a.table.get("hard_blow") {
-                Some(toml::Value::Boolean(b)) => *b,
-                _ => return Err(a.invalid("hard_blow", "must be true or false")),
-            };
-        }
-        if a.table.contains_key("webhook") {
-            let url = a.string("webhook")?;
-            if !(url.starts_with("http://") || url.starts_with("https://")) {
-                return Err(a.invalid("webhook", format!("'{url}' is not an http(s) URL")));
-            }
-            webhook = Some(url.to_string());
-        }
-        if a.table.contains_key("plc_coil") {
-            let c = a.table("plc_coil")?;
-            let s = c.string("address")?;
-            let address = s.parse().map_err(|_| c.invalid("address", format!("'{s}' is not an address:port")))?;
-            let unit = c.non_negative("unit")?;
-            let coil = c.non_negative("coil")?;
-            if unit > 247.0 {
-                return Err(c.invalid("unit", "must be 0..=247"));
-            }
-            if coil > 65535.0 {
-                return Err(c.invalid("coil", "must be 0..=65535"));
-            }
-            plc_coil = Some(PlcCoil { address, unit: unit as u8, coil: coil as u16 });
-        }
+    let (alerts, webhook, plc_coil) = match &raw.alerts {
+        Some(a) => parse_alerts(&doc, a)?,
+        None => (AlertConfig::default(), None, None),
+    };
+    if raw.sources.is_empty() {
+        return Err(doc.invalid("sources", "must be a non-empty array of tables ([[sources]])"));
     }
-
-    let sources = match table.get("sources") {
-        Some(toml::Value::Array(list)) if !list.is_empty() => {
-            let mut out = Vec::new();
-            for (i, v) in list.iter().enumerate() {
-                let key = format!("sources[{}]", i + 1);
-                let toml::Value::Table(t) = v else { return Err(keys.invalid(&key, "must be a table ([[sources]])")) };
-                let s = Keys { origin, prefix: key, table: t };
-                out.push(parse_source(&s, base)?);
-            }
-            let mut names: Vec<&str> = out.iter().map(SourceSpec::name).collect();
-            names.sort();
-            if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
-                return Err(keys.invalid("sources", format!("two sources are named '{}'", w[0])));
-            }
-            out
-        }
-        Some(_) => return Err(keys.invalid("sources", "must be a non-empty array of tables ([[sources]])")),
-        None => return Err(keys.missing("sources")),
-    };
+    let sources =
+        (1..=raw.sources.len()).map(|i| source::parse_source(&doc, i, base)).collect::<Result<Vec<_>, _>>()?;
+    let mut names: Vec<&str> = sources.iter().map(SourceSpec::name).collect();
+    names.sort();
+    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+        return Err(doc.invalid("sources", format!("two sources are named '{}'", w[0])));
+    }
     Ok(ServiceConfig {
-        machine_path,
-        process_path,
-        recording_dir,
+        machine_path: path(&raw.machine),
+        process_path: raw.process.as_deref().map(path),
+        recording_dir: path(&rec.dir),
         rotate_bytes,
         rotate_seconds,
         http_listen,
@@ -191,189 +177,60 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
     })
 }
 
-fn parse_source(s: &Keys<'_>, base: &Path) -> Result<SourceSpec, ConfigError> {
-    let name = s.string("name")?.to_string();
-    if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
-        return Err(s.invalid("name", "must be letters, digits, '_' or '-'"));
+/// `[alerts]` over the defaults, with its webhook and PLC coil.
+fn parse_alerts(
+    doc: &Document<'_>,
+    a: &RawAlerts,
+) -> Result<(AlertConfig, Option<String>, Option<PlcCoil>), ConfigError> {
+    let mut alerts = AlertConfig::default();
+    if let Some(x) = a.low_efficiency {
+        alerts.low_efficiency = doc.in_range("alerts.low_efficiency", x, &EFFICIENCY)?;
     }
-    match s.string("kind")? {
-        "serial" => {
-            let format = match s.table.get("format").map(|_| s.string("format")).transpose()? {
-                None | Some("binary") => SerialFormat::Binary,
-                Some("ascii") => SerialFormat::Ascii,
-                Some(other) => {
-                    return Err(s.invalid("format", format!("must be \"binary\" or \"ascii\", got \"{other}\"")));
-                }
-            };
-            let baud = match s.opt_number("baud")? {
-                Some(_) => s.positive("baud")? as u32,
-                None => DEFAULT_BAUD,
-            };
-            let channels = parse_channels(s)?;
-            // CONTRACTS.md §7: 1..=16 channels per frame.
-            if !(1..=16).contains(&channels.len()) {
-                return Err(s.invalid("channels", format!("has {} entries; a frame carries 1 to 16", channels.len())));
-            }
-            Ok(SourceSpec::Serial { name, path: s.string("path")?.to_string(), baud, format, channels })
+    if let Some(n) = a.n_window {
+        alerts.n_window = doc.in_whole_range("alerts.n_window", n, &ALERT_WINDOW_BLOWS)? as usize;
+    }
+    if let Some(k) = a.k_low {
+        alerts.k_low = doc.in_whole_range("alerts.k_low", k, &ALERT_WINDOW_BLOWS)? as usize;
+    }
+    if alerts.k_low > alerts.n_window {
+        return Err(doc.invalid("alerts.k_low", format!("{} exceeds n_window {}", alerts.k_low, alerts.n_window)));
+    }
+    if let Some(r) = a.residual_limit {
+        alerts.residual_limit = doc.in_range("alerts.residual_limit", r, &RESIDUAL_LIMIT)?;
+    }
+    if let Some(d) = a.debounce_blows {
+        alerts.debounce_blows = doc.in_whole_range("alerts.debounce_blows", d, &DEBOUNCE_BLOWS)? as u32;
+    }
+    if let Some(b) = a.hard_blow {
+        alerts.on_hard_blow = b;
+    }
+    let webhook = match &a.webhook {
+        Some(url) if !(url.starts_with("http://") || url.starts_with("https://")) => {
+            return Err(doc.invalid("alerts.webhook", format!("'{url}' is not an http(s) URL")));
         }
-        "modbus" => Ok(SourceSpec::Modbus(parse_modbus(s, name)?)),
-        "can" => Ok(SourceSpec::Can(crate::acquire::can::parse_can_source(s.origin, &s.prefix, s.table, base)?)),
-        other => Err(s.invalid("kind", format!("'{other}' is not a known source kind (serial, modbus, can)"))),
-    }
+        other => other.clone(),
+    };
+    let plc_coil = match &a.plc_coil {
+        Some(c) => {
+            if c.unit > 247 {
+                return Err(doc.invalid("alerts.plc_coil.unit", "must be 0..=247"));
+            }
+            Some(PlcCoil { address: address(doc, "alerts.plc_coil.address", &c.address)?, unit: c.unit, coil: c.coil })
+        }
+        None => None,
+    };
+    Ok((alerts, webhook, plc_coil))
 }
 
-/// `kind = "modbus"`: `transport` "tcp" (`address`) or "rtu" (`path`, `baud`), `unit`,
-/// `poll_ms`, `timeout_ms`, and `mode` "poll" with `[[sources.registers]]` (`role` or
-/// `name`, `address`, `register` "holding"|"input", `type` u16|i16|u32|i32|f32, `word_order`
-/// "big"|"little", `scale`, `offset`) or "block" with `block_base` and `[[sources.channels]]`.
-fn parse_modbus(s: &Keys<'_>, name: String) -> Result<crate::acquire::modbus::ModbusConfig, ConfigError> {
-    use crate::acquire::modbus::{
-        DataType, ModbusConfig, Mode, RegisterKind, RegisterSpec, Signal, Transport, WordOrder, client,
-    };
-    use std::time::Duration;
-    let transport = match s.string("transport")? {
-        "tcp" => {
-            let a = s.string("address")?;
-            Transport::Tcp {
-                addr: a.parse().map_err(|_| s.invalid("address", format!("'{a}' is not an address:port")))?,
-            }
-        }
-        "rtu" => Transport::Rtu {
-            path: s.string("path")?.to_string(),
-            baud: match s.opt_number("baud")? {
-                Some(_) => s.positive("baud")? as u32,
-                None => 19_200,
-            },
-        },
-        other => return Err(s.invalid("transport", format!("must be \"tcp\" or \"rtu\", got \"{other}\""))),
-    };
-    let unit = match s.opt_number("unit")? {
-        Some(_) => s.non_negative("unit")?,
-        None => 1.0,
-    };
-    if unit > 247.0 {
-        return Err(s.invalid("unit", "must be 0..=247"));
-    }
-    let ms = |key: &str, default: Duration| -> Result<Duration, ConfigError> {
-        Ok(match s.opt_number(key)? {
-            Some(_) => Duration::from_secs_f64(s.positive(key)? / 1e3),
-            None => default,
-        })
-    };
-    let (mode, map, default_poll) = match s.table.get("mode").map(|_| s.string("mode")).transpose()?.unwrap_or("poll") {
-        "block" => {
-            let base = match s.opt_number("block_base")? {
-                Some(_) => s.non_negative("block_base")?,
-                None => 0.0,
-            };
-            if base > 65535.0 {
-                return Err(s.invalid("block_base", "must be a register address 0..=65535"));
-            }
-            (
-                Mode::Block { base: base as u16, channels: parse_channels(s)? },
-                Vec::new(),
-                client::DEFAULT_BLOCK_POLL_INTERVAL,
-            )
-        }
-        "poll" => {
-            let Some(toml::Value::Array(list)) = s.table.get("registers") else { return Err(s.missing("registers")) };
-            let mut map = Vec::new();
-            for (i, v) in list.iter().enumerate() {
-                let key = format!("registers[{}]", i + 1);
-                let toml::Value::Table(t) = v else { return Err(s.invalid(&key, "must be a table")) };
-                let r = Keys { origin: s.origin, prefix: s.path(&key), table: t };
-                let signal = if r.table.contains_key("role") {
-                    let n = r.string("role")?;
-                    Signal::Role(
-                        Role::from_column(n)
-                            .ok_or_else(|| r.invalid("role", format!("'{n}' is not load_N, disp_m or acc_mps2")))?,
-                    )
-                } else {
-                    Signal::Named(r.string("name")?.to_string())
-                };
-                let address = r.non_negative("address")?;
-                if address > 65535.0 {
-                    return Err(r.invalid("address", "must be 0..=65535"));
-                }
-                let kind = match r.table.get("register").map(|_| r.string("register")).transpose()?.unwrap_or("holding")
-                {
-                    "holding" => RegisterKind::Holding,
-                    "input" => RegisterKind::Input,
-                    other => {
-                        return Err(r.invalid("register", format!("must be \"holding\" or \"input\", got \"{other}\"")));
-                    }
-                };
-                let data_type = match r.string("type")? {
-                    "u16" => DataType::U16,
-                    "i16" => DataType::I16,
-                    "u32" => DataType::U32,
-                    "i32" => DataType::I32,
-                    "f32" => DataType::F32,
-                    other => return Err(r.invalid("type", format!("'{other}' is not u16, i16, u32, i32 or f32"))),
-                };
-                let word_order =
-                    match r.table.get("word_order").map(|_| r.string("word_order")).transpose()?.unwrap_or("big") {
-                        "big" => WordOrder::BigEndian,
-                        "little" => WordOrder::LittleEndian,
-                        other => {
-                            return Err(
-                                r.invalid("word_order", format!("must be \"big\" or \"little\", got \"{other}\""))
-                            );
-                        }
-                    };
-                let scale = r.opt_number("scale")?.map(|_| r.finite("scale")).transpose()?.unwrap_or(1.0);
-                let offset = r.opt_number("offset")?.map(|_| r.finite("offset")).transpose()?.unwrap_or(0.0);
-                map.push(RegisterSpec { signal, address: address as u16, kind, data_type, word_order, scale, offset });
-            }
-            (Mode::Poll, map, client::DEFAULT_POLL_INTERVAL)
-        }
-        other => return Err(s.invalid("mode", format!("must be \"poll\" or \"block\", got \"{other}\""))),
-    };
-    Ok(ModbusConfig {
-        source: name,
-        transport,
-        unit_id: unit as u8,
-        poll_interval: ms("poll_ms", default_poll)?,
-        timeout: ms("timeout_ms", client::DEFAULT_TIMEOUT)?,
-        map,
-        mode,
-    })
-}
-
-fn parse_channels(s: &Keys<'_>) -> Result<Vec<ChannelSpec>, ConfigError> {
-    let Some(toml::Value::Array(list)) = s.table.get("channels") else {
-        return Err(if s.table.contains_key("channels") {
-            s.invalid("channels", "must be an array of tables")
-        } else {
-            s.missing("channels")
-        });
-    };
-    let mut out = Vec::new();
-    for (i, v) in list.iter().enumerate() {
-        let key = format!("channels[{}]", i + 1);
-        let toml::Value::Table(t) = v else { return Err(s.invalid(&key, "must be a table")) };
-        let c = Keys { origin: s.origin, prefix: s.path(&key), table: t };
-        let role_name = c.string("role")?;
-        let role = Role::from_column(role_name)
-            .ok_or_else(|| c.invalid("role", format!("'{role_name}' is not load_N, disp_m or acc_mps2")))?;
-        let gain = c.finite("gain")?;
-        if gain == 0.0 {
-            return Err(c.invalid("gain", "must not be 0"));
-        }
-        let offset = c.opt_number("offset")?.map(|_| c.finite("offset")).transpose()?.unwrap_or(0.0);
-        out.push(ChannelSpec { role, gain, offset });
-    }
-    for role in Role::ALL {
-        if out.iter().filter(|c| c.role == role).count() > 1 {
-            return Err(s.invalid("channels", format!("role {role} appears twice")));
-        }
-    }
-    Ok(out)
+/// `s`, the value of `key`, as an address:port.
+pub(super) fn address(doc: &Document<'_>, key: &str, s: &str) -> Result<SocketAddr, ConfigError> {
+    s.parse().map_err(|_| doc.invalid(key, format!("'{s}' is not an address:port")))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::signal::sample::Role;
 
     const GOOD: &str = r#"
 machine = "hammer.machine.toml"
@@ -465,5 +322,84 @@ gain = 0.01
         );
         assert!(e(&GOOD.replace("role = \"acc_mps2\"", "role = \"load_N\"")).contains("role load_N appears twice"));
         assert!(e(&format!("{GOOD}[http]\nlisten = \"nowhere\"\n")).contains("key 'http.listen'"));
+    }
+
+    fn error(text: &str) -> String {
+        parse_service("s.toml", Path::new("/"), text).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn misspelt_keys_are_refused_with_line_column_and_suggestion() {
+        // GOOD starts with an empty line: [alerts] is on line 6, its first key on line 7.
+        let e = error(&GOOD.replace("low_efficiency = 0.55", "hard_blwo = false"));
+        assert_eq!(e, "s.toml:7:1: unknown key 'hard_blwo' in [alerts]; did you mean 'hard_blow'?");
+        let e = error(&GOOD.replace("dir = \"rec\"", "dir = \"rec\"\nrotate_byte = 1048576"));
+        assert_eq!(e, "s.toml:6:1: unknown key 'rotate_byte' in [recording]; did you mean 'rotate_bytes'?");
+        let e = error(&GOOD.replace("path = \"/dev/ttyUSB0\"", "path = \"/dev/ttyUSB0\"\nbuad = 115200"));
+        assert!(e.ends_with("unknown key 'buad' in [sources[1]]; did you mean 'baud'?"), "{e}");
+        let e = error(&GOOD.replace("gain = 1e-6", "gian = 1e-6"));
+        assert!(e.contains("unknown key 'gian' in [sources[1].channels[2]]; did you mean 'gain'?"), "{e}");
+        let e = error(&GOOD.replace("coil = 7", "coils = 7"));
+        assert!(e.contains("unknown key 'coils' in [alerts.plc_coil]; did you mean 'coil'?"), "{e}");
+        let e = error(&format!("procss = \"p.toml\"\n{GOOD}"));
+        assert_eq!(e, "s.toml:1:1: unknown key 'procss' at the top level; did you mean 'process'?");
+        // A key far from every known one gets no suggestion, but is still refused.
+        let e = error(&GOOD.replace("low_efficiency = 0.55", "colour = \"red\""));
+        assert_eq!(e, "s.toml:7:1: unknown key 'colour' in [alerts]");
+    }
+
+    #[test]
+    fn byte_counts_are_whole_and_durations_cannot_overflow() {
+        let rec = |extra: &str| GOOD.replace("dir = \"rec\"", &format!("dir = \"rec\"\n{extra}"));
+        let e = error(&rec("rotate_bytes = 0.5"));
+        assert_eq!(
+            e,
+            "s.toml:6:16: key 'recording.rotate_bytes' must be a whole number >= 0, not floating point `0.5`"
+        );
+        let e = error(&rec("rotate_bytes = -1"));
+        assert!(e.contains("key 'recording.rotate_bytes' must be a whole number >= 0"), "{e}");
+        let e = error(&rec("rotate_bytes = 10"));
+        assert!(e.contains("key 'recording.rotate_bytes' must be within 1048576..=1099511627776 bytes, got 10"), "{e}");
+        let e = error(&rec("rotate_seconds = 9223372036854775807"));
+        assert!(e.starts_with("s.toml:6:1: key 'recording.rotate_seconds' must be within 1..=31622400 s"), "{e}");
+        let c =
+            parse_service("s.toml", Path::new("/"), &rec("rotate_seconds = 86400\nrotate_bytes = 1073741824")).unwrap();
+        assert_eq!((c.rotate_seconds, c.rotate_bytes), (86_400, 1 << 30));
+        let e = error(&GOOD.replace("path = \"/dev/ttyUSB0\"", "path = \"/dev/ttyUSB0\"\nbaud = 1e20"));
+        assert!(e.contains("key 'sources[1].baud' must be a whole number >= 0"), "{e}");
+        let e = error(&GOOD.replace("path = \"/dev/ttyUSB0\"", "path = \"/dev/ttyUSB0\"\nbaud = 7"));
+        assert!(e.contains("key 'sources[1].baud' must be within 300..=12000000 baud"), "{e}");
+        let e = error(&GOOD.replace("unit = 1", "unit = 300"));
+        assert!(e.contains("key 'alerts.plc_coil.unit' must be a whole number in 0..=255"), "{e}");
+        let e = error(&GOOD.replace("low_efficiency = 0.55", "hard_blow = \"no\""));
+        assert!(e.contains("key 'alerts.hard_blow' must be true or false"), "{e}");
+        let e = error(&GOOD.replace("low_efficiency = 0.55", "k_low = 2.5"));
+        assert!(e.contains("key 'alerts.k_low' must be a whole number"), "{e}");
+    }
+
+    #[test]
+    fn modbus_and_can_sources_deny_unknown_keys_too() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+        let press = std::fs::read_to_string(dir.join("press-modbus-serial.service.toml")).unwrap();
+        let e = parse_service("p", &dir, &press.replace("poll_ms = 500", "pol_ms = 500")).unwrap_err().to_string();
+        assert!(e.contains("unknown key 'pol_ms' in [sources[2]]; did you mean 'poll_ms'?"), "{e}");
+        let e = parse_service("p", &dir, &press.replace("word_order = \"big\"", "word_ordr = \"big\"")).unwrap_err();
+        assert!(e.to_string().contains("in [sources[2].registers[1]]; did you mean 'word_order'?"), "{e}");
+        let e = parse_service("p", &dir, &press.replace("transport = \"tcp\"", "transport = \"tpc\"")).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("key 'sources[2].transport' must be \"tcp\" or \"rtu\", got \"tpc\"; did you mean \"tcp\"?"),
+            "{e}"
+        );
+        let e = parse_service("p", &dir, &press.replace("poll_ms = 500", "poll_ms = 1e300")).unwrap_err();
+        assert!(e.to_string().contains("key 'sources[2].poll_ms' must be within 1..3.6e6 ms"), "{e}");
+        let can = std::fs::read_to_string(dir.join("hammer-can.service.toml")).unwrap();
+        let e = parse_service("c", &dir, &can.replace("sample_rate_hz", "sample_rate_Hz")).unwrap_err().to_string();
+        assert!(e.contains("unknown key 'sample_rate_Hz' in [sources[1]]; did you mean 'sample_rate_hz'?"), "{e}");
+        let e = parse_service("c", &dir, &can.replace("acc_mps2 = \"Acc\"", "acc_mps = \"Acc\"")).unwrap_err();
+        assert!(e.to_string().contains("in [sources[1].signals]; did you mean 'acc_mps2'?"), "{e}");
+        // The CAN source's own checks are placed at their key too.
+        let e = parse_service("c", &dir, &can.replace("sample_rate_hz = 5000", "sample_rate_hz = -5")).unwrap_err();
+        assert!(e.to_string().starts_with("c:20:1: key 'sources[1].sample_rate_hz' must be finite and > 0"), "{e}");
     }
 }

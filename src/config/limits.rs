@@ -1,0 +1,171 @@
+//! The physically sensible range of every number the configuration files give, checked
+//! once when a file is read. A value outside its range is almost always a typing error
+//! (`m1_kg = 1e308`, `k_N_per_m = 1e-300`), and let through it ends deep in the
+//! integrator ("step size fell below 1e-14 s") with a message that names neither the
+//! file nor the key. The ranges are wide: each spans every machine or billet the
+//! service could meet, with a margin of at least ten on both sides of the examples.
+
+/// A closed range of one physical quantity, with its unit for the messages.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    pub min: f64,
+    pub max: f64,
+    pub unit: &'static str,
+}
+
+/// Masses, kg: from a bench test rig's 0.1 kg tool to 1e7 kg, ten times the equivalent
+/// moving mass (ram, screw and flywheel) of the largest screw presses; the example press's
+/// is 1.06e5 kg and the example hammer's lower tool 19 kg.
+pub const MASS_KG: Limits = Limits { min: 0.1, max: 1e7, unit: "kg" };
+
+/// Stiffnesses, N/m: from 1e5 (a soft spring on a bench rig) to 1e13, the stiffness of a
+/// steel column 1 m² across and 2 cm long (E·A/L); the example machines' springs are
+/// 1.7e9..3.4e10 N/m and the default tool contact 6e10 N/m.
+pub const STIFFNESS_N_PER_M: Limits = Limits { min: 1e5, max: 1e13, unit: "N/m" };
+
+/// Damping coefficients, Ns/m: from none to 1e11, above the critical damping
+/// 2·sqrt(k·m) = 2e10 Ns/m of the heaviest mass on the stiffest spring above.
+pub const DAMPING_NS_PER_M: Limits = Limits { min: 0.0, max: 1e11, unit: "Ns/m" };
+
+/// Billet diameter and height before the sheet's first blow, m: from 1 mm (a coin blank)
+/// to 2 m (an open-die ingot).
+pub const BILLET_DIMENSION_M: Limits = Limits { min: 1e-3, max: 2.0, unit: "m" };
+
+/// A measured height after a blow, m: as a billet, but down to 0.1 mm, since a forged
+/// plate can end thinner than any billet starts.
+pub const MEASURED_HEIGHT_M: Limits = Limits { min: 1e-4, max: 2.0, unit: "m" };
+
+/// Flow stress, Pa: from 1e4 (modelling clay, the soft model material of forging
+/// experiments, flows near 0.1 MPa) to 1e10 (five times a hardened tool steel's 2 GPa).
+pub const FLOW_STRESS_PA: Limits = Limits { min: 1e4, max: 1e10, unit: "Pa" };
+
+/// Hansel–Spittel `A_Pa`: as a flow stress, with room above for the fits in which
+/// exp(m1·T) brings a large A down (A = 1.5e9 with exp(m1·T) ≈ 0.04 for hot steel).
+pub const HANSEL_SPITTEL_A_PA: Limits = Limits { min: 1e4, max: 1e12, unit: "Pa" };
+
+/// Hansel–Spittel `m1`, per °C: published fits have |m1| < 0.01; ±0.1 keeps exp(m1·T)
+/// finite at every temperature below.
+pub const HANSEL_SPITTEL_M1_PER_C: Limits = Limits { min: -0.1, max: 0.1, unit: "1/°C" };
+
+/// Hansel–Spittel `m2`, `m3`, `m4` (exponents of strain, strain rate, and 1/strain): the
+/// published fits are within ±1.
+pub const HANSEL_SPITTEL_EXPONENT: Limits = Limits { min: -10.0, max: 10.0, unit: "" };
+
+/// Billet temperature, °C: from absolute zero to 2000 °C, above any steel's solidus.
+pub const TEMPERATURE_C: Limits = Limits { min: -273.15, max: 2000.0, unit: "°C" };
+
+/// Coulomb friction coefficient mu: 0 (none) to 1; sticking friction is reached at
+/// mu = 0.577 already (Tresca's limit), so a larger mu is a mistyped number.
+pub const FRICTION: Limits = Limits { min: 0.0, max: 1.0, unit: "" };
+
+/// Impact speed, m/s: from a press closing at 1 mm/s to 30 m/s, above the fastest
+/// counterblow and high-energy-rate hammers.
+pub const IMPACT_SPEED_MPS: Limits = Limits { min: 1e-3, max: 30.0, unit: "m/s" };
+
+/// An efficiency (plastic work over kinetic energy at impact): a fraction in [0, 1].
+pub const EFFICIENCY: Limits = Limits { min: 0.0, max: 1.0, unit: "" };
+
+/// A whole-number range (byte counts, durations, counters).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WholeLimits {
+    pub min: u64,
+    pub max: u64,
+    pub unit: &'static str,
+}
+
+/// Recording file size before rotation, bytes: from 1 MiB (below that a file holds less
+/// than a second of one 100 kHz DAQ) to 1 TiB.
+pub const ROTATE_BYTES: WholeLimits = WholeLimits { min: 1 << 20, max: 1 << 40, unit: "bytes" };
+
+/// Recording file age before rotation, s: from 1 s to 366 days; the upper bound also keeps
+/// the age in nanoseconds far inside a u64.
+pub const ROTATE_SECONDS: WholeLimits = WholeLimits { min: 1, max: 366 * 86_400, unit: "s" };
+
+/// Serial speed, baud: the standard rates from 300 up to the 12 Mbaud of fast USB bridges.
+pub const BAUD: WholeLimits = WholeLimits { min: 300, max: 12_000_000, unit: "baud" };
+
+/// Modbus poll interval and request timeout, ms: 1 ms to one hour.
+pub const MODBUS_MS: Limits = Limits { min: 1.0, max: 3.6e6, unit: "ms" };
+
+/// Alert window, blows.
+pub const ALERT_WINDOW_BLOWS: WholeLimits = WholeLimits { min: 1, max: 10_000, unit: "blows" };
+
+/// Alert debounce, blows.
+pub const DEBOUNCE_BLOWS: WholeLimits = WholeLimits { min: 0, max: 1_000_000, unit: "blows" };
+
+/// Model-health limit on |energy-balance residual|, a fraction of the kinetic energy.
+pub const RESIDUAL_LIMIT: Limits = Limits { min: 1e-4, max: 10.0, unit: "" };
+
+impl Limits {
+    /// `x` if it is finite and in the range; otherwise why not, in words.
+    pub fn check(&self, x: f64) -> Result<f64, String> {
+        if self.min > 0.0 && !(x.is_finite() && x > 0.0) {
+            return Err(format!("must be finite and > 0, got {x}"));
+        }
+        if self.min == 0.0 && !(x.is_finite() && x >= 0.0) {
+            return Err(format!("must be finite and >= 0, got {x}"));
+        }
+        if !x.is_finite() {
+            return Err(format!("must be finite, got {x}"));
+        }
+        if x < self.min || x > self.max {
+            return Err(format!(
+                "must be within {}..{}{} (a physically sensible range), got {}",
+                number(self.min),
+                number(self.max),
+                unit(self.unit),
+                number(x)
+            ));
+        }
+        Ok(x)
+    }
+}
+
+impl WholeLimits {
+    /// `x` if it is in the range; otherwise why not, in words.
+    pub fn check(&self, x: u64) -> Result<u64, String> {
+        if (self.min..=self.max).contains(&x) {
+            Ok(x)
+        } else {
+            Err(format!("must be within {}..={}{}, got {x}", self.min, self.max, unit(self.unit)))
+        }
+    }
+}
+
+fn unit(u: &str) -> String {
+    if u.is_empty() { String::new() } else { format!(" {u}") }
+}
+
+/// A number as a person writes it: 0.1, 2, 1e7, 1e-300.
+fn number(x: f64) -> String {
+    if x != 0.0 && (x.abs() >= 1e5 || x.abs() < 1e-2) { format!("{x:e}") } else { format!("{x}") }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_outside_the_range_say_the_range_and_the_unit() {
+        assert_eq!(MASS_KG.check(732.0), Ok(732.0));
+        assert_eq!(
+            MASS_KG.check(1e308).unwrap_err(),
+            "must be within 0.1..1e7 kg (a physically sensible range), got 1e308"
+        );
+        assert_eq!(
+            STIFFNESS_N_PER_M.check(1e-300).unwrap_err(),
+            "must be within 1e5..1e13 N/m (a physically sensible range), got 1e-300"
+        );
+        assert_eq!(MASS_KG.check(0.0).unwrap_err(), "must be finite and > 0, got 0");
+        assert_eq!(MASS_KG.check(f64::NAN).unwrap_err(), "must be finite and > 0, got NaN");
+        assert_eq!(FRICTION.check(-0.2).unwrap_err(), "must be finite and >= 0, got -0.2");
+        assert_eq!(FRICTION.check(0.0), Ok(0.0));
+        assert_eq!(TEMPERATURE_C.check(f64::INFINITY).unwrap_err(), "must be finite, got inf");
+        assert_eq!(ROTATE_SECONDS.check(0).unwrap_err(), "must be within 1..=31622400 s, got 0");
+    }
+
+    #[test]
+    fn the_longest_rotation_fits_in_nanoseconds() {
+        assert!(ROTATE_SECONDS.max.checked_mul(1_000_000_000).is_some());
+    }
+}
