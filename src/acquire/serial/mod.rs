@@ -18,4 +18,4 @@ pub use driver::{
     system_clock_ns,
 };
 pub use frame::{DecoderStats, Frame, FrameDecoder, FrameError, encode_frame};
-pub use tracker::{FrameTracker, TrackError, Tracked};
+pub use tracker::{FrameTracker, TrackError, TrackStats, Tracked};
