@@ -220,12 +220,76 @@ fn every_blow_of_the_candump_fixture_is_found_as_expected_and_as_simulated() {
     // 0.85 and 0.926 for blow 1), a limit of the estimator at low rates, not of the bus.
     let truth = expected["truth"].as_array().unwrap();
     assert_eq!(found.len(), V0S_MPS.len(), "every blow, no extra");
+    // The truth is in the log's clock; device time counts from the log's first frame.
+    let t_first_s = first_frame_ns(&text) as f64 * 1e-9;
     for (v, t) in found.iter().zip(truth) {
         let b = v["blow"].clone();
         assert!((f(v, "v_impact_mps") / f(t, "v0_mps") - 1.0).abs() < 0.01, "blow {b}: {v} vs {t}");
-        assert!((f(v, "t_contact_s") - f(t, "t_contact_s")).abs() < 1e-3, "blow {b}: {v} vs {t}");
+        assert!((f(v, "t_contact_s") + t_first_s - f(t, "t_contact_s")).abs() < 1e-3, "blow {b}: {v} vs {t}");
         assert!(f(v, "efficiency") > 0.0 && f(v, "efficiency") < f(t, "efficiency"), "blow {b}: {v} vs {t}");
     }
+}
+
+/// The receive time of a log's first frame, ns.
+fn first_frame_ns(text: &str) -> i64 {
+    CandumpReader::new(LOG, text.as_bytes()).next_frame().expect("a frame").expect("not empty").t_ns
+}
+
+/// The fixture log replayed by the service's CAN log source (`run_log`), at the log's pace
+/// or as fast as possible: every event, and the pipeline's blows as JSON text.
+async fn replay_log_source(path: &Path, realtime: bool) -> (Vec<SourceEvent>, String) {
+    let cfg = CanSourceConfig {
+        name: "can".into(),
+        iface: LOG.into(),
+        mapping: fixture_mapping(),
+        timing: CanTiming::new(SAMPLE_RATE_HZ, 0.05, true),
+    };
+    let (tx, mut rx) = tokio::sync::mpsc::channel(100_000);
+    let (_stop, stop_rx) = tokio::sync::watch::channel(false);
+    forgemon::acquire::can::run_log(cfg, path.to_path_buf(), realtime, tx, stop_rx).await.expect("log reads");
+    let mut events = Vec::new();
+    while let Some(e) = rx.recv().await {
+        if !matches!(e, SourceEvent::Status(_)) {
+            events.push(e);
+        }
+    }
+    let blows = serde_json::to_string(&run_pipeline(&events)).expect("json");
+    (events, blows)
+}
+
+/// Regression (issue 15, finding 8): the log path kept epoch time (1.7e9 s) in f64, 0.24 µs
+/// resolution, and batches were cut at the pace of the replay, so two runs of the same log
+/// differed in the 5th digit of the impact speed.
+#[tokio::test]
+async fn two_replays_of_the_same_candump_log_are_byte_identical() {
+    // The fixture's clock starts at 79.96 s; shift it to an epoch time like a real capture.
+    let text = read(LOG);
+    let shift_us = 1_700_000_000_000_000i64;
+    let mut shifted = String::with_capacity(text.len() + 8 * 4400);
+    for line in text.lines() {
+        let (stamp, rest) = line.split_once(") ").expect("candump -L line");
+        let (s, us) = stamp.trim_start_matches('(').split_once('.').expect("sec.usec");
+        let t_us = s.parse::<i64>().expect("seconds") * 1_000_000 + us.parse::<i64>().expect("µs") + shift_us;
+        shifted.push_str(&format!("({}.{:06}) {rest}\n", t_us / 1_000_000, t_us % 1_000_000));
+    }
+    assert!(shifted.starts_with("(1700000079.962098) can0 120#"), "{}", &shifted[..40]);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("epoch.log");
+    std::fs::write(&path, &shifted).expect("write log");
+    let (events_a, blows_a) = replay_log_source(&path, true).await;
+    let (events_b, blows_b) = replay_log_source(&path, true).await;
+    let (events_c, blows_c) = replay_log_source(&path, false).await;
+    assert_eq!(events_a, events_b, "two paced replays give the same batches");
+    assert_eq!(events_a, events_c, "paced or not, the same batches");
+    assert_eq!(blows_a, blows_b);
+    assert_eq!(blows_a, blows_c);
+    // Device time counts from the first frame in integer ns: µs stamps stay exact.
+    let SourceEvent::Batch(first) = &events_a[0] else { panic!("{:?}", events_a[0]) };
+    assert_eq!((first.device_time_ns, first.host_time_ns), (0, 1_700_000_079_962_098_000));
+    // Against the unshifted log: the same blows to the last digit.
+    let unshifted = run_pipeline(&decode(&text, LOG, BadLines::Fail).0);
+    assert_eq!(blows_a, serde_json::to_string(&unshifted).expect("json"), "the epoch does not change a digit");
+    assert_eq!(unshifted.len(), V0S_MPS.len());
 }
 
 #[test]

@@ -106,7 +106,8 @@ mod tests {
             let SourceEvent::Batch(b) = e else { panic!("no gaps expected: {e:?}") };
             for i in 0..b.len() {
                 let row = &rows[k];
-                assert!((b.time_s(i) - row.t_s).abs() < 1e-6);
+                // Device time counts from the first frame (12.5 s in the log).
+                assert!((b.time_s(i) - (row.t_s - 12.5)).abs() < 1e-6);
                 assert!((b.values[3 * i] - row.load_n).abs() <= 50.0);
                 assert!((b.values[3 * i + 1] - row.disp_m).abs() <= 0.5e-6);
                 assert!((b.values[3 * i + 2] - row.acc_mps2).abs() <= 0.125);

@@ -3,6 +3,10 @@
 //! same `SourceEvent`s as a SocketCAN interface, as fast as possible or at the pace the
 //! log was recorded. Malformed lines are counted as decode errors and the first one is
 //! named (file and line) in the status.
+//!
+//! Deterministic: batches are cut by the decoder alone (its batch length, gaps, the end),
+//! never by the pace of the replay, and device time counts in integer ns from the first
+//! frame, so two runs of the same log give byte-identical batches and results.
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -54,12 +58,10 @@ pub async fn run_log(
             Ok(Some(f)) => {
                 if realtime {
                     let t0 = *t_first_ns.get_or_insert(f.t_ns);
-                    let due = start + Duration::from_nanos((f.t_ns - t0).max(0) as u64);
-                    if due > tokio::time::Instant::now() {
-                        // Hand over what is decoded before waiting.
-                        dec.flush(&mut events);
-                        tokio::time::sleep_until(due).await;
-                    }
+                    let due = start + Duration::from_nanos(f.t_ns.saturating_sub(t0).max(0) as u64);
+                    // Wait without flushing: a batch cut at the pace of the replay would
+                    // make each run's batches, and so its results, differ.
+                    tokio::time::sleep_until(due).await;
                 }
                 match f.data() {
                     Some((frame, data)) => dec.push(f.t_ns, frame, data, &mut events),

@@ -3,13 +3,15 @@
 //! opens the port, reconnects with backoff and reports status, gaps and counters.
 //!
 //! - `frame`: the binary frame codec and its decoder with resync.
-//! - `tracker`: frames into samples; sequence jumps into gaps.
+//! - `tracker`: frames into samples; sequence jumps and device-time slips into gaps.
 //! - `ascii`: the `t_s,v0,v1,...` line decoder.
+//! - `stamps`: the time-stamp check of the ASCII lines (next sample, hole, restart, garbage).
 //! - `driver`: the IO (tokio-serial, or any `AsyncRead` for tests and ptys).
 
 pub mod ascii;
 pub mod driver;
 pub mod frame;
+pub mod stamps;
 pub mod tracker;
 
 pub use ascii::{AsciiEvent, LineDecoder, LineStats};
@@ -18,4 +20,4 @@ pub use driver::{
     system_clock_ns,
 };
 pub use frame::{DecoderStats, Frame, FrameDecoder, FrameError, encode_frame};
-pub use tracker::{FrameTracker, TrackError, Tracked};
+pub use tracker::{FrameTracker, TrackError, TrackStats, Tracked};
