@@ -157,7 +157,7 @@ impl RecordReader {
                 Some(Step::Chunk { offset, record }) => {
                     self.naming = None;
                     if !self.take_chunk(offset, &record, Vec::new()) {
-                        self.naming = Some(self.report.corrupt_chunks.len() - 1);
+                        self.naming = self.report.corrupt_chunks.len().checked_sub(1);
                     }
                 }
                 Some(Step::MessageIndex { channel_id }) => {
