@@ -1,6 +1,7 @@
 //! `forgemon inspect FILE.mcap`: what a recording holds, in forging terms: sources with
 //! their rates and durations, blows, results by class, alerts, gaps and drops, the stored
-//! configuration, and whether the file was finished or had to be recovered.
+//! configuration, and whether the file was finished or had to be recovered. Corrupt chunks
+//! are named on stderr and the exit status is 3 ([`input_status`], shared with `replay`).
 
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -10,7 +11,21 @@ use std::process::ExitCode;
 use clap::Args;
 use serde_json::json;
 
-use crate::record::{Payload, RecordReader};
+use crate::record::{Payload, ReadReport, RecordReader};
+
+/// Exit status when the input recording was corrupt and the results cover only part of it
+/// (README, "Recorded blows").
+pub const EXIT_CORRUPT_INPUT: u8 = 3;
+
+/// Print what was wrong with a recording on stderr, one line per corrupt chunk (file, byte
+/// offset, why, topics lost), and give the exit status it calls for: 3 when part of the
+/// file was corrupt and skipped, else success.
+pub(crate) fn input_status(report: &ReadReport) -> ExitCode {
+    for problem in report.problems() {
+        eprintln!("forgemon: {problem}");
+    }
+    if report.is_corrupt() { ExitCode::from(EXIT_CORRUPT_INPUT) } else { ExitCode::SUCCESS }
+}
 
 #[derive(Debug, Args)]
 pub struct InspectArgs {
@@ -82,6 +97,13 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
         "recovered_messages": report.messages,
         "bytes_recovered": report.bytes_recovered,
         "total_bytes": report.total_bytes,
+        "chunks_verified": report.chunks_verified,
+        "chunks_unverified": report.chunks_unverified,
+        "corrupt_chunks": report.corrupt_chunks.iter().map(|c| json!({
+            "offset": c.offset, "length": c.length, "topics": c.topics, "error": c.error.to_string(),
+        })).collect::<Vec<_>>(),
+        "unknown_channel_messages": report.unknown_channel_messages,
+        "summary_error": report.summary_error,
         "sources": src_json,
         "blows": boundaries,
         "results_by_class": classes,
@@ -96,7 +118,7 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
     let mut w = stdout.lock();
     if args.json {
         writeln!(w, "{out}")?;
-        return Ok(ExitCode::SUCCESS);
+        return Ok(input_status(&report));
     }
     writeln!(w, "{}", args.file.display())?;
     if report.complete {
@@ -110,6 +132,9 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
             report.total_bytes,
             report.stopped_by.as_ref().map_or(String::new(), |s| format!(" ({s})"))
         )?;
+    }
+    if !report.corrupt_chunks.is_empty() {
+        writeln!(w, "  CORRUPT: {} chunks skipped (named on stderr)", report.corrupt_chunks.len())?;
     }
     for s in out["sources"].as_array().into_iter().flatten() {
         writeln!(
@@ -157,5 +182,6 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
         "  configuration stored: {}",
         if configs.is_empty() { "none".to_string() } else { configs.join(", ") }
     )?;
-    Ok(ExitCode::SUCCESS)
+    w.flush()?;
+    Ok(input_status(&report))
 }

@@ -97,6 +97,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         )?;
     }
     let mut events = Vec::new();
+    let mut status = ExitCode::SUCCESS;
     let (mut blows, mut rejected) = (0u64, 0u64);
     let mut handle =
         |events: &mut Vec<PipelineEvent>, writer: &mut Option<RecordWriter>, w: &mut dyn Write| -> anyhow::Result<()> {
@@ -183,6 +184,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             if !reader.report().complete {
                 eprintln!("forgemon: {}", reader.report());
             }
+            status = super::inspect::input_status(reader.report());
         }
     }
     feeder.pipeline_mut().end_of_stream(&mut events);
@@ -201,7 +203,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         s.triggers_without_contact,
         s.batches_dropped
     );
-    Ok(ExitCode::SUCCESS)
+    Ok(status)
 }
 
 /// Record a batch (with `--out`) and feed it to the pipeline, through the same merge of

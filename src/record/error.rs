@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 /// A payload that is not a valid forgemon message (sans-IO: no file, no offset; the
-/// reader wraps it in [`RecordError::Decode`] with both).
+/// reader reports it as [`ChunkError::Payload`], in a [`super::CorruptChunk`] with both).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DecodeError {
     #[error("not a valid protobuf message: {0}")]
@@ -19,6 +19,44 @@ pub enum DecodeError {
     UnknownClass { class: String },
     #[error("unknown alert kind {kind:?} (expected elastic_blow or model_health)")]
     UnknownAlertKind { kind: String },
+}
+
+/// Why one chunk of a recording could not be used (sans-IO: the reader adds the file and
+/// the byte offset in [`super::CorruptChunk`]). The chunk is skipped and the rest is read.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ChunkError {
+    #[error("crc mismatch: stored {saved:#010x}, computed {calculated:#010x}")]
+    Crc { saved: u32, calculated: u32 },
+    /// Anything else the `mcap` crate's reader refused (bad compression, sizes that do not
+    /// add up, a record running past the chunk's end, ...), in its words.
+    #[error("{what}")]
+    Mcap { what: String },
+    #[error("not a chunk record (opcode {opcode:#04x})")]
+    NotChunk { opcode: u8 },
+    #[error("the record ends after {have} bytes, inside its header")]
+    Truncated { have: u64 },
+    #[error("its length field says {field} bytes, but {actual} follow")]
+    Length { field: u64, actual: u64 },
+    #[error("it claims {bytes} bytes, over the {limit}-byte limit")]
+    TooLarge { bytes: u64, limit: u64 },
+    #[error("the index puts it at bytes {start}..{end}, past the end of the {total}-byte file")]
+    OutsideFile { start: u64, end: u64, total: u64 },
+    #[error("message on {topic} at log time {log_time_ns} ns: {source}")]
+    Payload {
+        topic: String,
+        log_time_ns: u64,
+        #[source]
+        source: DecodeError,
+    },
+    #[error("message on {topic} has log time {log_time_ns} ns, which is out of range")]
+    LogTime { topic: String, log_time_ns: u64 },
+    /// Front-to-back reading lost the record boundaries here (a damaged length field) and
+    /// found the next intact chunk further on.
+    #[error("unreadable records ({reason}), read on from the next intact chunk")]
+    Framing { reason: String },
+    /// As [`ChunkError::Framing`], with no intact chunk after it: the rest of the file.
+    #[error("unreadable records to the end of the file ({reason})")]
+    Tail { reason: String },
 }
 
 /// An error recording or reading a recording.
@@ -42,17 +80,6 @@ pub enum RecordError {
         #[source]
         source: mcap::McapError,
     },
-    #[error("{path}: message on {topic} at log time {log_time_ns} ns: {source}", path = path.display())]
-    Decode {
-        path: PathBuf,
-        topic: String,
-        log_time_ns: u64,
-        #[source]
-        source: DecodeError,
-    },
-    #[error("{path}: message on {topic} has log time {log_time_ns} ns, which is out of range",
-        path = path.display())]
-    LogTimeOutOfRange { path: PathBuf, topic: String, log_time_ns: u64 },
     #[error("{path}: cannot record on {topic}: log time {time_ns} ns is negative (MCAP times are unsigned)",
         path = path.display())]
     NegativeLogTime { path: PathBuf, topic: String, time_ns: i64 },

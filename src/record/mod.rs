@@ -13,24 +13,33 @@
 //! - [`batch`]: joining/cutting sample batches to 10–100 ms (sans-IO).
 //! - [`writer`]: chunked zstd MCAP, `.part` then rename, sync every second of log time,
 //!   rotation.
-//! - [`reader`]: indexed reading, and recovery of files cut off by a crash.
+//! - [`reader`]: indexed reading, and recovery of files cut off by a crash or damaged:
+//!   every chunk's CRC is checked (`chunk`), a corrupt chunk is skipped and named in the
+//!   [`report`]; the summary (`summary`) is checked against its CRC; a file without a
+//!   usable one is read front to back, resynchronising after damaged records (`linear`).
 //!
 //! This is the one layer above the pure core that does file IO; nothing in `signal/`,
 //! `estimate/` or `alert/` depends on it.
 
 pub mod batch;
+mod channels;
+mod chunk;
 pub mod codec;
 pub mod error;
 mod file;
+mod linear;
 pub mod message;
 pub mod reader;
+pub mod report;
 pub mod rotation;
 pub mod schema;
+mod summary;
 pub mod writer;
 
 pub use batch::Rebatcher;
-pub use error::{DecodeError, RecordError};
+pub use error::{ChunkError, DecodeError, RecordError};
 pub use message::{BlowBoundary, ConfigFile, Gap, Payload, Recorded, Status};
-pub use reader::{ReadReport, RecordReader, Recording, read_recording};
+pub use reader::{RecordReader, Recording, read_recording};
+pub use report::{CorruptChunk, ReadReport};
 pub use schema::MessageKind;
 pub use writer::{ChunkCompression, RecordOptions, RecordWriter, Rotation, SyncPoint};

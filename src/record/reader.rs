@@ -1,70 +1,34 @@
 //! Reading a recording back as typed messages, from a finished file (through its summary
-//! and chunk index) or from one cut off by a crash or power loss (no footer, maybe half a
-//! chunk at the end), and saying how much was recovered.
+//! and chunk index) or front to back (a file cut off by a crash or power loss, or one whose
+//! summary is damaged), and saying how much was recovered and what was corrupt.
 //!
-//! A cut-off file is read front to back with the `mcap` crate's sans-IO message reader,
-//! each chunk checked against its CRC before any of its messages is yielded, so exactly
-//! the messages of the chunks written completely before the cut come back; reading stops
-//! at the first record that is incomplete or corrupt, and [`ReadReport`] says where and
-//! why. Both paths yield messages in file order, which is the order they were recorded;
-//! [`read_recording`] sorts them by log time.
+//! Every chunk is checked against its CRC by the `mcap` crate before any of its messages
+//! is yielded (`chunk.rs`): a chunk gives all its messages or none. A corrupt chunk is
+//! skipped, and reading goes on at the next one (found through the chunk index, by the
+//! chunk's own length field, or by resynchronising, `linear.rs`); [`ReadReport`] names each
+//! skipped chunk with its byte offset and topics. A cut-off file gives back the messages of
+//! the chunks written completely before the cut. Both paths yield messages in file order,
+//! which is the order they were recorded; [`read_recording`] sorts them by log time.
 
-use std::collections::HashMap;
+use std::collections::VecDeque;
 use std::fs::File;
-use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
-use mcap::sans_io::{
-    IndexedReadEvent, IndexedReader, IndexedReaderOptions, LinearReaderOptions, MessageReadEvent, MessageReader,
-    SummaryReadEvent, SummaryReader, SummaryReaderOptions,
-};
+use mcap::records::ChunkIndex;
 
+use super::channels::{Channels, Lookup};
+use super::chunk::{self, Inner};
 use super::codec;
-use super::error::RecordError;
+use super::error::{ChunkError, RecordError};
+use super::linear::{Linear, Step};
 use super::message::Recorded;
-use super::schema::{MESSAGE_ENCODING, MessageKind, SCHEMA_ENCODING};
+use super::report::{CorruptChunk, ReadReport};
+use super::summary::{self, Found};
 
 /// The largest record (chunk, compressed or not) the reader accepts. forgemon's chunks are
-/// about 1 MiB; the limit keeps a corrupt length from allocating gigabytes.
-pub const MAX_RECORD_BYTES: usize = 256 * 1024 * 1024;
-
-/// How much of a file was read, and whether it was whole.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ReadReport {
-    pub path: PathBuf,
-    /// The file has its summary and footer: it was finished properly.
-    pub complete: bool,
-    /// Read through the summary's chunk index (else front to back).
-    pub indexed: bool,
-    /// Messages yielded.
-    pub messages: u64,
-    /// Messages on channels that are not forgemon's (other schemas), passed over.
-    pub skipped: u64,
-    /// Bytes from the start of the file through the last chunk recovered (approximately:
-    /// read-ahead inside the cut chunk is not counted).
-    pub bytes_recovered: u64,
-    pub total_bytes: u64,
-    /// Why reading stopped before the end, for a cut-off or corrupt file.
-    pub stopped_by: Option<String>,
-}
-
-impl std::fmt::Display for ReadReport {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{}: {} messages, {} of {} bytes{}",
-            self.path.display(),
-            self.messages,
-            self.bytes_recovered,
-            self.total_bytes,
-            if self.complete { String::new() } else { ", file was cut off".to_string() }
-        )?;
-        if let Some(why) = &self.stopped_by {
-            write!(f, " ({why})")?;
-        }
-        Ok(())
-    }
-}
+/// about 1 MiB; the limit keeps a damaged length field from allocating gigabytes.
+pub const MAX_RECORD_BYTES: usize = 64 * 1024 * 1024;
 
 /// A whole recording in memory, in log-time order (ties in file order).
 #[derive(Debug, Clone, PartialEq)]
@@ -74,6 +38,7 @@ pub struct Recording {
 }
 
 /// Read a whole recording (`.mcap` or `.mcap.part`) into memory, sorted by log time.
+/// Corrupt chunks are skipped and named in the report, not errors.
 pub fn read_recording(path: impl AsRef<Path>) -> Result<Recording, RecordError> {
     let mut reader = RecordReader::open(path)?;
     let mut messages = Vec::new();
@@ -86,24 +51,29 @@ pub fn read_recording(path: impl AsRef<Path>) -> Result<Recording, RecordError> 
 }
 
 /// Streams the messages of one recording, in file (= recording) order. After the last
-/// message, [`RecordReader::report`] says how much was read.
+/// message, [`RecordReader::report`] says how much was read and what was skipped. The
+/// only errors are IO errors and a file that is not MCAP at all.
 pub struct RecordReader {
     path: PathBuf,
-    mode: Mode,
+    source: Source,
+    channels: Channels,
+    /// The messages of the chunk being handed out.
+    queue: VecDeque<Recorded>,
     report: ReadReport,
-    /// What each channel id holds: its kind and topic, or `None` for foreign channels.
-    channels: HashMap<u16, Option<(MessageKind, String)>>,
+    /// Reading front to back: the corrupt chunk whose topics the message index records
+    /// after it name.
+    naming: Option<usize>,
     done: bool,
 }
 
-enum Mode {
-    Indexed { file: File, summary: Box<mcap::Summary>, reader: Box<IndexedReader>, chunk: Vec<u8> },
-    Linear { file: BufReader<File>, reader: Box<MessageReader>, fed: u64 },
+enum Source {
+    Indexed { file: File, chunks: std::vec::IntoIter<ChunkIndex> },
+    Linear(Box<Linear>),
 }
 
 impl RecordReader {
     /// Open a recording. Fails when the file cannot be read or is not MCAP at all; a
-    /// cut-off file opens, and yields what it holds.
+    /// cut-off or damaged file opens, and yields what it holds.
     pub fn open(path: impl AsRef<Path>) -> Result<RecordReader, RecordError> {
         let path = path.as_ref().to_path_buf();
         let io_err = |action: &'static str| {
@@ -113,44 +83,25 @@ impl RecordReader {
         let mut file = File::open(&path).map_err(io_err("open"))?;
         let total_bytes = file.metadata().map_err(io_err("stat"))?.len();
         check_magic(&path, &mut file, total_bytes)?;
-
-        let indexed = match read_summary(&mut file, total_bytes) {
-            Some(summary) if is_indexed(&summary) => {
-                let options = IndexedReaderOptions::new()
-                    .with_order(mcap::sans_io::indexed_reader::ReadOrder::File)
-                    .with_record_length_limit(MAX_RECORD_BYTES);
-                IndexedReader::new_with_options(&summary, options).ok().map(|r| (summary, r))
+        let mut report = ReadReport::new(path.clone(), total_bytes);
+        let found = summary::read_summary(&mut file, total_bytes, MAX_RECORD_BYTES).map_err(io_err("read"))?;
+        let (source, channels) = match found {
+            // Every message is in an indexed chunk (forgemon writes no others).
+            Found::Summary(s) if !s.chunk_indexes.is_empty() || s.message_count.unwrap_or(0) == 0 => {
+                report.complete = true;
+                report.indexed = true;
+                let s = *s;
+                (Source::Indexed { file, chunks: s.chunk_indexes.into_iter() }, s.channels)
             }
-            _ => None,
-        };
-        let is_indexed = indexed.is_some();
-        let mode = match indexed {
-            Some((summary, reader)) => {
-                Mode::Indexed { file, summary: Box::new(summary), reader: Box::new(reader), chunk: Vec::new() }
-            }
-            None => {
-                file.seek(SeekFrom::Start(0)).map_err(io_err("seek"))?;
-                let options = LinearReaderOptions::default()
-                    .with_prevalidate_chunk_crcs(true)
-                    .with_record_length_limit(MAX_RECORD_BYTES);
-                Mode::Linear {
-                    file: BufReader::with_capacity(256 * 1024, file),
-                    reader: Box::new(MessageReader::new_with_options(options)),
-                    fed: 0,
+            other => {
+                if let Found::Unreadable(why) = other {
+                    report.summary_error = Some(why);
                 }
+                let linear = Linear::new(file, total_bytes, MAX_RECORD_BYTES).map_err(io_err("seek"))?;
+                (Source::Linear(Box::new(linear)), Channels::default())
             }
         };
-        let report = ReadReport {
-            path: path.clone(),
-            complete: is_indexed,
-            indexed: is_indexed,
-            messages: 0,
-            skipped: 0,
-            bytes_recovered: 0,
-            total_bytes,
-            stopped_by: None,
-        };
-        Ok(RecordReader { path, mode, report, channels: HashMap::new(), done: false })
+        Ok(RecordReader { path, source, channels, queue: VecDeque::new(), report, naming: None, done: false })
     }
 
     /// How much has been read so far; final once the iterator has ended.
@@ -164,98 +115,149 @@ impl RecordReader {
 
     fn next_message(&mut self) -> Result<Option<Recorded>, RecordError> {
         loop {
-            let (log_time, decoded) = match &mut self.mode {
-                Mode::Indexed { file, summary, reader, chunk } => {
-                    let Some(event) = reader.next_event() else {
-                        self.report.bytes_recovered = self.report.total_bytes;
-                        return Ok(None);
-                    };
-                    match event.map_err(|source| RecordError::Mcap { path: self.path.clone(), offset: None, source })? {
-                        IndexedReadEvent::ReadChunkRequest { offset, length } => {
-                            let io_err = |source| RecordError::Io { path: self.path.clone(), action: "read", source };
-                            chunk.resize(length, 0);
-                            file.seek(SeekFrom::Start(offset)).map_err(io_err)?;
-                            file.read_exact(chunk).map_err(|source| RecordError::Io {
-                                path: self.path.clone(),
-                                action: "read",
-                                source,
-                            })?;
-                            reader.insert_chunk_record_data(offset, chunk).map_err(|source| RecordError::Mcap {
-                                path: self.path.clone(),
-                                offset: Some(offset),
-                                source,
-                            })?;
-                            continue;
-                        }
-                        IndexedReadEvent::Message { header, data } => {
-                            let kind = channel_kind(&mut self.channels, header.channel_id, || {
-                                summary.channels.get(&header.channel_id).map(|c| c.as_ref().clone())
-                            });
-                            let decoded = kind.map(|(kind, topic)| (topic, codec::decode_payload(kind, data)));
-                            (header.log_time, decoded)
-                        }
-                    }
-                }
-                Mode::Linear { file, reader, fed } => {
-                    let Some(event) = reader.next_event() else {
-                        // The end magic was read: the file is whole even without an index.
-                        self.report.complete = true;
-                        self.report.bytes_recovered = *fed;
-                        return Ok(None);
-                    };
-                    match event {
-                        Ok(MessageReadEvent::ReadRequest(need)) => {
-                            let buf = reader.insert(need);
-                            let n = loop {
-                                match file.read(buf) {
-                                    Ok(n) => break n,
-                                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                                    Err(source) => {
-                                        return Err(RecordError::Io {
-                                            path: self.path.clone(),
-                                            action: "read",
-                                            source,
-                                        });
-                                    }
-                                }
-                            };
-                            reader.notify_read(n);
-                            *fed += n as u64;
-                            continue;
-                        }
-                        Ok(MessageReadEvent::Message(message)) => {
-                            let id = message.channel.id;
-                            let kind = channel_kind(&mut self.channels, id, || Some(message.channel.as_ref().clone()));
-                            let decoded = kind.map(|(kind, topic)| (topic, codec::decode_payload(kind, &message.data)));
-                            self.report.bytes_recovered = *fed;
-                            (message.log_time, decoded)
-                        }
-                        Err(e) => {
-                            // A cut-off or corrupt file: keep what came before.
-                            self.report.stopped_by = Some(describe_stop(&e, *fed, self.report.total_bytes));
-                            return Ok(None);
-                        }
-                    }
-                }
-            };
-            let Some((topic, decoded)) = decoded else {
-                self.report.skipped += 1;
-                continue;
-            };
-            let payload = decoded.map_err(|source| RecordError::Decode {
-                path: self.path.clone(),
-                topic: topic.clone(),
-                log_time_ns: log_time,
-                source,
-            })?;
-            let log_time_ns = i64::try_from(log_time).map_err(|_| RecordError::LogTimeOutOfRange {
-                path: self.path.clone(),
-                topic,
-                log_time_ns: log_time,
-            })?;
-            self.report.messages += 1;
-            return Ok(Some(Recorded { log_time_ns, payload }));
+            if let Some(message) = self.queue.pop_front() {
+                self.report.messages += 1;
+                return Ok(Some(message));
+            }
+            if !self.advance()? {
+                return Ok(None);
+            }
         }
+    }
+
+    /// Read the next chunk (or record) into the queue; `false` at the end.
+    fn advance(&mut self) -> Result<bool, RecordError> {
+        let io_err = |source| RecordError::Io { path: self.path.clone(), action: "read", source };
+        match &mut self.source {
+            Source::Indexed { file, chunks } => {
+                let Some(index) = chunks.next() else {
+                    self.report.bytes_recovered = self.report.total_bytes;
+                    return Ok(false);
+                };
+                let mut topics: Vec<String> =
+                    index.message_index_offsets.keys().map(|&id| self.channels.topic_or_id(id)).collect();
+                topics.sort();
+                let (start, length) = (index.chunk_start_offset, index.chunk_length);
+                let end = start.saturating_add(length);
+                if end > self.report.total_bytes {
+                    let error = ChunkError::OutsideFile { start, end, total: self.report.total_bytes };
+                    self.corrupt(start, length, topics, error);
+                } else if length > MAX_RECORD_BYTES as u64 {
+                    let error = ChunkError::TooLarge { bytes: length, limit: MAX_RECORD_BYTES as u64 };
+                    self.corrupt(start, length, topics, error);
+                } else {
+                    let mut record = vec![0u8; length as usize];
+                    file.seek(SeekFrom::Start(start)).map_err(io_err)?;
+                    file.read_exact(&mut record).map_err(io_err)?;
+                    self.take_chunk(start, &record, topics);
+                }
+            }
+            Source::Linear(linear) => match linear.next_step().map_err(io_err)? {
+                None => return Ok(false),
+                Some(Step::Chunk { offset, record }) => {
+                    self.naming = None;
+                    if !self.take_chunk(offset, &record, Vec::new()) {
+                        self.naming = self.report.corrupt_chunks.len().checked_sub(1);
+                    }
+                }
+                Some(Step::MessageIndex { channel_id }) => {
+                    let topic = self.channels.topic_or_id(channel_id);
+                    if let Some(c) = self.naming.and_then(|i| self.report.corrupt_chunks.get_mut(i))
+                        && !c.topics.contains(&topic)
+                    {
+                        c.topics.push(topic);
+                        c.topics.sort();
+                    }
+                }
+                Some(Step::Loose { offset, length, record }) => {
+                    self.naming = None;
+                    match self.decode(vec![record]) {
+                        Ok(messages) => self.queue.extend(messages),
+                        Err(error) => self.corrupt(offset, length, Vec::new(), error),
+                    }
+                }
+                Some(Step::Damaged { offset, length, error }) => {
+                    self.naming = None;
+                    self.corrupt(offset, length, Vec::new(), error);
+                }
+                Some(Step::End { complete, stopped_by }) => {
+                    self.report.complete = complete;
+                    self.report.stopped_by = stopped_by;
+                    if complete {
+                        self.report.bytes_recovered = self.report.total_bytes;
+                    }
+                }
+            },
+        }
+        Ok(true)
+    }
+
+    /// Check, unpack and decode one chunk record at `offset` into the queue; `false` when it
+    /// was corrupt (and is now in the report).
+    fn take_chunk(&mut self, offset: u64, record: &[u8], topics: Vec<String>) -> bool {
+        let decoded = chunk::unpack(record, MAX_RECORD_BYTES).and_then(|u| Ok((u.verified, self.decode(u.records)?)));
+        match decoded {
+            Ok((verified, messages)) => {
+                self.queue.extend(messages);
+                if verified {
+                    self.report.chunks_verified += 1;
+                } else {
+                    self.report.chunks_unverified += 1;
+                }
+                self.report.bytes_recovered = self.report.bytes_recovered.max(offset + record.len() as u64);
+                true
+            }
+            Err(error) => {
+                self.corrupt(offset, record.len() as u64, topics, error);
+                false
+            }
+        }
+    }
+
+    /// Turn a chunk's records into messages, learning its schemas and channels on the way.
+    /// One message that does not decode makes the whole chunk corrupt.
+    fn decode(&mut self, records: Vec<Inner>) -> Result<Vec<Recorded>, ChunkError> {
+        let mut out = Vec::new();
+        let (mut foreign, mut unknown) = (0, 0);
+        for record in records {
+            match record {
+                Inner::Schema { id, name, encoding } => self.channels.add_schema(id, name, encoding),
+                Inner::Channel { id, schema_id, topic, message_encoding } => {
+                    self.channels.add_channel(id, schema_id, topic, message_encoding)
+                }
+                Inner::Message { channel_id, log_time, data } => match self.channels.lookup(channel_id) {
+                    Lookup::Ours(kind, topic) => {
+                        let payload = codec::decode_payload(kind, &data).map_err(|source| ChunkError::Payload {
+                            topic: topic.to_string(),
+                            log_time_ns: log_time,
+                            source,
+                        })?;
+                        let log_time_ns = i64::try_from(log_time)
+                            .map_err(|_| ChunkError::LogTime { topic: topic.to_string(), log_time_ns: log_time })?;
+                        out.push(Recorded { log_time_ns, payload });
+                    }
+                    Lookup::Foreign => foreign += 1,
+                    Lookup::Unknown => unknown += 1,
+                },
+            }
+        }
+        self.report.skipped += foreign;
+        self.report.unknown_channel_messages += unknown;
+        Ok(out)
+    }
+
+    /// Name a corrupt chunk (or stretch of bytes) in the report. Damage that starts where
+    /// the last one ended is the same damage (a chunk whose length field was hit, and the
+    /// bytes after it the reader could not frame): the entry grows.
+    fn corrupt(&mut self, offset: u64, length: u64, topics: Vec<String>, error: ChunkError) {
+        if let Some(last) = self.report.corrupt_chunks.last_mut()
+            && last.offset.saturating_add(last.length) == offset
+            && matches!(error, ChunkError::Framing { .. } | ChunkError::Tail { .. })
+        {
+            last.length += length;
+            return;
+        }
+        self.report.corrupt_chunks.push(CorruptChunk { offset, length, topics, error });
     }
 }
 
@@ -272,28 +274,6 @@ impl Iterator for RecordReader {
         }
         item
     }
-}
-
-/// The kind and topic of a channel, looked up once per channel id.
-fn channel_kind(
-    cache: &mut HashMap<u16, Option<(MessageKind, String)>>,
-    id: u16,
-    channel: impl FnOnce() -> Option<mcap::Channel<'static>>,
-) -> Option<(MessageKind, String)> {
-    cache
-        .entry(id)
-        .or_insert_with(|| {
-            let channel = channel()?;
-            if channel.message_encoding != MESSAGE_ENCODING {
-                return None;
-            }
-            let schema = channel.schema.as_ref()?;
-            if schema.encoding != SCHEMA_ENCODING {
-                return None;
-            }
-            MessageKind::from_schema_name(&schema.name).map(|k| (k, channel.topic.clone()))
-        })
-        .clone()
 }
 
 /// The first bytes must be the MCAP magic; anything else is not a recording.
@@ -318,48 +298,232 @@ fn check_magic(path: &Path, file: &mut File, total_bytes: u64) -> Result<(), Rec
     Ok(())
 }
 
-/// The summary section, if the file has a valid footer and summary.
-fn read_summary(file: &mut File, total_bytes: u64) -> Option<mcap::Summary> {
-    let options =
-        SummaryReaderOptions::default().with_file_size(total_bytes).with_record_length_limit(MAX_RECORD_BYTES);
-    let mut reader = SummaryReader::new_with_options(options);
-    while let Some(event) = reader.next_event() {
-        match event.ok()? {
-            SummaryReadEvent::ReadRequest(need) => {
-                let n = file.read(reader.insert(need)).ok()?;
-                reader.notify_read(n);
-            }
-            SummaryReadEvent::SeekRequest(to) => {
-                let pos = file.seek(to).ok()?;
-                reader.notify_seeked(pos);
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    use super::*;
+    use crate::record::message::{ConfigFile, Payload};
+    use crate::record::writer::{ChunkCompression, RecordOptions, RecordWriter};
+    use crate::signal::sample::{Role, SampleBatch};
+
+    const MS: i64 = 1_000_000;
+    const BATCHES: i64 = 24;
+
+    /// A small recording in 4 kB chunks (about 8 of them): a config file, then 24 batches
+    /// of 50 samples, 50 ms apart from host time 1 s. Returns its bytes and what it holds.
+    fn small_recording() -> (Vec<u8>, Vec<Recorded>) {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("r.mcap");
+        let options = RecordOptions {
+            compression: ChunkCompression::Zstd { level: 1 },
+            chunk_size_bytes: 4096,
+            ..RecordOptions::default()
+        };
+        let mut w = RecordWriter::create_with(&path, options).expect("create");
+        w.write_config(1_000 * MS, "machine.toml", "kind = \"hammer\"\n").expect("config");
+        for k in 0..BATCHES {
+            w.write_samples(&SampleBatch {
+                source: "daq0".into(),
+                seq: k as u64,
+                device_time_ns: k * 50 * MS,
+                host_time_ns: 1_000 * MS + k * 50 * MS,
+                period_ns: 1e6,
+                roles: vec![Role::Load, Role::Disp, Role::Acc],
+                values: (0..150).map(|i| ((k * 7919 + i * 104_729) % 10_007) as f64).collect(),
+            })
+            .expect("samples");
+        }
+        w.finish().expect("finish");
+        let bytes = std::fs::read(&path).expect("read back");
+        let intact = read_bytes(&bytes).expect("intact").0;
+        assert_eq!(intact.len() as i64, BATCHES + 1);
+        (bytes, intact)
+    }
+
+    /// Every message of `bytes` as a file, in file order, and the report.
+    fn read_bytes(bytes: &[u8]) -> Result<(Vec<Recorded>, ReadReport), RecordError> {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("x.mcap");
+        std::fs::write(&path, bytes).expect("write");
+        let mut reader = RecordReader::open(&path)?;
+        let messages = reader.by_ref().collect::<Result<Vec<_>, _>>()?;
+        Ok((messages, reader.report().clone()))
+    }
+
+    /// The chunk index, by the `mcap` crate's own (non-sans-IO) summary reader.
+    fn chunk_indexes(bytes: &[u8]) -> Vec<ChunkIndex> {
+        let summary = mcap::Summary::read(bytes).expect("summary").expect("has one");
+        let mut chunks = summary.chunk_indexes;
+        chunks.sort_by_key(|c| c.chunk_start_offset);
+        chunks
+    }
+
+    /// `got` is `all` with one non-empty run of messages taken out.
+    fn is_all_but_one_run(got: &[Recorded], all: &[Recorded]) -> bool {
+        let head = got.iter().zip(all).take_while(|(a, b)| a == b).count();
+        let tail = got.iter().rev().zip(all.iter().rev()).take_while(|(a, b)| a == b).count();
+        got.len() < all.len() && head + tail >= got.len()
+    }
+
+    #[test]
+    fn a_flipped_bit_in_any_chunk_skips_that_chunk_only_and_names_it() {
+        let (bytes, intact) = small_recording();
+        let chunks = chunk_indexes(&bytes);
+        assert!(chunks.len() >= 4, "{} chunks", chunks.len());
+        for c in &chunks {
+            let mut bad = bytes.clone();
+            // Middle of the compressed data.
+            let at = (c.compressed_data_offset().expect("offset") + c.compressed_size / 2) as usize;
+            bad[at] ^= 0x10;
+            let (got, report) = read_bytes(&bad).expect("reads");
+            assert_eq!(report.corrupt_chunks.len(), 1, "{report:?}");
+            let corrupt = &report.corrupt_chunks[0];
+            assert_eq!((corrupt.offset, corrupt.length), (c.chunk_start_offset, c.chunk_length));
+            assert!(!corrupt.topics.is_empty());
+            assert!(corrupt.topics.iter().all(|t| t == "/config" || t == "/samples/daq0"), "{:?}", corrupt.topics);
+            assert!(is_all_but_one_run(&got, &intact), "chunk at {}: the others read intact", c.chunk_start_offset);
+            assert!(report.is_corrupt() && report.complete && report.indexed);
+            assert_eq!(report.chunks_verified as usize, chunks.len() - 1);
+            let line = &report.problems()[0];
+            assert!(
+                line.contains(&format!("chunk at byte {} is corrupt (crc mismatch", c.chunk_start_offset)),
+                "{line}"
+            );
+        }
+    }
+
+    #[test]
+    fn read_front_to_back_a_corrupt_chunk_is_skipped_and_named_by_its_message_index() {
+        let (bytes, intact) = small_recording();
+        let chunks = chunk_indexes(&bytes);
+        // Cut the summary off: the reader goes front to back.
+        let data_end = chunks.last().map(|c| c.chunk_start_offset + c.chunk_length).expect("chunks") as usize;
+        let c = &chunks[2];
+        let mut bad = bytes[..data_end + 40].to_vec();
+        bad[(c.compressed_data_offset().expect("offset") + 3) as usize] ^= 0x01;
+        let (got, report) = read_bytes(&bad).expect("reads");
+        assert!(!report.indexed && !report.complete);
+        assert_eq!(report.corrupt_chunks.len(), 1, "{report:?}");
+        assert_eq!(report.corrupt_chunks[0].offset, c.chunk_start_offset);
+        assert_eq!(report.corrupt_chunks[0].topics, vec!["/samples/daq0".to_string()]);
+        assert!(is_all_but_one_run(&got, &intact));
+    }
+
+    #[test]
+    fn a_damaged_chunk_length_read_front_to_back_resyncs_at_the_next_chunk() {
+        let (bytes, intact) = small_recording();
+        let chunks = chunk_indexes(&bytes);
+        let data_end = chunks.last().map(|c| c.chunk_start_offset + c.chunk_length).expect("chunks") as usize;
+        // A set bit cleared (the record ends early), and bits that make it run past the end
+        // of the file (16 MiB) or past the record size limit (1 GiB).
+        let lowest_set = |c: &ChunkIndex| (c.chunk_length - 9).trailing_zeros() as usize;
+        for (bit, c) in [(lowest_set(&chunks[1]), &chunks[1]), (24, &chunks[2]), (30, &chunks[3])] {
+            let mut bad = bytes[..data_end].to_vec();
+            // The record length field, little-endian, after the opcode.
+            let field = c.chunk_start_offset as usize + 1 + bit / 8;
+            bad[field] ^= 1 << (bit % 8);
+            let (got, report) = read_bytes(&bad).expect("reads");
+            assert!(!report.corrupt_chunks.is_empty(), "bit {bit}: {report:?}");
+            assert_eq!(report.corrupt_chunks[0].offset, c.chunk_start_offset, "{report:?}");
+            assert!(is_all_but_one_run(&got, &intact), "bit {bit}: {report:?}");
+            let kept_after = got.iter().filter(|m| m.log_time_ns as u64 > c.message_end_time).count();
+            let after = intact.iter().filter(|m| m.log_time_ns as u64 > c.message_end_time).count();
+            assert_eq!(kept_after, after, "bit {bit}: every later chunk is read");
+        }
+    }
+
+    #[test]
+    fn a_flipped_bit_outside_the_chunks_loses_nothing_or_is_named() {
+        let (bytes, intact) = small_recording();
+        let chunks = chunk_indexes(&bytes);
+        let first = chunks[0].chunk_start_offset as usize;
+        let data_end = chunks.last().map(|c| c.chunk_start_offset + c.chunk_length).expect("chunks") as usize;
+        // The magic and header record, and everything after the last chunk: message
+        // indexes, data end, summary, footer, closing magic. Every bit.
+        for i in (0..first).chain(data_end..bytes.len()) {
+            for bit in [0, 3, 6] {
+                let mut bad = bytes.clone();
+                bad[i] ^= 1 << bit;
+                match read_bytes(&bad) {
+                    Ok((got, report)) => {
+                        assert_eq!(got, intact, "byte {i} bit {bit}: {report:?}");
+                        assert!(report.corrupt_chunks.is_empty(), "byte {i} bit {bit}: {report:?}");
+                        assert!(report.indexed || report.summary_error.is_some() || !report.complete);
+                    }
+                    Err(e) => assert!(i < 8 && matches!(e, RecordError::NotMcap { .. }), "byte {i}: {e}"),
+                }
             }
         }
     }
-    reader.finish()
-}
-
-/// A summary the indexed reader can use: every message is in an indexed chunk.
-fn is_indexed(summary: &mcap::Summary) -> bool {
-    let messages = summary.stats.as_ref().map_or(0, |s| s.message_count);
-    !summary.chunk_indexes.is_empty() || messages == 0
-}
-
-fn describe_stop(e: &mcap::McapError, fed: u64, total: u64) -> String {
-    match e {
-        mcap::McapError::UnexpectedEof => format!("the file ends inside a record (read {fed} of {total} bytes)"),
-        other => format!("{other} (near byte {fed} of {total})"),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
 
     #[test]
-    fn stop_descriptions_name_the_offset() {
-        let s = describe_stop(&mcap::McapError::UnexpectedEof, 10, 20);
-        assert!(s.contains("10 of 20"), "{s}");
-        let s = describe_stop(&mcap::McapError::BadMagic, 3, 20);
-        assert!(s.contains("near byte 3"), "{s}");
+    fn a_damaged_summary_falls_back_to_front_to_back_and_says_so() {
+        let (mut bytes, intact) = small_recording();
+        let chunks = chunk_indexes(&bytes);
+        let data_end = chunks.last().map(|c| c.chunk_start_offset + c.chunk_length).expect("chunks") as usize;
+        // A byte in the middle of the summary section.
+        let at = data_end + (bytes.len() - data_end) * 3 / 4;
+        bytes[at] ^= 0x04;
+        let (got, report) = read_bytes(&bytes).expect("reads");
+        assert_eq!(got, intact);
+        assert!(!report.indexed, "{report:?}");
+        let why = report.summary_error.as_deref().expect("named");
+        assert!(report.problems().iter().any(|p| p.contains("summary is unusable") && p.contains(why)));
+        assert!(report.is_corrupt());
+    }
+
+    /// The recording's own time range: host (log) times and device times.
+    fn in_range(m: &Recorded) -> bool {
+        let log_ok = (1_000 * MS..=1_000 * MS + BATCHES * 50 * MS).contains(&m.log_time_ns);
+        match &m.payload {
+            Payload::Samples(b) => {
+                log_ok
+                    && (0..BATCHES * 50 * MS).contains(&b.device_time_ns)
+                    && b.values.iter().all(|v| v.is_finite())
+                    && b.period_ns == 1e6
+            }
+            Payload::Config(ConfigFile { name, .. }) => log_ok && name == "machine.toml",
+            _ => false,
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 256, failure_persistence: None, ..ProptestConfig::default() })]
+
+        #[test]
+        fn arbitrary_bytes_never_panic(tail in proptest::collection::vec(any::<u8>(), 0..2000), magic in any::<bool>()) {
+            let mut bytes = if magic { mcap::MAGIC.to_vec() } else { Vec::new() };
+            bytes.extend_from_slice(&tail);
+            // Any outcome but a panic (or a hang) will do: nothing in it is a recording.
+            let _ = read_bytes(&bytes);
+        }
+
+        #[test]
+        fn mutated_recordings_never_panic_and_give_only_what_was_written(
+            edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
+            cut in any::<prop::sample::Index>(),
+            truncate in any::<bool>(),
+        ) {
+            let (mut bytes, intact) = RECORDING.with(|r| r.clone());
+            for (at, value) in &edits {
+                let i = at.index(bytes.len());
+                bytes[i] = *value;
+            }
+            if truncate {
+                bytes.truncate(cut.index(bytes.len()));
+            }
+            if let Ok((got, report)) = read_bytes(&bytes) {
+                for m in &got {
+                    prop_assert!(in_range(m), "{m:?}");
+                    prop_assert!(intact.contains(m), "a message that was never written: {m:?}");
+                }
+                prop_assert!(report.messages as usize == got.len());
+            }
+        }
+    }
+
+    thread_local! {
+        static RECORDING: (Vec<u8>, Vec<Recorded>) = small_recording();
     }
 }
