@@ -25,6 +25,9 @@ use crate::synth::CaptureSpec;
 const MACHINE: &str = include_str!("../../config/hammer-lg1000.machine.toml");
 const STEEL: &str = include_str!("../../config/steel-16NiCrMo13.process.toml");
 
+/// How long the simulated device keeps the pty open after its last frame.
+const DEVICE_LINGER: std::time::Duration = std::time::Duration::from_secs(1);
+
 #[derive(Debug, Args)]
 pub struct DemoArgs {
     /// How many billets to forge.
@@ -102,10 +105,17 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         let (control_tx, control_rx) = mpsc::channel(16);
         let billet_tx = control_tx.clone();
         let device = tokio::spawn(async move {
-            drive_serial(sim, &spec, master, device_stop, move |_, device_ns| {
+            let mut master = master;
+            let stats = drive_serial(sim, &spec, &mut master, device_stop, move |_, device_ns| {
                 let _ = billet_tx.try_send(Control::NewBillet { at_device_ns: Some(device_ns as i64) });
             })
-            .await
+            .await?;
+            // A pty discards what the reader has not read yet when its master closes (the
+            // last frame was lost this way: 1 of 24000 on `--fast --billets 20`). The reader
+            // needs room for a read's events to take it, which a pipeline at 10× real time
+            // frees within tens of ms: stay open a second after the last frame.
+            tokio::time::sleep(DEVICE_LINGER).await;
+            Ok::<_, std::io::Error>(stats)
         });
         let cfg = SerialConfig {
             backpressure: parts_backpressure,
