@@ -48,6 +48,9 @@ pub struct CanStats {
     pub unsupported_frames: u64,
     /// Sample-message frames repeating the previous counter value (dropped).
     pub duplicates: u64,
+    /// Sample frames whose trusted time claimed whole counter wraps lost that the next
+    /// frame did not confirm (a wild stamp): dropped, never used.
+    pub wild_stamps: u64,
 }
 
 /// The decoder of one CAN source. See the module docs of `acquire::can` for the frame
@@ -72,6 +75,9 @@ pub struct CanDecoder {
     next_index: u64,
     last_seq: Option<u64>,
     last_t_ns: i64,
+    /// A frame whose time claimed whole counter wraps lost, held back until the next frame
+    /// confirms it: its receive time and counter.
+    suspect: Option<(i64, u64)>,
     batch: Vec<f64>,
     batch_index0: u64,
     batch_host_ns: i64,
@@ -98,6 +104,7 @@ impl CanDecoder {
             next_index: 0,
             last_seq: None,
             last_t_ns: 0,
+            suspect: None,
             batch_index0: 0,
             batch_host_ns: 0,
             batch_seq: 0,
@@ -168,6 +175,11 @@ impl CanDecoder {
             self.origin_ns.get_or_insert(t_ns);
             self.t0_ns = Some(t_ns);
         } else if let Some(lost) = self.lost_before(seq, t_ns) {
+            if !self.wraps_confirmed(lost, seq, t_ns) {
+                self.stats.wild_stamps += 1;
+                self.counters.decode_errors += 1;
+                return;
+            }
             if lost < 0 {
                 self.stats.duplicates += 1;
                 return;
@@ -204,6 +216,28 @@ impl CanDecoder {
         if self.batch.len() / self.roles.len() >= self.timing.batch_samples {
             self.flush(out);
         }
+    }
+
+    /// With trusted times, a time that credits whole counter wraps as lost is believed only
+    /// when the next frame's time and counter continue from it; the first such frame is held
+    /// back (false: drop it, it only costs its own sample, which the next frame's counter then
+    /// counts as lost) and forgotten when the next frame continues the old timeline.
+    fn wraps_confirmed(&mut self, lost: i64, seq: Option<u64>, t_ns: i64) -> bool {
+        let (Some(seq), Some(layout)) = (seq, self.mapping.sequence()) else { return true };
+        let modulus = 1i64 << layout.length;
+        let suspect = self.suspect.take();
+        if lost < modulus {
+            return true;
+        }
+        let continues = suspect.is_some_and(|(st, sseq)| {
+            let diff = (seq as i64 - sseq as i64).rem_euclid(modulus);
+            let elapsed = (t_ns - st) as f64 / self.timing.period_ns;
+            diff > 0 && (elapsed - diff as f64).abs() < 0.5
+        });
+        if !continues {
+            self.suspect = Some((t_ns, seq));
+        }
+        continues
     }
 
     /// Samples lost between the previous sample frame and this one (negative: a repeat),
@@ -253,14 +287,15 @@ impl CanDecoder {
         self.t0_ns = None;
         self.next_index = 0;
         self.last_seq = None;
+        self.suspect = None;
         self.held.iter_mut().for_each(|v| *v = None);
     }
 
     /// A status line's detail: what the counters do not hold.
     pub fn detail(&self) -> String {
         format!(
-            "unknown frames {}, remote/error/FD frames {}, repeated counters {}",
-            self.stats.unknown_frames, self.stats.unsupported_frames, self.stats.duplicates
+            "unknown frames {}, remote/error/FD frames {}, repeated counters {}, wild stamps {}",
+            self.stats.unknown_frames, self.stats.unsupported_frames, self.stats.duplicates, self.stats.wild_stamps
         )
     }
 }
@@ -347,9 +382,14 @@ mod tests {
         d.push(0, SAMPLE_FRAME, &encode(10, 0.0, 0.0, 0.0), &mut out);
         // 1000 samples later the 8-bit counter reads 10 + 1000 mod 256 = 242.
         d.push(1000 * 200_000, SAMPLE_FRAME, &encode(242, 0.0, 0.0, 0.0), &mut out);
+        // One frame's time alone is not believed for whole wraps (it could be a wild
+        // stamp): it is held back until the next one continues from it.
+        assert!(out.iter().all(|e| !matches!(e, SourceEvent::Gap(_))));
+        d.push(1001 * 200_000, SAMPLE_FRAME, &encode(243, 0.0, 0.0, 0.0), &mut out);
         let lost: u64 =
             out.iter().filter_map(|e| if let SourceEvent::Gap(g) = e { Some(g.samples_lost) } else { None }).sum();
-        assert_eq!(lost, 999);
+        // The 999 of the quiet and the held-back frame.
+        assert_eq!(lost, 1000);
     }
 
     #[test]
@@ -431,11 +471,11 @@ mod tests {
     }
 
     #[test]
-    #[ignore = "open: with trusted times one wild stamp counts whole counter wraps (issue 15; see ARCHITECTURE acquire)"]
     fn one_wild_stamp_with_trusted_times_is_no_gap_and_loses_no_later_frame() {
         // Frame 5's stamp is 900 s ahead (a flipped digit in a candump log); its counter
-        // continues. Today: a gap of 4,499,968 samples, a sample 900 s late, and every
-        // later frame dropped as a repeat, because its time is "before" frame 5's.
+        // continues. It used to give a gap of 4,499,968 samples, a sample 900 s late, and
+        // every later frame dropped as a repeat. Now frame 5 alone is dropped as wild and
+        // its sample is the one-sample gap the counter shows.
         let mut d = decoder(true);
         let mut out = Vec::new();
         for k in 0..12u8 {
@@ -443,7 +483,35 @@ mod tests {
             d.push(1_000_000_000 + k as i64 * 200_000 + wild, SAMPLE_FRAME, &encode(k, 0.0, 0.0, 0.0), &mut out);
         }
         d.flush(&mut out);
-        assert!(out.iter().all(|e| !matches!(e, SourceEvent::Gap(_))));
-        assert_eq!(d.counters().samples, 12);
+        let lost: u64 = out.iter().map(|e| if let SourceEvent::Gap(g) = e { g.samples_lost } else { 0 }).sum();
+        assert_eq!(lost, 1, "{out:?}");
+        assert_eq!(d.counters().samples, 11);
+        assert_eq!(d.stats().wild_stamps, 1);
+        // Every sample lies on the 0.2 ms grid from the first: none 900 s late.
+        let last = batches(&out).last().map(|b| b.time_s(b.len() - 1)).unwrap();
+        assert!((last - 11.0 * 200e-6).abs() < 1e-9, "{last}");
+    }
+
+    #[test]
+    fn a_real_loss_of_whole_counter_wraps_is_believed_once_the_next_frame_confirms_it() {
+        // The bus goes quiet for 10 s: frames 6.. arrive 10 s (50 000 samples) later and
+        // keep coming on time. The first late frame is held back, the second confirms.
+        let mut d = decoder(true);
+        let mut out = Vec::new();
+        for k in 0..12u64 {
+            let late = if k >= 6 { 10_000_000_000 } else { 0 };
+            let seq = (k + if k >= 6 { 50_000 } else { 0 }) % 256;
+            d.push(
+                1_000_000_000 + k as i64 * 200_000 + late,
+                SAMPLE_FRAME,
+                &encode(seq as u8, 0.0, 0.0, 0.0),
+                &mut out,
+            );
+        }
+        d.flush(&mut out);
+        let lost: u64 = out.iter().map(|e| if let SourceEvent::Gap(g) = e { g.samples_lost } else { 0 }).sum();
+        // 50 000 lost in the quiet, plus the held-back first frame after it.
+        assert_eq!(lost, 50_001, "{out:?}");
+        assert_eq!(d.counters().samples, 11);
     }
 }
