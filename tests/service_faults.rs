@@ -146,7 +146,7 @@ fn ascii_stream(rows: &[CaptureRow], fault: Fault, hit: usize) -> Vec<Vec<u8>> {
         x ^= x << 13;
         x ^= x >> 7;
         x ^= x << 17;
-        if fault == Fault::Garbage && x % 100 == 0 {
+        if fault == Fault::Garbage && x.is_multiple_of(100) {
             let garbage = ["8\u{fffd}2,1e3,,\n", "0.12.5,3,4,5\n", ",,,,\n", "t_s,load_N\n", "9999999999,1,2,3\n"];
             chunk.push_str(garbage[(x / 100 % garbage.len() as u64) as usize]);
         }

@@ -175,7 +175,7 @@ mod tests {
     #[test]
     fn short_or_unfinished_files_have_no_footer() {
         assert!(matches!(read(b""), Found::NoFooter));
-        assert!(matches!(read(&mcap::MAGIC[..]), Found::NoFooter));
+        assert!(matches!(read(mcap::MAGIC), Found::NoFooter));
         let bytes = small_file();
         assert!(matches!(read(&bytes[..bytes.len() - 1]), Found::NoFooter));
     }

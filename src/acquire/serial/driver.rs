@@ -97,6 +97,8 @@ pub enum StreamEnd {
     ReceiverGone,
 }
 
+/// One per source, never moved on a hot path: the variants' sizes do not matter.
+#[allow(clippy::large_enum_variant)]
 enum Decoder {
     Binary { frames: FrameDecoder, tracker: FrameTracker },
     Ascii(LineDecoder),
