@@ -251,7 +251,8 @@ pub async fn serve(
 fn start_billet(feeder: &mut Feeder, writer: &mut RecordWriter, status: &SharedStatus) {
     feeder.pipeline_mut().new_billet();
     let _ = writer.write_status(host_now_ns(), &new_billet_marker());
-    status.lock().map(|mut s| s.billets += 1).ok();
+    let billets = feeder.pipeline_mut().billets();
+    status.lock().map(|mut s| s.billets = u64::from(billets)).ok();
     tracing::info!("new billet");
 }
 
