@@ -54,6 +54,8 @@ pub struct Pipeline {
     estimator: Estimator,
     alerts: AlertRules,
     cut: Vec<Blow>,
+    /// The billet of the last blow judged: the alert memory starts over with each billet.
+    billet: u32,
 }
 
 impl Pipeline {
@@ -63,6 +65,7 @@ impl Pipeline {
             estimator: Estimator::new(machine, process, cfg.estimate),
             alerts: AlertRules::new(cfg.alerts),
             cut: Vec::new(),
+            billet: 0,
         }
     }
 
@@ -86,10 +89,15 @@ impl Pipeline {
         self.drain(out);
     }
 
-    /// A new billet is in the dies: the height tracking and the alert memory start over.
+    /// A new billet is in the dies (a signal): the height tracking and the alert memory
+    /// start over. Without a signal the estimator finds new billets from the encoder.
     pub fn new_billet(&mut self) {
         self.estimator.new_billet();
-        self.alerts.reset();
+    }
+
+    /// Billets started so far, by the encoder or a signal.
+    pub fn billets(&self) -> u32 {
+        self.estimator.billets()
     }
 
     /// New alert thresholds (SIGHUP).
@@ -110,6 +118,10 @@ impl Pipeline {
             };
             match self.estimator.estimate(&blow) {
                 Ok(mut estimate) => {
+                    if estimate.billet.billet != self.billet {
+                        self.billet = estimate.billet.billet;
+                        self.alerts.reset();
+                    }
                     estimate.alert = self.alerts.on_blow(&estimate);
                     out.push(PipelineEvent::Blow { cut, estimate: Box::new(estimate) });
                 }
@@ -187,6 +199,7 @@ mod tests {
     use super::*;
     use crate::config::{parse_machine, parse_process};
     use crate::estimate::BlowClass;
+    use crate::estimate::billet::BilletCheck;
     use crate::physics::effects::EffectSet;
     use crate::signal::capture::CaptureRow;
     use crate::signal::sample::Role;
@@ -248,8 +261,12 @@ mod tests {
     }
 
     fn run(batches: &[SampleBatch]) -> Vec<BlowEstimate> {
+        run_with(batches, PipelineConfig::for_machine(&machine()))
+    }
+
+    fn run_with(batches: &[SampleBatch], cfg: PipelineConfig) -> Vec<BlowEstimate> {
         let m = machine();
-        let mut feeder = Feeder::new(Pipeline::new(m, Some(process()), PipelineConfig::for_machine(&m)));
+        let mut feeder = Feeder::new(Pipeline::new(m, Some(process()), cfg));
         let mut events = Vec::new();
         for b in batches {
             feeder.push(b, &mut events);
@@ -330,5 +347,103 @@ mod tests {
         let f = &faulted[2];
         assert_eq!(f.class, BlowClass::Incomplete);
         assert!(f.gap_s > 0.0 && f.gap_s <= SegmentConfig::HAMMER.max_blow_s, "gap {}", f.gap_s);
+    }
+
+    /// Issue 22: billets of varying heights (up to 8 % off the sheet's, the first on it), no
+    /// new-billet signal. Each is counted from the encoder, and each blow's height after it
+    /// is within 0.1 mm (the issue's figure) of the simulator's.
+    fn billets_from_the_encoder(idle_s: f64) -> (Vec<BlowEstimate>, Vec<f64>) {
+        let base = BilletPlan { process: process(), v0s_mps: vec![3.9, 5.3, 5.3] };
+        let plans = crate::simdevice::spread_plans(&base, 10, 0.08, 7);
+        let mut sim =
+            SimMachine::new(machine(), EffectSet::NONE, plans, CaptureSpec::hammer(23), 0.3).with_billet_idle(idle_s);
+        let mut rows = Vec::new();
+        while !sim.finished() {
+            rows.extend(sim.next_rows(50_000).unwrap());
+        }
+        (run(&frames(&rows, |_| false)), sim.h_end_truth_m().to_vec())
+    }
+
+    #[test]
+    fn ten_billets_of_varying_heights_are_counted_from_the_encoder() {
+        let (blows, truth) = billets_from_the_encoder(0.0);
+        assert_eq!(blows.len(), 30);
+        for (i, (b, h)) in blows.iter().zip(&truth).enumerate() {
+            assert_eq!(
+                (b.billet.billet, b.billet.billet_blow),
+                (i as u32 / 3 + 1, i as u32 % 3 + 1),
+                "blow {}",
+                b.blow
+            );
+            assert_eq!(b.billet.billet_check, None, "blow {}", b.blow);
+            let e = b.h_end_m.unwrap();
+            assert!((e - h).abs() < 1e-4, "blow {}: h_end {e} vs simulated {h}", b.blow);
+        }
+        // Billets off the sheet by more than the resolutions say so on their first blow.
+        let off = blows.iter().filter(|b| b.billet.h_start_off_sheet_m.is_some()).count();
+        assert!(off >= 5, "{off} billets reported off the sheet");
+    }
+
+    /// Forge `plans` with `idle_s` more between billets, through a pipeline whose idle gap
+    /// for billet detection is 2 s; the estimates and the simulator's end heights.
+    fn forge(plans: Vec<BilletPlan>, idle_s: f64) -> (Vec<BlowEstimate>, Vec<f64>) {
+        let mut sim =
+            SimMachine::new(machine(), EffectSet::NONE, plans, CaptureSpec::hammer(29), 0.3).with_billet_idle(idle_s);
+        let mut rows = Vec::new();
+        while !sim.finished() {
+            rows.extend(sim.next_rows(50_000).unwrap());
+        }
+        let mut cfg = PipelineConfig::for_machine(&machine());
+        cfg.estimate.idle_new_billet_s = 2.0;
+        (run_with(&frames(&rows, |_| false), cfg), sim.h_end_truth_m().to_vec())
+    }
+
+    fn plan(height_m: f64, v0s_mps: &[f64]) -> BilletPlan {
+        let mut p = process();
+        p.billet.height_m = height_m;
+        BilletPlan { process: p, v0s_mps: v0s_mps.to_vec() }
+    }
+
+    fn assert_heights(blows: &[BlowEstimate], truth: &[f64]) {
+        assert_eq!(blows.len(), truth.len());
+        for (b, h) in blows.iter().zip(truth) {
+            let e = b.h_end_m.unwrap();
+            assert!((e - h).abs() < 1e-4, "blow {}: h_end {e} vs simulated {h}", b.blow);
+        }
+    }
+
+    /// A part put back after a pause for one correction blow: a billet of its own (its
+    /// height from the encoder), and the next billet's first blow says the one before took
+    /// a single blow.
+    #[test]
+    fn a_re_struck_part_is_a_one_blow_billet_and_flagged() {
+        let h0 = process().billet.height_m;
+        let (_, first) = forge(vec![plan(h0, &[3.9, 5.3])], 0.0);
+        let a_end = *first.last().unwrap();
+        let plans = vec![plan(h0, &[3.9, 5.3]), plan(h0, &[3.9, 5.3, 5.3]), plan(a_end, &[5.3]), plan(h0, &[3.9])];
+        let (blows, truth) = forge(plans, 3.0);
+        let billets: Vec<u32> = blows.iter().map(|b| b.billet.billet).collect();
+        assert_eq!(billets, [1, 1, 2, 2, 2, 3, 4]);
+        let checks: Vec<_> = blows.iter().map(|b| b.billet.billet_check).collect();
+        let mut want = vec![None; 7];
+        want[6] = Some(BilletCheck::PreviousBilletOneBlow);
+        assert_eq!(checks, want);
+        assert_heights(&blows, &truth);
+    }
+
+    /// A billet shorter than where the last one ended: the ram meets it lower, which no
+    /// blow on the same part can do. A new billet, flagged, its height from the encoder.
+    #[test]
+    fn a_billet_shorter_than_the_last_ones_end_is_flagged_and_tracked() {
+        let h0 = process().billet.height_m;
+        let (_, first) = forge(vec![plan(h0, &[3.9, 5.3, 5.3])], 0.0);
+        let short = 0.9 * first.last().unwrap();
+        let plans = vec![plan(h0, &[3.9, 5.3, 5.3]), plan(short, &[3.9, 3.9]), plan(h0, &[3.9])];
+        let (blows, truth) = forge(plans, 0.0);
+        let billets: Vec<u32> = blows.iter().map(|b| b.billet.billet).collect();
+        assert_eq!(billets, [1, 1, 1, 2, 2, 3]);
+        assert_eq!(blows[3].billet.billet_check, Some(BilletCheck::ContactBelowLastEnd));
+        assert!(blows.iter().enumerate().all(|(i, b)| i == 3 || b.billet.billet_check.is_none()));
+        assert_heights(&blows, &truth);
     }
 }

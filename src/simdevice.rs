@@ -21,6 +21,25 @@ pub struct BilletPlan {
     pub v0s_mps: Vec<f64>,
 }
 
+/// `n` billets of `base`'s plan whose heights vary by up to `spread` (a fraction) around the
+/// sheet's, drawn uniformly from `seed`; the first is the sheet's own height, since a
+/// service learns the dies' position from the first billet it sees.
+pub fn spread_plans(base: &BilletPlan, n: usize, spread: f64, seed: u64) -> Vec<BilletPlan> {
+    use rand::SeedableRng;
+    use rand_distr::Distribution;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let unit = rand_distr::Uniform::new_inclusive(-1.0, 1.0).expect("finite bounds");
+    (0..n)
+        .map(|i| {
+            let mut plan = base.clone();
+            if i > 0 && spread > 0.0 {
+                plan.process.billet.height_m *= 1.0 + spread * unit.sample(&mut rng);
+            }
+            plan
+        })
+        .collect()
+}
+
 /// A machine forging a list of billets, blow after blow, with `interval_s` between blows.
 pub struct SimMachine {
     machine: Machine,
@@ -37,6 +56,10 @@ pub struct SimMachine {
     seed: u64,
     /// Stream sample index at which each billet started.
     billet_starts: Vec<u64>,
+    /// Extra idle time before each billet after the first, s (a part being changed).
+    billet_idle_s: f64,
+    /// The simulated truth: each blow's billet height after it, m, in forging order.
+    h_end_truth_m: Vec<f64>,
 }
 
 impl SimMachine {
@@ -61,7 +84,21 @@ impl SimMachine {
             last_disp_m: 0.4375,
             seed,
             billet_starts: Vec::new(),
+            billet_idle_s: 0.0,
+            h_end_truth_m: Vec::new(),
         }
+    }
+
+    /// Stand idle this long more before each billet after the first, s.
+    pub fn with_billet_idle(mut self, idle_s: f64) -> Self {
+        self.billet_idle_s = idle_s.max(0.0);
+        self
+    }
+
+    /// The simulated billet height after each blow forged so far, m (the truth a test
+    /// compares the estimator's `h_end_m` with).
+    pub fn h_end_truth_m(&self) -> &[f64] {
+        &self.h_end_truth_m
     }
 
     pub fn sample_rate_hz(&self) -> f64 {
@@ -86,8 +123,11 @@ impl SimMachine {
         let mut spec = self.spec;
         spec.seed = self.seed.wrapping_add(self.next_billet as u64);
         let blows = synth_blows(&self.machine, &self.effects, &plan.process, &plan.v0s_mps, &spec)?;
+        let idle_s = if self.next_billet > 1 { self.billet_idle_s } else { 0.0 };
         for (i, b) in blows.iter().enumerate() {
-            let pause = ((self.interval_s * self.spec.sample_rate_hz) as usize).saturating_sub(b.rows.len());
+            self.h_end_truth_m.push(b.truth.forming.map_or(b.truth.h_start_m, |f| f.h_end_m));
+            let interval_s = self.interval_s + if i == 0 { idle_s } else { 0.0 };
+            let pause = ((interval_s * self.spec.sample_rate_hz) as usize).saturating_sub(b.rows.len());
             let disp0 = b.rows.first().map_or(self.last_disp_m, |r| r.disp_m);
             self.queue.extend(idle_rows(pause, 0.0, &spec, disp0, spec.seed.wrapping_mul(31).wrapping_add(i as u64)));
             self.queue.extend(b.rows.iter().copied());

@@ -65,6 +65,7 @@ fn result(blow: u32) -> BlowEstimate {
         gap_s: 0.0,
         h_start_m: None,
         height_check: None,
+        billet: Default::default(),
     }
 }
 

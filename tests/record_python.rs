@@ -61,6 +61,7 @@ fn result(blow: u32, with_sheet: bool) -> BlowEstimate {
         gap_s: if whole { 0.0 } else { 0.0125 },
         h_start_m: with_sheet.then_some(0.0151),
         height_check: None,
+        billet: Default::default(),
     }
 }
 

@@ -90,6 +90,8 @@ fn roles_from_two_daqs_on_their_own_clocks_are_merged() {
             alerts: forgemon::alert::AlertConfig::default(),
             webhook: None,
             plc_coil: None,
+            new_billet_rise_m: None,
+            idle_new_billet_s: forgemon::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
             sources: Vec::new(),
         },
         config_path: dir.join("service.toml"),

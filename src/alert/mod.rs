@@ -186,6 +186,7 @@ mod tests {
             gap_s: 0.0,
             h_start_m: None,
             height_check: None,
+            billet: Default::default(),
         }
     }
 

@@ -77,10 +77,12 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         alerts: crate::alert::AlertConfig::default(),
         webhook: None,
         plc_coil: None,
+        new_billet_rise_m: None,
+        idle_new_billet_s: crate::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
         sources: Vec::new(),
     };
-    // The simulated machine signals each new billet (as a PLC would), so the service tracks
-    // the billet's height and splits plastic from friction work.
+    // No new-billet signal: the service finds each billet from the encoder (issue 22), so it
+    // tracks the billet's height and splits plastic from friction work on every billet.
     let parts = ServiceParts {
         config,
         config_path: args.dir.join("demo.toml"),
@@ -94,7 +96,6 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let parts_backpressure = parts.backpressure;
     super::run::init_logging("error");
     let rt = tokio::runtime::Runtime::new()?;
-    let blows_per_billet = 8;
     rt.block_on(async move {
         let (master, slave) = tokio_serial::SerialStream::pair().context("cannot open a pty pair")?;
         let (tx, rx) = mpsc::channel(SOURCE_CHANNEL_CAPACITY);
@@ -102,14 +103,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         let (_stop_tx, stop_rx) = watch::channel(false);
         let spec = SerialDeviceSpec { channels: demo_channels(), frame_samples: 1000, realtime: !args.fast, faults: Default::default() };
         let device_stop = shutdown_rx.clone();
-        let (control_tx, control_rx) = mpsc::channel(16);
-        let billet_tx = control_tx.clone();
+        let (control_tx, control_rx) = mpsc::channel::<Control>(16);
         let device = tokio::spawn(async move {
             let mut master = master;
-            let stats = drive_serial(sim, &spec, &mut master, device_stop, move |_, device_ns| {
-                let _ = billet_tx.try_send(Control::NewBillet { at_device_ns: Some(device_ns as i64) });
-            })
-            .await?;
+            let stats = drive_serial(sim, &spec, &mut master, device_stop, |_, _| {}).await?;
             // A pty discards what the reader has not read yet when its master closes (the
             // last frame was lost this way: 1 of 24000 on `--fast --billets 20`). The reader
             // needs room for a read's events to take it, which a pipeline at 10× real time
@@ -130,7 +127,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
                 println!("blow  billet  impact m/s  plastic J  efficiency                    class");
             })),
             on_blow: Some(Box::new(move |e| {
-                let billet = (e.blow as usize - 1) / blows_per_billet + 1;
+                let billet = e.billet.billet;
                 match (e.plastic_j, e.efficiency) {
                     (Some(plastic_j), Some(efficiency)) => {
                         let bar_len = (efficiency.clamp(0.0, 1.0) * 24.0).round() as usize;
@@ -149,7 +146,8 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         let summary = serve(parts, rx, shutdown_tx, stop_rx, hooks, Some((control_tx, control_rx))).await?;
         let stats = device.await.context("the simulated device task")??;
         println!(
-            "forgemon demo: {} blows ({} incomplete), {} alerts, {} samples ({} frames from the device, {} events dropped); recorded {}",
+            "forgemon demo: {} billets, {} blows ({} incomplete), {} alerts, {} samples ({} frames from the device, {} events dropped); recorded {}",
+            summary.billets,
             summary.blows,
             summary.incomplete_blows,
             summary.alerts,

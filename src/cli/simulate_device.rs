@@ -53,6 +53,13 @@ pub struct SimulateDeviceArgs {
     /// Seconds between blows.
     #[arg(long, default_value_t = 3.0)]
     pub interval: f64,
+    /// Billet heights vary by up to this fraction around the sheet's (the first billet is
+    /// the sheet's own), so the service's billet detection and height tracking are exercised.
+    #[arg(long, default_value_t = 0.0)]
+    pub height_spread: f64,
+    /// Seconds more the machine stands idle before each billet after the first.
+    #[arg(long, default_value_t = 0.0)]
+    pub billet_idle: f64,
     /// Sample rate, Hz (up to 100 kHz).
     #[arg(long, default_value_t = 100e3)]
     pub rate: f64,
@@ -99,9 +106,17 @@ pub fn run(args: SimulateDeviceArgs) -> anyhow::Result<ExitCode> {
         MachineKind::ScrewPress => CaptureSpec::press(1),
     };
     spec.sample_rate_hz = args.rate;
+    if !(args.height_spread.is_finite() && (0.0..=0.5).contains(&args.height_spread)) {
+        anyhow::bail!("--height-spread must be between 0 and 0.5, got {}", args.height_spread);
+    }
+    if !(args.billet_idle.is_finite() && args.billet_idle >= 0.0) {
+        anyhow::bail!("--billet-idle must be 0 or more seconds, got {}", args.billet_idle);
+    }
     let billets = if args.billets == 0 { 1_000_000 } else { args.billets };
     let plan = BilletPlan { process, v0s_mps: args.v0.clone() };
-    let sim = SimMachine::new(mf.machine, EffectSet::from_effects(&effects), vec![plan; billets], spec, args.interval);
+    let plans = crate::simdevice::spread_plans(&plan, billets, args.height_spread, 1);
+    let sim = SimMachine::new(mf.machine, EffectSet::from_effects(&effects), plans, spec, args.interval)
+        .with_billet_idle(args.billet_idle);
     let dev = SerialDeviceSpec {
         channels: super::demo::demo_channels(),
         frame_samples: ((args.rate * 0.01) as usize).max(1),
@@ -203,3 +218,20 @@ async fn serve_modbus(mut sim: SimMachine, listen: std::net::SocketAddr, rate: f
 
 /// How long the Modbus device keeps serving after its session has ended.
 const DRAIN_LINGER: std::time::Duration = std::time::Duration::from_secs(3);
+
+#[cfg(test)]
+mod tests {
+    use super::super::{Cli, Command};
+    use clap::Parser;
+
+    /// Issue 22: the billets' heights and the idle between them are set on the command line.
+    #[test]
+    fn height_spread_and_billet_idle_parse() {
+        let args = ["forgemon", "simulate-device", "--machine", "m.toml", "--process", "p.toml", "--v0", "3.9"];
+        let cli = Cli::try_parse_from(args.iter().chain(&["--height-spread", "0.05", "--billet-idle", "30"])).unwrap();
+        let Command::SimulateDevice(a) = cli.command else { panic!("not simulate-device") };
+        assert_eq!((a.height_spread, a.billet_idle), (0.05, 30.0));
+        let Command::SimulateDevice(d) = Cli::try_parse_from(args).unwrap().command else { panic!() };
+        assert_eq!((d.height_spread, d.billet_idle), (0.0, 0.0));
+    }
+}

@@ -93,6 +93,13 @@ pub const ALERT_WINDOW_BLOWS: WholeLimits = WholeLimits { min: 1, max: 10_000, u
 /// Alert debounce, blows.
 pub const DEBOUNCE_BLOWS: WholeLimits = WholeLimits { min: 0, max: 1_000_000, unit: "blows" };
 
+/// `[billets] new_billet_rise_m`: from a tenth of a millimetre (10 counts of a 10 µm
+/// encoder) to a metre (taller than any billet a hammer takes).
+pub const NEW_BILLET_RISE_M: Limits = Limits { min: 1e-4, max: 1.0, unit: "m" };
+
+/// `[billets] idle_s`: from a second (a fast line's part change) to a day.
+pub const BILLET_IDLE_S: Limits = Limits { min: 1.0, max: 86_400.0, unit: "s" };
+
 /// Model-health limit on |energy-balance residual|, a fraction of the kinetic energy.
 pub const RESIDUAL_LIMIT: Limits = Limits { min: 1e-4, max: 10.0, unit: "" };
 

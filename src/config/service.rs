@@ -12,7 +12,10 @@ use serde::Deserialize;
 use serde::de::IgnoredAny;
 
 use super::document::Document;
-use super::limits::{ALERT_WINDOW_BLOWS, DEBOUNCE_BLOWS, EFFICIENCY, RESIDUAL_LIMIT, ROTATE_BYTES, ROTATE_SECONDS};
+use super::limits::{
+    ALERT_WINDOW_BLOWS, BILLET_IDLE_S, DEBOUNCE_BLOWS, EFFICIENCY, NEW_BILLET_RISE_M, RESIDUAL_LIMIT, ROTATE_BYTES,
+    ROTATE_SECONDS,
+};
 use super::{ConfigError, source};
 use crate::acquire::ChannelSpec;
 use crate::alert::AlertConfig;
@@ -78,6 +81,11 @@ pub struct ServiceConfig {
     pub alerts: AlertConfig,
     pub webhook: Option<String>,
     pub plc_coil: Option<PlcCoil>,
+    /// `[billets] new_billet_rise_m`: the encoder's new-billet threshold, m (`None`: the
+    /// estimator's default from the sheet's height, `estimate::billet`).
+    pub new_billet_rise_m: Option<f64>,
+    /// `[billets] idle_s`: the idle gap after which a smaller rise starts a billet, s.
+    pub idle_new_billet_s: f64,
     pub sources: Vec<SourceSpec>,
 }
 
@@ -89,6 +97,7 @@ struct RawService {
     recording: RawRecording,
     http: Option<RawHttp>,
     alerts: Option<RawAlerts>,
+    billets: Option<RawBillets>,
     /// Each read by its `kind` (`source.rs`).
     sources: Vec<IgnoredAny>,
 }
@@ -118,6 +127,13 @@ struct RawAlerts {
     debounce_blows: Option<u64>,
     webhook: Option<String>,
     plc_coil: Option<RawPlcCoil>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBillets {
+    new_billet_rise_m: Option<f64>,
+    idle_s: Option<f64>,
 }
 
 #[derive(Deserialize)]
@@ -153,6 +169,15 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         Some(a) => parse_alerts(&doc, a)?,
         None => (AlertConfig::default(), None, None),
     };
+    let billets = raw.billets.as_ref();
+    let new_billet_rise_m = match billets.and_then(|b| b.new_billet_rise_m) {
+        Some(r) => Some(doc.in_range("billets.new_billet_rise_m", r, &NEW_BILLET_RISE_M)?),
+        None => None,
+    };
+    let idle_new_billet_s = match billets.and_then(|b| b.idle_s) {
+        Some(s) => doc.in_range("billets.idle_s", s, &BILLET_IDLE_S)?,
+        None => crate::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
+    };
     if raw.sources.is_empty() {
         return Err(doc.invalid("sources", "must be a non-empty array of tables ([[sources]])"));
     }
@@ -173,6 +198,8 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         alerts,
         webhook,
         plc_coil,
+        new_billet_rise_m,
+        idle_new_billet_s,
         sources,
     })
 }
@@ -259,6 +286,25 @@ offset = 0.1
 role = "acc_mps2"
 gain = 0.01
 "#;
+
+    /// Issue 22: billet detection is tuned in `[billets]`, checked like every other key.
+    #[test]
+    fn billet_detection_is_tuned_in_its_table() {
+        let c = parse_service("s.toml", Path::new("/"), GOOD).unwrap();
+        assert_eq!(
+            (c.new_billet_rise_m, c.idle_new_billet_s),
+            (None, crate::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S)
+        );
+        let set = GOOD.replace("[[sources]]", "[billets]\nnew_billet_rise_m = 0.005\nidle_s = 45.0\n[[sources]]");
+        let c = parse_service("s.toml", Path::new("/"), &set).unwrap();
+        assert_eq!((c.new_billet_rise_m, c.idle_new_billet_s), (Some(0.005), 45.0));
+        let bad = GOOD.replace("[[sources]]", "[billets]\nnew_billet_rise_m = 5.0\n[[sources]]");
+        let e = parse_service("s.toml", Path::new("/"), &bad).unwrap_err().to_string();
+        assert!(e.contains("billets.new_billet_rise_m"), "{e}");
+        let typo = GOOD.replace("[[sources]]", "[billets]\nidle = 45.0\n[[sources]]");
+        let e = parse_service("s.toml", Path::new("/"), &typo).unwrap_err().to_string();
+        assert!(e.contains("unknown key 'idle' in [billets]"), "{e}");
+    }
 
     #[test]
     fn a_full_configuration_parses_with_defaults() {

@@ -83,6 +83,8 @@ pub struct Hooks {
 #[derive(Debug, Clone, Default)]
 pub struct Summary {
     pub samples: u64,
+    /// Billets started, by the encoder or a signal.
+    pub billets: u64,
     pub blows: u64,
     pub alerts: u64,
     /// Events the live queue dropped because the pipeline fell behind.
@@ -133,11 +135,8 @@ pub async fn serve(
     let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx));
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
 
-    let mut feeder = Feeder::new(Pipeline::new(
-        parts.machine,
-        parts.process.clone(),
-        PipelineConfig { alerts: cfg.alerts, ..PipelineConfig::for_machine(&parts.machine) },
-    ));
+    let mut feeder =
+        Feeder::new(Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine)));
     let mut summary = Summary::default();
     let mut events = Vec::new();
     // The pipeline's input: a source carrying every role as it is, or the roles of several
@@ -241,9 +240,19 @@ pub async fn serve(
         on_event(e, host_now_ns(), &mut writer, &status, &sinks, &mut hooks, &mut summary);
     }
     summary.samples = feeder.samples();
+    summary.billets = u64::from(feeder.pipeline_mut().billets());
     summary.files = writer.finish()?;
     http.abort();
     Ok(summary)
+}
+
+/// The pipeline's thresholds: the machine's defaults with the service file's alert rules
+/// and billet detection.
+pub fn pipeline_config(cfg: &ServiceConfig, machine: &Machine) -> PipelineConfig {
+    let mut p = PipelineConfig { alerts: cfg.alerts, ..PipelineConfig::for_machine(machine) };
+    p.estimate.new_billet_rise_m = cfg.new_billet_rise_m;
+    p.estimate.idle_new_billet_s = cfg.idle_new_billet_s;
+    p
 }
 
 /// A new billet from here on: restart the height tracking and alert memory, and mark the
@@ -251,7 +260,8 @@ pub async fn serve(
 fn start_billet(feeder: &mut Feeder, writer: &mut RecordWriter, status: &SharedStatus) {
     feeder.pipeline_mut().new_billet();
     let _ = writer.write_status(host_now_ns(), &new_billet_marker());
-    status.lock().map(|mut s| s.billets += 1).ok();
+    let billets = feeder.pipeline_mut().billets();
+    status.lock().map(|mut s| s.billets = u64::from(billets)).ok();
     tracing::info!("new billet");
 }
 

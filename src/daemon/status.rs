@@ -45,8 +45,17 @@ pub struct SourceState {
 #[derive(Debug, Clone, Serialize)]
 pub struct StatusSnapshot {
     pub machine: String,
-    /// Billets started (by `POST /billet`), counting the first.
+    /// Billets started, by the encoder's billet detection or a signal (`POST /billet`, the
+    /// PLC coil); 0 before the first blow.
     pub billets: u64,
+    /// Billets finished: each billet is finished when the next one starts.
+    pub billets_finished: u64,
+    /// Blows on the billet in the dies so far.
+    pub billet_blows: u64,
+    /// Blows the last finished billet took.
+    pub last_billet_blows: Option<u64>,
+    #[serde(skip)]
+    billet_of_last_blow: u64,
     pub samples: u64,
     pub blows: u64,
     pub alerts: u64,
@@ -73,7 +82,11 @@ impl StatusSnapshot {
     pub fn new(machine: &str) -> Self {
         StatusSnapshot {
             machine: machine.to_string(),
-            billets: 1,
+            billets: 0,
+            billets_finished: 0,
+            billet_blows: 0,
+            last_billet_blows: None,
+            billet_of_last_blow: 0,
             samples: 0,
             blows: 0,
             alerts: 0,
@@ -119,6 +132,15 @@ impl StatusSnapshot {
 
     pub fn on_blow(&mut self, e: &BlowEstimate) {
         self.blows += 1;
+        let billet = u64::from(e.billet.billet);
+        if billet != self.billet_of_last_blow && self.billet_blows > 0 {
+            // The blow started another billet: the one before is finished.
+            self.last_billet_blows = Some(self.billet_blows);
+        }
+        self.billet_of_last_blow = billet;
+        self.billets = self.billets.max(billet);
+        self.billets_finished = self.billets.saturating_sub(1);
+        self.billet_blows = u64::from(e.billet.billet_blow);
         self.alerts += u64::from(e.alert.is_some());
         self.incomplete_blows += u64::from(!e.is_complete());
         self.last_efficiency = e.efficiency;
@@ -145,6 +167,19 @@ impl StatusSnapshot {
             "counter",
             "Oldest events the live queue dropped because the pipeline fell behind.",
             vec![(String::new(), self.dropped_events as f64)],
+        );
+        metric("billets_total", "counter", "Billets started.", vec![(String::new(), self.billets as f64)]);
+        metric(
+            "billets_finished_total",
+            "counter",
+            "Billets finished (the next one started).",
+            vec![(String::new(), self.billets_finished as f64)],
+        );
+        metric(
+            "billet_blows",
+            "gauge",
+            "Blows on the billet in the dies.",
+            vec![(String::new(), self.billet_blows as f64)],
         );
         metric(
             "incomplete_blows_total",

@@ -1,19 +1,22 @@
 //! Per-blow estimation with the identified model on measured signals (DESIGN.md §2.4):
 //! impact speed from the approach, the model observer's energy terms, the split into
 //! plastic and friction work along the billet's tracked height when a process sheet is
-//! given, the efficiency class and the energy-balance residual. Pure code.
+//! given, the efficiency class and the energy-balance residual. Which billet each blow
+//! forged comes from the encoder (`billet`) or a new-billet signal. Pure code.
 
 pub mod approach;
+pub mod billet;
 pub mod observer;
 pub mod result;
 
-pub use result::{BlowClass, BlowEstimate, HeightCheck};
+pub use result::{BilletTag, BlowClass, BlowEstimate, HeightCheck};
 
 use crate::physics::billet::{BilletLaw, LoadEffects};
 use crate::physics::machine::{Machine, MachineKind};
 use crate::physics::process::Process;
 use crate::signal::segment::Blow;
 use approach::{ApproachError, fit_impact_speed};
+use billet::{BilletCheck, BilletDetect, Transition};
 
 /// A tracked billet height below this fraction of the sheet's is impossible for an upset
 /// cylinder: the billets changed without a new-billet signal, so the height is no longer
@@ -34,6 +37,12 @@ pub struct EstimatorConfig {
     /// The resolution of the process sheet's measured heights, m: a digital caliper reads
     /// 0.01 mm and is good to ±0.02 mm over 100 mm (DIN 862).
     pub caliper_resolution_m: f64,
+    /// A contact higher than the last blow's end by more than this starts a new billet, m;
+    /// `None`: `billet::NEW_BILLET_RISE_FRACTION` of the sheet's height, at least
+    /// `billet::NEW_BILLET_RISE_COUNTS` encoder counts.
+    pub new_billet_rise_m: Option<f64>,
+    /// After an idle gap this long, any rise beyond the measurement starts a new billet, s.
+    pub idle_new_billet_s: f64,
 }
 
 impl EstimatorConfig {
@@ -53,6 +62,8 @@ impl EstimatorConfig {
             },
             encoder_resolution_m: Self::DEFAULT_ENCODER_RESOLUTION_M,
             caliper_resolution_m: Self::DEFAULT_CALIPER_RESOLUTION_M,
+            new_billet_rise_m: None,
+            idle_new_billet_s: billet::DEFAULT_IDLE_NEW_BILLET_S,
         }
     }
 
@@ -92,12 +103,57 @@ pub struct Estimator {
     blows: u32,
     /// Blows on the present billet, this one included once estimated.
     billet_blows: usize,
+    detect: BilletDetect,
+    /// The present billet's number (0 before the first).
+    billet: u32,
+    /// Blows the billet before the present one took.
+    prev_billet_blows: usize,
+    /// A new-billet signal started the present billet and no blow has landed on it yet.
+    signalled: bool,
+    /// Where the ram would meet the billet left by the last blow (its contact lowered by
+    /// the height it lost, when known), m, whether that is known, and the blow's end time, s.
+    last_end: Option<LastEnd>,
+    /// The encoder's reading at the lower die, m: learnt from the first billet's first
+    /// contact and the sheet's height; each later billet's real height is this minus its
+    /// first contact.
+    die_x_m: Option<f64>,
+}
+
+/// Where the last blow left the billet, in encoder terms.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LastEnd {
+    x_m: f64,
+    /// Whether the blow's end height was known (not an incomplete blow): only then can a
+    /// lower contact be told from the billet's own set.
+    end_known: bool,
+    h_end_m: Option<f64>,
+    t_s: f64,
 }
 
 impl Estimator {
     pub fn new(machine: Machine, process: Option<Process>, cfg: EstimatorConfig) -> Self {
         let h_m = process.as_ref().map(|p| p.billet.height_m);
-        Estimator { machine, process, cfg, h_m, chain: None, blows: 0, billet_blows: 0 }
+        let detect = BilletDetect::new(h_m, cfg.encoder_resolution_m, cfg.new_billet_rise_m, cfg.idle_new_billet_s);
+        Estimator {
+            machine,
+            process,
+            cfg,
+            h_m,
+            chain: None,
+            blows: 0,
+            billet_blows: 0,
+            detect,
+            billet: 0,
+            prev_billet_blows: 0,
+            signalled: false,
+            last_end: None,
+            die_x_m: None,
+        }
+    }
+
+    /// Billets started so far (by the encoder or a signal).
+    pub fn billets(&self) -> u32 {
+        self.billet
     }
 
     pub fn config(&self) -> &EstimatorConfig {
@@ -109,11 +165,68 @@ impl Estimator {
         self.h_m.is_some()
     }
 
-    /// A new billet from the process sheet: its height starts again from the sheet's.
+    /// A new billet, signalled (`POST /billet`, the PLC coil, a recording's marker): the
+    /// next blow starts it, and the encoder does not count it a second time. Its height
+    /// starts again from the sheet's (or the encoder's, `first_blow_height`).
     pub fn new_billet(&mut self) {
+        if !self.signalled {
+            self.start_billet();
+            self.signalled = true;
+        }
+    }
+
+    fn start_billet(&mut self) {
         self.h_m = self.process.as_ref().map(|p| p.billet.height_m);
         self.chain = None;
+        self.billet += 1;
+        self.prev_billet_blows = self.billet_blows;
         self.billet_blows = 0;
+        self.last_end = None;
+    }
+
+    /// Whether this contact starts a new billet (counting it), and what it could not explain.
+    fn follow_billet(&mut self, x_contact_m: f64, t_contact_s: f64, tolerance_m: f64) -> Option<BilletCheck> {
+        let (transition, check) = match self.last_end {
+            _ if std::mem::take(&mut self.signalled) => return None,
+            None if self.billet == 0 => (Transition::New, None),
+            None => (Transition::Same, None),
+            Some(end) => {
+                let rise_m = end.x_m - x_contact_m;
+                match self.detect.classify(rise_m, t_contact_s - end.t_s, tolerance_m) {
+                    // An incomplete blow's end is unknown: any contact lower is its set.
+                    (_, Some(BilletCheck::ContactBelowLastEnd)) if !end.end_known => (Transition::Same, None),
+                    other => other,
+                }
+            }
+        };
+        match transition {
+            Transition::Same => {}
+            Transition::New => self.start_billet(),
+            Transition::Rebase => {
+                // The encoder's word for the part in the dies: the die reference, or the
+                // last end raised by the rise.
+                let from_end = self.last_end.and_then(|e| e.h_end_m.map(|h| h + (e.x_m - x_contact_m)));
+                self.h_m = self.die_x_m.map(|d| d - x_contact_m).or(from_end).or(self.h_m);
+                self.chain = None;
+            }
+        }
+        check
+    }
+
+    /// A billet's first blow: its height is the sheet's unless the encoder's (the die
+    /// reference less the contact) differs by more than the measurement; the first billet
+    /// teaches the die reference. Returns the encoder's height less the sheet's when reported.
+    fn first_blow_height(&mut self, x_contact_m: f64, tolerance_m: f64) -> Option<f64> {
+        let nominal_m = self.process.as_ref()?.billet.height_m;
+        let Some(die_x_m) = self.die_x_m else {
+            self.die_x_m = Some(x_contact_m + nominal_m);
+            return None;
+        };
+        let off_m = (die_x_m - x_contact_m) - nominal_m;
+        (off_m.abs() > tolerance_m).then(|| {
+            self.h_m = Some(nominal_m + off_m);
+            off_m
+        })
     }
 
     /// The longest hole bridged inside a blow, s: a tenth of the machine's second-mode
@@ -127,12 +240,22 @@ impl Estimator {
     /// Estimate the next blow.
     pub fn estimate(&mut self, blow: &Blow) -> Result<BlowEstimate, EstimateError> {
         self.blows += 1;
-        self.billet_blows += 1;
         let n = self.blows;
         let fit = fit_impact_speed(&blow.samples, blow.i_contact, self.cfg.fit_s, blow.period_s)
             .map_err(|source| EstimateError::Approach { blow: n, source })?;
         let v0 = fit.v_impact_mps;
         let gap_s = self.gap_s(blow);
+        let t_contact_s = blow.samples[blow.i_contact].t_s;
+        let tolerance_m = self.contact_tolerance_m(v0 * blow.period_s);
+        let mut billet_check = self.follow_billet(fit.x_contact_m, t_contact_s, tolerance_m);
+        let mut h_start_off_sheet_m = None;
+        if self.billet_blows == 0 {
+            h_start_off_sheet_m = self.first_blow_height(fit.x_contact_m, tolerance_m);
+            if self.prev_billet_blows == 1 && self.billet > 1 {
+                billet_check = billet_check.or(Some(BilletCheck::PreviousBilletOneBlow));
+            }
+        }
+        self.billet_blows += 1;
         let (h_start_m, height_check) = self.start_height(fit.x_contact_m, v0 * blow.period_s);
         let mut e = BlowEstimate {
             blow: n,
@@ -154,8 +277,16 @@ impl Estimator {
             gap_s,
             h_start_m,
             height_check,
+            billet: BilletTag {
+                billet: self.billet,
+                billet_blow: self.billet_blows as u32,
+                billet_check,
+                h_start_off_sheet_m,
+            },
         };
         self.chain = h_start_m.map(|h| (fit.x_contact_m, h));
+        let t_end_s = e.t_end_s;
+        self.last_end = Some(LastEnd { x_m: fit.x_contact_m, end_known: false, h_end_m: None, t_s: t_end_s });
         if blow.lost_s > 0.0 || gap_s > self.max_bridged_s() {
             // Cut short or holed beyond bridging: nothing after the hole is known, not even
             // the billet's height (the encoder chain takes it up again at the next blow).
@@ -205,6 +336,14 @@ impl Estimator {
         e.class = self.cfg.classify(efficiency);
         e.peak_load_n = o.peak_load_n;
         e.residual = Some((o.kinetic_in_j - o.deform_j - o.damped_j - o.elastic_j) / o.kinetic_in_j);
+        // The next contact on this billet comes lower by what the billet lost; without a
+        // height, by the ram's deepest travel past contact is all that is known.
+        self.last_end = Some(match (h_start_m, h_end_m) {
+            (Some(h0), Some(h1)) => {
+                LastEnd { x_m: fit.x_contact_m + (h0 - h1), end_known: true, h_end_m: Some(h1), t_s: t_end_s }
+            }
+            _ => LastEnd { x_m: fit.x_contact_m, end_known: false, h_end_m: None, t_s: t_end_s },
+        });
         Ok(e)
     }
 
@@ -216,12 +355,18 @@ impl Estimator {
         blow.filled_in(from..blow.i_end + 1) as f64 * blow.period_s + blow.lost_s
     }
 
+    /// How well a contact position compares with a height: the encoder's and the caliper's
+    /// resolutions and one sample's travel at impact, m.
+    fn contact_tolerance_m(&self, sample_travel_m: f64) -> f64 {
+        self.cfg.encoder_resolution_m + self.cfg.caliper_resolution_m + sample_travel_m
+    }
+
     /// The billet's height before this blow: the one tracked through the last blow, or, when
     /// that was lost (an incomplete blow), the encoder's chain from the last contact: the ram
     /// meets the billet lower by exactly the height the billet lost. The chain is also
     /// checked against the sheet's measured height after the blow before.
     fn start_height(&self, x_contact_m: f64, sample_travel_m: f64) -> (Option<f64>, Option<HeightCheck>) {
-        let tolerance_m = self.cfg.encoder_resolution_m + self.cfg.caliper_resolution_m + sample_travel_m;
+        let tolerance_m = self.contact_tolerance_m(sample_travel_m);
         // A billet does not grow: a contact higher than the last one (beyond the tolerance)
         // breaks the chain (another billet, or the part turned over).
         let chained = self

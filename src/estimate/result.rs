@@ -4,6 +4,7 @@
 use serde::Serialize;
 
 use crate::alert::Alert;
+use crate::estimate::billet::BilletCheck;
 
 /// Efficiency class of a blow (seed 000 §4.3: soft blows 80–90 %, hard 20–50 %).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -40,6 +41,21 @@ pub struct HeightCheck {
     pub tolerance_m: f64,
     /// `|sheet_m - encoder_m| <= tolerance_m`.
     pub agree: bool,
+}
+
+/// Which billet a blow forged, as the encoder (or a new-billet signal) told it (issue 22).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct BilletTag {
+    /// The billet's number, from 1 (0: not known, a result from an older recording).
+    pub billet: u32,
+    /// The blow's number on its billet, from 1.
+    pub billet_blow: u32,
+    /// A contact the billet detector could not reconcile, `None` when all is consistent.
+    pub billet_check: Option<BilletCheck>,
+    /// On a billet's first blow: its start height from the encoder minus the sheet's, m,
+    /// when the two differ by more than the caliper's and the encoder's resolution and one
+    /// sample's travel together; `None` otherwise.
+    pub h_start_off_sheet_m: Option<f64>,
 }
 
 /// One blow as measured and estimated. Field names and units are those of CONTRACTS.md §5;
@@ -85,6 +101,9 @@ pub struct BlowEstimate {
     pub h_start_m: Option<f64>,
     /// The encoder's start height against the sheet's measurement, where both exist.
     pub height_check: Option<HeightCheck>,
+    /// The billet the blow forged.
+    #[serde(flatten)]
+    pub billet: BilletTag,
 }
 
 impl BlowEstimate {

@@ -12,7 +12,8 @@
 use prost::Message;
 
 use crate::alert::{Alert, AlertKind};
-use crate::estimate::{BlowClass, BlowEstimate, HeightCheck};
+use crate::estimate::billet::BilletCheck;
+use crate::estimate::{BilletTag, BlowClass, BlowEstimate, HeightCheck};
 use crate::signal::sample::{Role, SampleBatch};
 
 use super::error::DecodeError;
@@ -252,6 +253,10 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
             tolerance_m: h.tolerance_m,
             agree: h.agree,
         }),
+        billet: (r.billet.billet > 0).then_some(r.billet.billet),
+        billet_blow: (r.billet.billet > 0).then_some(r.billet.billet_blow),
+        billet_check: r.billet.billet_check.map(|c| c.as_str().to_string()),
+        h_start_off_sheet_m: r.billet.h_start_off_sheet_m,
     }
 }
 
@@ -291,6 +296,13 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
             tolerance_m: h.tolerance_m,
             agree: h.agree,
         }),
+        // Recordings from before issue 22 carry no billet: 0, and no check.
+        billet: BilletTag {
+            billet: r.billet.unwrap_or(0),
+            billet_blow: r.billet_blow.unwrap_or(0),
+            billet_check: r.billet_check.as_deref().and_then(BilletCheck::parse),
+            h_start_off_sheet_m: r.h_start_off_sheet_m,
+        },
     })
 }
 
@@ -512,6 +524,12 @@ mod tests {
                 tolerance_m: 8e-5,
                 agree: false,
             }),
+            billet: BilletTag {
+                billet: 2,
+                billet_blow: 3,
+                billet_check: with_optional.then_some(BilletCheck::ContactAboveLastEnd),
+                h_start_off_sheet_m: with_optional.then_some(-0.0021),
+            },
         }
     }
 
