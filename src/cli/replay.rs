@@ -107,13 +107,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
                         blows += 1;
                         if let Some(rec) = writer.as_mut() {
                             let t_ns = (cut.t_end_s * 1e9).round() as i64;
-                            let boundary = BlowBoundary {
-                                blow: estimate.blow,
-                                t_trigger_s: cut.t_trigger_s,
-                                t_contact_s: cut.t_contact_s,
-                                t_end_s: cut.t_end_s,
-                                source: String::new(),
-                            };
+                            let boundary = BlowBoundary::of(estimate.blow, &cut);
                             rec.write_payload(t_ns, &Payload::Boundary(boundary))?;
                             rec.write_result(t_ns, &estimate)?;
                             if let Some(a) = &estimate.alert {

@@ -278,13 +278,7 @@ fn on_event(
         PipelineEvent::Blow { cut, estimate } => {
             summary.blows += 1;
             summary.incomplete_blows += u64::from(!estimate.is_complete());
-            let boundary = BlowBoundary {
-                blow: estimate.blow,
-                t_trigger_s: cut.t_trigger_s,
-                t_contact_s: cut.t_contact_s,
-                t_end_s: cut.t_end_s,
-                source: String::new(),
-            };
+            let boundary = BlowBoundary::of(estimate.blow, &cut);
             let _ = writer.write_payload(log_time_ns, &Payload::Boundary(boundary));
             if let Err(err) = writer.write_result(log_time_ns, &estimate) {
                 tracing::error!("recording the result of blow {}: {err}", estimate.blow);

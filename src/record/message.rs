@@ -22,6 +22,19 @@ pub struct BlowBoundary {
     pub source: String,
 }
 
+impl BlowBoundary {
+    /// Blow `blow` as the pipeline cut it (the source left unnamed).
+    pub fn of(blow: u32, cut: &crate::pipeline::Cut) -> Self {
+        BlowBoundary {
+            blow,
+            t_trigger_s: cut.t_trigger_s,
+            t_contact_s: cut.t_contact_s,
+            t_end_s: cut.t_end_s,
+            source: String::new(),
+        }
+    }
+}
+
 /// Samples lost or dropped (topic `/gaps`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Gap {
