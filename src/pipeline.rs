@@ -4,6 +4,7 @@
 //! recording through it reproduces the live results exactly. Pure code.
 
 use crate::alert::{AlertConfig, AlertRules};
+use crate::estimate::billet_book::{BilletBook, BilletSummary};
 use crate::estimate::{BlowEstimate, EstimateError, Estimator, EstimatorConfig};
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
@@ -25,6 +26,10 @@ pub enum PipelineEvent {
     Blow { cut: Cut, estimate: Box<BlowEstimate> },
     /// A blow was cut but could not be estimated (for example too short an approach).
     Rejected { cut: Cut, error: EstimateError },
+    /// A billet's summary: finished when the next one started (reported just before that
+    /// one's first blow, or at its signal), unfinished at the end of a run
+    /// (`Pipeline::close_billet`).
+    Billet(Box<BilletSummary>),
 }
 
 /// Thresholds of every stage.
@@ -56,6 +61,7 @@ pub struct Pipeline {
     cut: Vec<Blow>,
     /// The billet of the last blow judged: the alert memory starts over with each billet.
     billet: u32,
+    billets: BilletBook,
 }
 
 impl Pipeline {
@@ -66,6 +72,7 @@ impl Pipeline {
             alerts: AlertRules::new(cfg.alerts),
             cut: Vec::new(),
             billet: 0,
+            billets: BilletBook::default(),
         }
     }
 
@@ -90,9 +97,21 @@ impl Pipeline {
     }
 
     /// A new billet is in the dies (a signal): the height tracking and the alert memory
-    /// start over. Without a signal the estimator finds new billets from the encoder.
-    pub fn new_billet(&mut self) {
+    /// start over, and the billet before is finished (its summary goes to `out`). Without a
+    /// signal the estimator finds new billets from the encoder.
+    pub fn new_billet(&mut self, out: &mut Vec<PipelineEvent>) {
         self.estimator.new_billet();
+        out.extend(self.billets.finish().map(|b| PipelineEvent::Billet(Box::new(b))));
+    }
+
+    /// The run ends: the summary of the billet still in the dies (unfinished) goes to `out`.
+    pub fn close_billet(&mut self, out: &mut Vec<PipelineEvent>) {
+        out.extend(self.billets.close().map(|b| PipelineEvent::Billet(Box::new(b))));
+    }
+
+    /// The billet in the dies so far.
+    pub fn current_billet(&self) -> Option<&BilletSummary> {
+        self.billets.current()
     }
 
     /// Billets started so far, by the encoder or a signal.
@@ -123,6 +142,7 @@ impl Pipeline {
                         self.alerts.reset();
                     }
                     estimate.alert = self.alerts.on_blow(&estimate);
+                    out.extend(self.billets.on_blow(&estimate).map(|b| PipelineEvent::Billet(Box::new(b))));
                     out.push(PipelineEvent::Blow { cut, estimate: Box::new(estimate) });
                 }
                 Err(error) => out.push(PipelineEvent::Rejected { cut, error }),
@@ -265,6 +285,11 @@ mod tests {
     }
 
     fn run_with(batches: &[SampleBatch], cfg: PipelineConfig) -> Vec<BlowEstimate> {
+        run_billets(batches, cfg).0
+    }
+
+    /// The blows and the billets' summaries, the last one closed at the end of the run.
+    fn run_billets(batches: &[SampleBatch], cfg: PipelineConfig) -> (Vec<BlowEstimate>, Vec<BilletSummary>) {
         let m = machine();
         let mut feeder = Feeder::new(Pipeline::new(m, Some(process()), cfg));
         let mut events = Vec::new();
@@ -272,13 +297,20 @@ mod tests {
             feeder.push(b, &mut events);
         }
         feeder.pipeline_mut().end_of_stream(&mut events);
-        events
-            .into_iter()
-            .map(|e| match e {
-                PipelineEvent::Blow { estimate, .. } => *estimate,
+        feeder.pipeline_mut().close_billet(&mut events);
+        let (mut blows, mut billets) = (Vec::new(), Vec::new());
+        for e in events {
+            match e {
+                PipelineEvent::Blow { estimate, .. } => blows.push(*estimate),
+                PipelineEvent::Billet(b) => {
+                    // A billet is summarised before the next one's first blow.
+                    assert_eq!(blows.last().map(|e: &BlowEstimate| e.billet.billet), Some(b.billet));
+                    billets.push(*b);
+                }
                 PipelineEvent::Rejected { cut, error } => panic!("blow at {} rejected: {error}", cut.t_contact_s),
-            })
-            .collect()
+            }
+        }
+        (blows, billets)
     }
 
     /// The sample index 3 ms after blow `n`'s contact (device time counts samples from 0).
@@ -352,21 +384,23 @@ mod tests {
     /// Issue 22: billets of varying heights (up to 8 % off the sheet's, the first on it), no
     /// new-billet signal. Each is counted from the encoder, and each blow's height after it
     /// is within 0.1 mm (the issue's figure) of the simulator's.
-    fn billets_from_the_encoder(idle_s: f64) -> (Vec<BlowEstimate>, Vec<f64>) {
+    fn billets_from_the_encoder(idle_s: f64) -> (Vec<BlowEstimate>, Vec<BilletSummary>, Vec<f64>, Vec<f64>) {
         let base = BilletPlan { process: process(), v0s_mps: vec![3.9, 5.3, 5.3] };
         let plans = crate::simdevice::spread_plans(&base, 10, 0.08, 7);
+        let heights: Vec<f64> = plans.iter().map(|p| p.process.billet.height_m).collect();
         let mut sim =
             SimMachine::new(machine(), EffectSet::NONE, plans, CaptureSpec::hammer(23), 0.3).with_billet_idle(idle_s);
         let mut rows = Vec::new();
         while !sim.finished() {
             rows.extend(sim.next_rows(50_000).unwrap());
         }
-        (run(&frames(&rows, |_| false)), sim.h_end_truth_m().to_vec())
+        let (blows, billets) = run_billets(&frames(&rows, |_| false), PipelineConfig::for_machine(&machine()));
+        (blows, billets, sim.h_end_truth_m().to_vec(), heights)
     }
 
     #[test]
     fn ten_billets_of_varying_heights_are_counted_from_the_encoder() {
-        let (blows, truth) = billets_from_the_encoder(0.0);
+        let (blows, billets, truth, heights) = billets_from_the_encoder(0.0);
         assert_eq!(blows.len(), 30);
         for (i, (b, h)) in blows.iter().zip(&truth).enumerate() {
             assert_eq!(
@@ -382,6 +416,23 @@ mod tests {
         // Billets off the sheet by more than the resolutions say so on their first blow.
         let off = blows.iter().filter(|b| b.billet.h_start_off_sheet_m.is_some()).count();
         assert!(off >= 5, "{off} billets reported off the sheet");
+        // One summary per billet: its three blows, its start height as the saw cut it and its
+        // end height as the simulator forged it, to the same 0.1 mm; all finished but the
+        // last, which the run's end closes.
+        assert_eq!(billets.len(), 10);
+        for (i, b) in billets.iter().enumerate() {
+            assert_eq!((b.billet, b.blows, b.incomplete_blows), (i as u32 + 1, 3, 0));
+            assert_eq!(b.finished, i < 9, "billet {}", b.billet);
+            let h0 = b.h_start_m.unwrap();
+            assert!((h0 - heights[i]).abs() < 1e-4, "billet {}: h_start {h0} vs cut {}", b.billet, heights[i]);
+            let h1 = b.h_end_m.unwrap();
+            assert!((h1 - truth[3 * i + 2]).abs() < 1e-4, "billet {}: h_end {h1}", b.billet);
+            let own = &blows[3 * i..3 * i + 3];
+            let plastic: f64 = own.iter().map(|e| e.plastic_j.unwrap()).sum();
+            assert!((b.plastic_j - plastic).abs() < 1e-6 * plastic, "billet {}", b.billet);
+            let first_hard = own.iter().find(|e| e.class == BlowClass::Hard).map(|e| e.billet.billet_blow);
+            assert_eq!(b.first_hard_blow, first_hard, "billet {}", b.billet);
+        }
     }
 
     /// Forge `plans` with `idle_s` more between billets, through a pipeline whose idle gap

@@ -185,8 +185,9 @@ fn efficiencies(found: &[PipelineEvent]) -> Vec<f64> {
 fn assert_blows_match(found: &[PipelineEvent], truth: &[SynthBlow]) {
     let blows: Vec<_> = found
         .iter()
-        .map(|e| match e {
-            PipelineEvent::Blow { estimate, .. } => estimate,
+        .filter_map(|e| match e {
+            PipelineEvent::Blow { estimate, .. } => Some(estimate),
+            PipelineEvent::Billet(_) => None,
             PipelineEvent::Rejected { cut, error } => panic!("blow at {} rejected: {error}", cut.t_contact_s),
         })
         .collect();

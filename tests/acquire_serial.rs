@@ -167,8 +167,9 @@ fn blows_found(events: &[SourceEvent]) -> Vec<forgemon::estimate::BlowEstimate> 
     }
     p.end_of_stream(&mut out);
     out.into_iter()
-        .map(|e| match e {
-            PipelineEvent::Blow { estimate, .. } => *estimate,
+        .filter_map(|e| match e {
+            PipelineEvent::Blow { estimate, .. } => Some(*estimate),
+            PipelineEvent::Billet(_) => None,
             PipelineEvent::Rejected { cut, error } => panic!("blow at {cut:?} rejected: {error}"),
         })
         .collect()

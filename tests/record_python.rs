@@ -1,13 +1,14 @@
 //! Interop (issue #3, "Must show"): a recording with every channel is decoded by the public
 //! Python packages `mcap` and `mcap-protobuf-support` through `tests/python/read_mcap.py`,
 //! using only the FileDescriptorSets stored in the file, and what they decode must be what
-//! was written. CI installs the packages (`.ci/run`); elsewhere the test fails saying how.
+//! was written, billet summaries included. CI installs the packages (`.ci/run`); elsewhere the test fails saying how.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
 use forgemon::alert::{Alert, AlertKind};
+use forgemon::estimate::billet_book::BilletSummary;
 use forgemon::estimate::{BlowClass, BlowEstimate};
 use forgemon::record::{BlowBoundary, Gap, RecordWriter, Rotation, Status};
 use forgemon::signal::sample::{Role, SampleBatch};
@@ -66,6 +67,29 @@ fn result(blow: u32, with_sheet: bool) -> BlowEstimate {
 }
 
 /// Run the Python reader on `path`; its JSON.
+fn billet(n: u32, whole: bool) -> BilletSummary {
+    BilletSummary {
+        billet: n,
+        t_start_s: 10.5 * f64::from(n),
+        t_end_s: 10.5 * f64::from(n) + 3.25,
+        blows: if whole { 8 } else { 1 },
+        incomplete_blows: u32::from(!whole),
+        energies_partial: !whole,
+        h_start_m: whole.then_some(0.1121),
+        h_start_off_sheet_m: whole.then_some(1.5e-4),
+        h_end_m: whole.then_some(0.0402),
+        kinetic_in_j: if whole { 91_250.0 } else { 0.0 },
+        plastic_j: if whole { 55_125.5 } else { 0.0 },
+        friction_j: whole.then_some(20_500.25),
+        efficiency: whole.then_some(55_125.5 / 91_250.0),
+        first_hard_blow: whole.then_some(6),
+        hard_blows: if whole { 3 } else { 0 },
+        alerts: if whole { 1 } else { 0 },
+        checked_blows: u32::from(!whole),
+        finished: whole,
+    }
+}
+
 fn python_read(path: &Path) -> Value {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/read_mcap.py");
     let out = match Command::new("python3").arg(&script).arg(path).output() {
@@ -126,6 +150,12 @@ fn python_mcap_protobuf_decodes_every_channel() {
             w.write_alert(t, a).expect("alert");
         }
     }
+    // Billet 1 finished with every figure; billet 2 in the dies at the end, its one blow
+    // incomplete, so no heights, efficiency or hard blow.
+    let billets = [billet(1, true), billet(2, false)];
+    for (i, b) in billets.iter().enumerate() {
+        w.write_billet(t_blow + 400 * MS + i as i64 * MS, b).expect("billet");
+    }
     w.write_gap(t0 + 700 * MS, &Gap { source: "daq0".into(), t_s: 0.7, samples_lost: 400, reason: "crc".into() })
         .expect("gap");
     w.write_status(
@@ -158,6 +188,7 @@ fn python_mcap_protobuf_decodes_every_channel() {
         ("/gaps", 1, "forgemon.Gap"),
         ("/status", 2, "forgemon.Status"),
         ("/config", 2, "forgemon.ConfigFile"),
+        ("/billets", 2, "forgemon.BilletSummary"),
     ];
     assert_eq!(topics.as_object().map(|o| o.len()), Some(expected.len()), "topics: {topics}");
     for (topic, n, schema) in expected {
@@ -166,7 +197,7 @@ fn python_mcap_protobuf_decodes_every_channel() {
         assert_eq!(topics[topic]["schema_encoding"], "protobuf");
         assert_eq!(topics[topic]["message_encoding"], "protobuf");
     }
-    assert_eq!(json["summary_message_count"], 133);
+    assert_eq!(json["summary_message_count"], 135);
 
     // Samples: every field of the first batch, and the sum of every value of each source.
     for source in ["daq0", "modbus1"] {
@@ -241,6 +272,27 @@ fn python_mcap_protobuf_decodes_every_channel() {
     assert_eq!(status["crc_errors"], 2);
     assert_eq!(status["reconnects"], 4);
     assert_eq!(status["detail"], "/dev/ttyACM0");
+
+    // Billets: every field, the optional ones absent exactly when they were None.
+    let decoded = topics["/billets"]["messages"].as_array().expect("billets");
+    for (d, b) in decoded.iter().zip(&billets) {
+        let n = b.billet;
+        assert_eq!((d["billet"].as_u64(), d["blows"].as_u64()), (Some(u64::from(n)), Some(u64::from(b.blows))));
+        assert_eq!((f(&d["t_start_s"]), f(&d["t_end_s"])), (b.t_start_s, b.t_end_s), "billet {n}");
+        assert_eq!(d["incomplete_blows"].as_u64(), Some(u64::from(b.incomplete_blows)), "billet {n}");
+        assert_eq!(d["energies_partial"].as_bool(), Some(b.energies_partial), "billet {n}");
+        assert_eq!(d["h_start_m"].as_f64(), b.h_start_m, "billet {n}");
+        assert_eq!(d["h_start_off_sheet_m"].as_f64(), b.h_start_off_sheet_m, "billet {n}");
+        assert_eq!(d["h_end_m"].as_f64(), b.h_end_m, "billet {n}");
+        assert_eq!((f(&d["kinetic_in_J"]), f(&d["plastic_J"])), (b.kinetic_in_j, b.plastic_j), "billet {n}");
+        assert_eq!(d["friction_J"].as_f64(), b.friction_j, "billet {n}");
+        assert_eq!(d["efficiency"].as_f64(), b.efficiency, "billet {n}");
+        assert_eq!(d["first_hard_blow"].as_u64(), b.first_hard_blow.map(u64::from), "billet {n}");
+        assert_eq!(d["hard_blows"].as_u64(), Some(u64::from(b.hard_blows)), "billet {n}");
+        assert_eq!(d["alerts"].as_u64(), Some(u64::from(b.alerts)), "billet {n}");
+        assert_eq!(d["checked_blows"].as_u64(), Some(u64::from(b.checked_blows)), "billet {n}");
+        assert_eq!(d["finished"].as_bool(), Some(b.finished), "billet {n}");
+    }
 
     let configs = topics["/config"]["messages"].as_array().expect("config");
     assert_eq!(configs[0]["name"], "machine.toml");

@@ -8,6 +8,7 @@ use std::process::{Command, Output};
 
 use forgemon::physics::{BilletGeometry, EffectSet, FlowStress, Hammer, Machine, MachineKind, Process, ScrewPress};
 use forgemon::signal::capture::write_capture;
+use forgemon::simdevice::{BilletPlan, SimMachine};
 use forgemon::synth::{CaptureSpec, SynthBlow, idle_rows, synth_blows};
 use serde_json::Value;
 
@@ -288,4 +289,70 @@ fn bad_input_is_refused_with_file_line_and_key() {
     let nodir = dir.join("nothing");
     std::fs::create_dir_all(&nodir).unwrap();
     fails_naming(&["replay", nodir.to_str().unwrap(), "--machine", m], &["no blow_NN.csv"]);
+}
+
+/// Issue 22: a recording replays with the alert rules and billet detection it was recorded
+/// with (the service file it stores), unless `--service` gives others. Four billets of
+/// heights up to 8 % apart in one continuous stream: recorded with a new-billet rise of
+/// 0.5 m (more than any billet) and a low-efficiency alert on any blow below 0.99, they are
+/// one billet that alerts on at least half its blows (debounced over one); with the defaults, four billets and fewer alerts.
+#[test]
+fn a_recording_replays_with_the_billet_detection_and_alert_rules_it_stored() {
+    let base = BilletPlan { process: steel(), v0s_mps: vec![4.0, 5.0, 5.0] };
+    let plans = forgemon::simdevice::spread_plans(&base, 4, 0.08, 3);
+    let mut sim = SimMachine::new(hammer(), EffectSet::NONE, plans, CaptureSpec::hammer(31), 0.2);
+    let mut rows = Vec::new();
+    while !sim.finished() {
+        rows.extend(sim.next_rows(50_000).unwrap());
+    }
+    let dir = tmpdir("tuning");
+    let csv = dir.join("stream.csv");
+    write_capture(&mut std::fs::File::create(&csv).unwrap(), &rows).unwrap();
+    std::fs::write(dir.join("machine.toml"), HAMMER_TOML).unwrap();
+    std::fs::write(dir.join("process.toml"), STEEL_TOML).unwrap();
+    std::fs::write(dir.join("tuned.toml"), "[alerts]\nlow_efficiency = 0.99\nk_low = 1\nn_window = 1\ndebounce_blows = 1\n[billets]\nnew_billet_rise_m = 0.5\n")
+        .unwrap();
+    std::fs::write(dir.join("defaults.toml"), "").unwrap();
+    let path = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let (m, p, rec) = (path("machine.toml"), path("process.toml"), path("tuned.mcap"));
+    let billets = |v: &[Value]| v.iter().map(|b| b["billet"].as_u64().unwrap()).collect::<Vec<_>>();
+    // A blow below `low_efficiency` raises an `elastic_blow` alert (k of the last n).
+    let low = |v: &[Value]| v.iter().filter(|b| b["alert"]["kind"] == "elastic_blow").count();
+
+    let tuned = forgemon(&[
+        "replay",
+        &path("stream.csv"),
+        "--machine",
+        &m,
+        "--process",
+        &p,
+        "--service",
+        &path("tuned.toml"),
+        "--json",
+        "--out",
+        &rec,
+    ]);
+    assert!(tuned.status.success(), "{}", String::from_utf8_lossy(&tuned.stderr));
+    let tuned_json: Vec<Value> =
+        String::from_utf8(tuned.stdout.clone()).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(tuned_json.len(), 12);
+    assert_eq!(billets(&tuned_json), vec![1; 12]);
+    let tuned_low = low(&tuned_json);
+    assert!(tuned_low >= 6, "{tuned_low} elastic-blow alerts");
+    // The stored service file rules the replay of the recording: the same JSON, byte for byte.
+    let again = forgemon(&["replay", &rec, "--machine", &m, "--json"]);
+    assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
+    assert_eq!(again.stdout, tuned.stdout);
+    // Other rules on the same recording: four billets, and fewer alerts.
+    let defaults = replay_json(&["replay", &rec, "--machine", &m, "--service", &path("defaults.toml"), "--json"]);
+    assert_eq!(billets(&defaults), [1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4]);
+    assert!(low(&defaults) < tuned_low, "{} vs {tuned_low} elastic-blow alerts", low(&defaults));
+    // Every billet's summary is in the recording, and the table prints one line per billet.
+    let out = forgemon(&["inspect", "--json", &rec]);
+    let inspected: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((inspected["billets"].as_u64(), inspected["billets_finished"].as_u64()), (Some(1), Some(0)));
+    assert_eq!(inspected["billet_summaries"][0]["blows"], 12);
+    let table = forgemon(&["replay", &rec, "--machine", &m, "--service", &path("defaults.toml")]);
+    let text = String::from_utf8_lossy(&table.stdout);
+    assert_eq!(text.lines().filter(|l| l.starts_with("billet ")).count(), 4, "{text}");
 }

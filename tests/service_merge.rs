@@ -50,7 +50,7 @@ fn single_daq_reference() -> Vec<BlowEstimate> {
         let billet = sim.billet_of_emitted();
         let rows = sim.next_rows(1000).unwrap();
         if billet > 0 && sim.billet_of_emitted() > billet {
-            feeder.pipeline_mut().new_billet();
+            feeder.pipeline_mut().new_billet(&mut events);
         }
         let batch = rows_batch("daq", 0, n * 10_000, 10_000.0, &rows);
         n += rows.len() as i64;

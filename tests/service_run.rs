@@ -442,7 +442,7 @@ fn ten_billets_are_counted_over_a_pty_without_a_billet_signal() {
     }
     let truth = truth_sim.h_end_truth_m().to_vec();
     let (_stop_tx, stop_rx) = tokio::sync::watch::channel(false);
-    drive_plans(master, plans, 0.3, Arc::new(AtomicU64::new(0)), stop_rx);
+    drive_plans(master, plans.clone(), 0.3, Arc::new(AtomicU64::new(0)), stop_rx);
     let deadline = Instant::now() + Duration::from_secs(10);
     while status(svc.http)["blows"].as_u64() < Some(30) {
         assert!(Instant::now() < deadline, "blows seen: {}", status(svc.http));
@@ -457,10 +457,13 @@ fn ten_billets_are_counted_over_a_pty_without_a_billet_signal() {
     assert!(kill.success());
     assert!(svc.child.wait().unwrap().success());
     drop(slave);
-    let results: Vec<_> = recordings(&svc.dir)
+    let messages: Vec<_> = recordings(&svc.dir)
         .iter()
         .flat_map(|f| RecordReader::open(f).unwrap().filter_map(|m| m.ok()).collect::<Vec<_>>())
-        .filter_map(|m| match m.payload {
+        .collect();
+    let results: Vec<_> = messages
+        .iter()
+        .filter_map(|m| match &m.payload {
             Payload::Result(r) => Some(r),
             _ => None,
         })
@@ -472,4 +475,82 @@ fn ten_billets_are_counted_over_a_pty_without_a_billet_signal() {
         let e = r.h_end_m.expect("a tracked height");
         assert!((e - h).abs() < 1e-4, "blow {}: h_end {e} vs simulated {h}", r.blow);
     }
+    // The recording's `/billets`: one summary per billet, the last closed unfinished when
+    // the service stopped; heights from the saw cut and to the simulator's end, 0.1 mm.
+    let billets: Vec<_> = messages
+        .iter()
+        .filter_map(|m| match &m.payload {
+            Payload::Billet(b) => Some(b),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(billets.len(), 10);
+    for (i, b) in billets.iter().enumerate() {
+        assert_eq!((b.billet, b.blows, b.finished), (i as u32 + 1, 3, i < 9), "{b}");
+        let h0 = b.h_start_m.expect("a start height");
+        assert!((h0 - plans[i].process.billet.height_m).abs() < 1e-4, "{b}");
+        assert!((b.h_end_m.expect("an end height") - truth[3 * i + 2]).abs() < 1e-4, "{b}");
+    }
+    // `inspect` counts them from the file.
+    let rec = recordings(&svc.dir);
+    let out = Command::new(env!("CARGO_BIN_EXE_forgemon")).args(["inspect", "--json"]).arg(&rec[0]).output().unwrap();
+    let inspected: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((inspected["billets"].as_u64(), inspected["billets_finished"].as_u64()), (Some(10), Some(9)));
+}
+
+/// SIGHUP reloads the alert rules, and the recording keeps the new file where it took
+/// effect, so a replay judges each blow by the rules the live run had at that blow. The
+/// first billet is forged with hard-blow alerts off, the second after turning them on.
+#[test]
+fn a_sighup_reload_is_recorded_and_replayed_where_it_happened() {
+    let (master, slave, tty) = pty();
+    let (hook_port, _hooks) = webhook_server();
+    let mut svc = start_service_with("sighup", &tty, hook_port, "hard_blow = false");
+    let (_stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let device = std::thread::spawn(move || drive(master, 2, 0.3, Arc::new(AtomicU64::new(0)), stop_rx));
+    let wait_blows = |n: u64| {
+        let deadline = Instant::now() + Duration::from_secs(15);
+        while status(svc.http)["blows"].as_u64() < Some(n) {
+            assert!(Instant::now() < deadline, "blows seen: {}", status(svc.http));
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    wait_blows(8);
+    let cfg = svc.dir.join("service.toml");
+    let text = std::fs::read_to_string(&cfg).unwrap().replace("hard_blow = false", "hard_blow = true");
+    std::fs::write(&cfg, text).unwrap();
+    assert!(Command::new("kill").args(["-HUP", &svc.child.id().to_string()]).status().unwrap().success());
+    wait_blows(16);
+    device.join().unwrap();
+    assert!(Command::new("kill").args(["-TERM", &svc.child.id().to_string()]).status().unwrap().success());
+    assert!(svc.child.wait().unwrap().success());
+    drop(slave);
+    let rec = recordings(&svc.dir);
+    assert_eq!(rec.len(), 1, "{rec:?}");
+    let live: Vec<_> = RecordReader::open(&rec[0])
+        .unwrap()
+        .filter_map(|m| match m.ok()?.payload {
+            Payload::Result(r) => Some(r),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(live.len(), 16);
+    let live_alerts: Vec<bool> = live.iter().map(|r| r.alert.is_some()).collect();
+    // Billet 1's hard blows did not alert; billet 2's did.
+    assert!(live[..8].iter().all(|r| r.alert.is_none()), "{live_alerts:?}");
+    assert!(live[8..].iter().any(|r| r.alert.is_some()), "{live_alerts:?}");
+    let replay = |extra: &[&str]| -> Vec<bool> {
+        let out = Command::new(env!("CARGO_BIN_EXE_forgemon"))
+            .args(["replay", rec[0].to_str().unwrap(), "--machine", HAMMER, "--json"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let lines = String::from_utf8(out.stdout).unwrap();
+        lines.lines().map(|l| !serde_json::from_str::<serde_json::Value>(l).unwrap()["alert"].is_null()).collect()
+    };
+    assert_eq!(replay(&[]), live_alerts, "the replay follows the recorded reload");
+    // The reloaded file applied from the start judges billet 1's hard blows too.
+    let from_start = replay(&["--service", cfg.to_str().unwrap()]);
+    assert!(from_start[..8].iter().any(|a| *a), "{from_start:?}");
 }

@@ -142,6 +142,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
                 let _ = std::io::stdout().flush();
             })),
             on_rejected: Some(Box::new(|m| println!("      (not estimated: {m})"))),
+            on_billet: Some(Box::new(|b| {
+                println!("      {b}");
+                let _ = std::io::stdout().flush();
+            })),
         };
         let summary = serve(parts, rx, shutdown_tx, stop_rx, hooks, Some((control_tx, control_rx))).await?;
         let stats = device.await.context("the simulated device task")??;

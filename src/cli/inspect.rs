@@ -1,5 +1,5 @@
 //! `forgemon inspect FILE.mcap`: what a recording holds, in forging terms: sources with
-//! their rates and durations, blows, results by class, alerts, gaps and drops, the stored
+//! their rates and durations, blows, results by class, billets, alerts, gaps and drops, the stored
 //! configuration, and whether the file was finished or had to be recovered. Corrupt chunks
 //! are named on stderr and the exit status is 3 ([`input_status`], shared with `replay`).
 
@@ -55,6 +55,7 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
     let mut drops: BTreeMap<String, u64> = BTreeMap::new();
     let mut configs = Vec::new();
     let mut efficiency = Vec::new();
+    let mut billets = Vec::new();
     for m in reader.by_ref() {
         match m?.payload {
             Payload::Samples(b) => {
@@ -80,6 +81,7 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
                 drops.insert(s.source.clone(), s.drops);
             }
             Payload::Config(c) => configs.push(c.name),
+            Payload::Billet(b) => billets.push(*b),
         }
     }
     let report = reader.report().clone();
@@ -108,6 +110,9 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
         "blows": boundaries,
         "results_by_class": classes,
         "mean_efficiency": if efficiency.is_empty() { None } else { Some(efficiency.iter().sum::<f64>() / efficiency.len() as f64) },
+        "billets": billets.len(),
+        "billets_finished": billets.iter().filter(|b| b.finished).count(),
+        "billet_summaries": billets,
         "alerts": alerts,
         "gaps": gaps,
         "samples_lost": samples_lost,
@@ -158,6 +163,11 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
     )?;
     if let Some(e) = out["mean_efficiency"].as_f64() {
         writeln!(w, "  mean efficiency: {e:.3}")?;
+    }
+    let finished = billets.iter().filter(|b| b.finished).count();
+    writeln!(w, "  billets: {} ({finished} finished)", billets.len())?;
+    for b in &billets {
+        writeln!(w, "    {b}")?;
     }
     writeln!(
         w,

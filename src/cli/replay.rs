@@ -10,9 +10,10 @@ use clap::Args;
 
 use super::{parse_process_warn, read_text};
 use crate::config::parse_machine;
-use crate::daemon::{CONTROL_SOURCE, NEW_BILLET_STATE};
+use crate::config::service::parse_tuning;
+use crate::daemon::{CONTROL_SOURCE, NEW_BILLET_STATE, SERVICE_CONFIG_NAME, tuned_config};
 use crate::physics::process::Process;
-use crate::pipeline::{Feeder, Pipeline, PipelineConfig, PipelineEvent};
+use crate::pipeline::{Feeder, Pipeline, PipelineEvent};
 use crate::record::{BlowBoundary, Payload, RecordReader, RecordWriter, Rotation};
 use crate::signal::merge::Merger;
 use crate::signal::sample::SampleBatch;
@@ -28,7 +29,12 @@ pub struct ReplayArgs {
     /// stored in the recording.
     #[arg(long)]
     pub process: Option<PathBuf>,
-    /// Record the replay (samples, blows, results, alerts, configuration) to this MCAP file.
+    /// The service configuration whose alert rules (`[alerts]`) and billet detection
+    /// (`[billets]`) to use; defaults to the one stored in the recording, else the defaults.
+    #[arg(long)]
+    pub service: Option<PathBuf>,
+    /// Record the replay (samples, blows, results, alerts, billets, configuration) to this
+    /// MCAP file.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// One JSON object per blow (CONTRACTS.md §5) instead of a table.
@@ -47,17 +53,24 @@ enum Input {
     },
 }
 
+/// The configuration files a recording stores before its first samples.
+#[derive(Default)]
+struct Stored {
+    process: Option<String>,
+    service: Option<String>,
+}
+
 pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     let machine_text = read_text(&args.machine)?;
     let machine = parse_machine(&args.machine.display().to_string(), &machine_text)?.machine;
-    let (input, stored_process) = open_input(&args.input)?;
+    let (input, stored) = open_input(&args.input)?;
     let process_text = match (&args.process, &input) {
         (Some(p), _) => Some((p.display().to_string(), read_text(p)?)),
         (None, Input::Files(_)) if args.input.is_dir() => {
             let p = args.input.join("process.toml");
             p.exists().then(|| read_text(&p).map(|t| (p.display().to_string(), t))).transpose()?
         }
-        _ => stored_process.map(|t| (format!("{} (process.toml stored in it)", args.input.display()), t)),
+        _ => stored.process.map(|t| (format!("{} (process.toml stored in it)", args.input.display()), t)),
     };
     let process: Option<Process> = match &process_text {
         Some((origin, text)) => {
@@ -74,6 +87,15 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         }
         None => None,
     };
+    // The alert rules and billet detection the live run used, unless the caller gives others.
+    let service_text = match &args.service {
+        Some(p) => Some((p.display().to_string(), read_text(p)?)),
+        None => stored.service.map(|t| (format!("{} (service.toml stored in it)", args.input.display()), t)),
+    };
+    let tuning = match &service_text {
+        Some((origin, text)) => parse_tuning(origin, text)?,
+        None => parse_tuning("defaults", "")?,
+    };
     let mut writer = match &args.out {
         Some(path) => {
             let mut w = RecordWriter::create(path, Rotation::default())
@@ -82,11 +104,14 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             if let Some((_, text)) = &process_text {
                 w.write_config(0, "process.toml", text)?;
             }
+            if let Some((_, text)) = &service_text {
+                w.write_config(0, SERVICE_CONFIG_NAME, text)?;
+            }
             Some(w)
         }
         None => None,
     };
-    let mut feeder = Feeder::new(Pipeline::new(machine, process, PipelineConfig::for_machine(&machine)));
+    let mut feeder = Feeder::new(Pipeline::new(machine, process, tuned_config(&tuning, &machine)));
     let mut input_merge = (Merger::default(), Vec::new());
     let stdout = std::io::stdout();
     let mut w = std::io::BufWriter::new(stdout.lock());
@@ -134,6 +159,14 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
                             )?;
                         }
                     }
+                    PipelineEvent::Billet(b) => {
+                        if let Some(rec) = writer.as_mut() {
+                            rec.write_billet((b.t_end_s * 1e9).round() as i64, &b)?;
+                        }
+                        if !args.json {
+                            writeln!(w, "{b}")?;
+                        }
+                    }
                     PipelineEvent::Rejected { cut, error } => {
                         rejected += 1;
                         eprintln!("forgemon: blow at t = {:.6} s not estimated: {error}", cut.t_contact_s);
@@ -167,10 +200,17 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
                     }
                     // A new billet went into the dies here during the live run.
                     Payload::Status(st) if st.source == CONTROL_SOURCE && st.state == NEW_BILLET_STATE => {
-                        feeder.pipeline_mut().new_billet();
+                        feeder.pipeline_mut().new_billet(&mut events);
+                        handle(&mut events, &mut writer, &mut w)?;
                         if let Some(rec) = writer.as_mut() {
                             rec.write_status(last_log_ns, &st)?;
                         }
+                    }
+                    // The live run reloaded its alert rules here (SIGHUP); a rotated file
+                    // repeats the same text, which changes nothing.
+                    Payload::Config(c) if c.name == SERVICE_CONFIG_NAME && args.service.is_none() => {
+                        let origin = format!("{} (service.toml stored in it)", args.input.display());
+                        feeder.pipeline_mut().set_alert_config(parse_tuning(&origin, &c.text)?.alerts);
                     }
                     _ => {}
                 }
@@ -182,6 +222,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         }
     }
     feeder.pipeline_mut().end_of_stream(&mut events);
+    feeder.pipeline_mut().close_billet(&mut events);
     handle(&mut events, &mut writer, &mut w)?;
     w.flush()?;
     if let Some(rec) = writer {
@@ -222,15 +263,15 @@ fn feed_batch(
     Ok(())
 }
 
-/// Classify the input and, for a recording, read its samples and stored process sheet.
-fn open_input(path: &Path) -> anyhow::Result<(Input, Option<String>)> {
+/// Classify the input and, for a recording, read its samples and stored configuration.
+fn open_input(path: &Path) -> anyhow::Result<(Input, Stored)> {
     if path.is_dir() {
-        return Ok((Input::Files(super::capture_dir_files(path)?), None));
+        return Ok((Input::Files(super::capture_dir_files(path)?), Stored::default()));
     }
     let name = path.to_string_lossy();
     if name.ends_with(".mcap") || name.ends_with(".mcap.part") {
         let mut reader = RecordReader::open(path)?;
-        let mut process = None;
+        let mut stored = Stored::default();
         let mut ahead = Vec::new();
         // Configuration is written before the samples; read up to the first batch of them.
         for m in reader.by_ref() {
@@ -239,16 +280,17 @@ fn open_input(path: &Path) -> anyhow::Result<(Input, Option<String>)> {
                     ahead.push(b);
                     break;
                 }
-                Payload::Config(c) if c.name == "process.toml" => process = Some(c.text),
+                Payload::Config(c) if c.name == "process.toml" => stored.process = Some(c.text),
+                Payload::Config(c) if c.name == SERVICE_CONFIG_NAME => stored.service = Some(c.text),
                 _ => {}
             }
         }
-        return Ok((Input::Recording { reader: Box::new(reader), ahead }, process));
+        return Ok((Input::Recording { reader: Box::new(reader), ahead }, stored));
     }
     if !path.exists() {
         bail!("{}: no such file or directory", path.display());
     }
-    Ok((Input::Files(vec![path.to_path_buf()]), None))
+    Ok((Input::Files(vec![path.to_path_buf()]), Stored::default()))
 }
 
 /// A figure of the table, or `-` where the blow has none (an incomplete blow).

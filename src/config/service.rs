@@ -169,15 +169,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         Some(a) => parse_alerts(&doc, a)?,
         None => (AlertConfig::default(), None, None),
     };
-    let billets = raw.billets.as_ref();
-    let new_billet_rise_m = match billets.and_then(|b| b.new_billet_rise_m) {
-        Some(r) => Some(doc.in_range("billets.new_billet_rise_m", r, &NEW_BILLET_RISE_M)?),
-        None => None,
-    };
-    let idle_new_billet_s = match billets.and_then(|b| b.idle_s) {
-        Some(s) => doc.in_range("billets.idle_s", s, &BILLET_IDLE_S)?,
-        None => crate::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
-    };
+    let (new_billet_rise_m, idle_new_billet_s) = parse_billets(&doc, raw.billets.as_ref())?;
     if raw.sources.is_empty() {
         return Err(doc.invalid("sources", "must be a non-empty array of tables ([[sources]])"));
     }
@@ -202,6 +194,60 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         idle_new_billet_s,
         sources,
     })
+}
+
+/// What a service file sets of the pipeline's own thresholds: what a replay needs to judge
+/// blows and find billets as the live run did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PipelineTuning {
+    pub alerts: AlertConfig,
+    pub new_billet_rise_m: Option<f64>,
+    pub idle_new_billet_s: f64,
+}
+
+/// Only the tables a [`PipelineTuning`] reads; the rest of the file is not looked at (a
+/// recording's copy names paths and ports of another machine).
+#[derive(Deserialize)]
+struct RawTuning {
+    alerts: Option<RawAlerts>,
+    billets: Option<RawBillets>,
+}
+
+/// `[alerts]` and `[billets]` of the service configuration text `origin`, checked like the
+/// whole file is by [`parse_service`].
+pub fn parse_tuning(origin: &str, text: &str) -> Result<PipelineTuning, ConfigError> {
+    let doc = Document::parse(origin, text)?;
+    let raw: RawTuning = doc.read()?;
+    let alerts = match &raw.alerts {
+        Some(a) => parse_alerts(&doc, a)?.0,
+        None => AlertConfig::default(),
+    };
+    let (new_billet_rise_m, idle_new_billet_s) = parse_billets(&doc, raw.billets.as_ref())?;
+    Ok(PipelineTuning { alerts, new_billet_rise_m, idle_new_billet_s })
+}
+
+impl ServiceConfig {
+    /// The pipeline thresholds this file sets.
+    pub fn tuning(&self) -> PipelineTuning {
+        PipelineTuning {
+            alerts: self.alerts,
+            new_billet_rise_m: self.new_billet_rise_m,
+            idle_new_billet_s: self.idle_new_billet_s,
+        }
+    }
+}
+
+/// `[billets]`: the new-billet rise (`None`: the estimator's default) and idle gap.
+fn parse_billets(doc: &Document<'_>, billets: Option<&RawBillets>) -> Result<(Option<f64>, f64), ConfigError> {
+    let new_billet_rise_m = match billets.and_then(|b| b.new_billet_rise_m) {
+        Some(r) => Some(doc.in_range("billets.new_billet_rise_m", r, &NEW_BILLET_RISE_M)?),
+        None => None,
+    };
+    let idle_new_billet_s = match billets.and_then(|b| b.idle_s) {
+        Some(s) => doc.in_range("billets.idle_s", s, &BILLET_IDLE_S)?,
+        None => crate::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
+    };
+    Ok((new_billet_rise_m, idle_new_billet_s))
 }
 
 /// `[alerts]` over the defaults, with its webhook and PLC coil.
@@ -304,6 +350,19 @@ gain = 0.01
         let typo = GOOD.replace("[[sources]]", "[billets]\nidle = 45.0\n[[sources]]");
         let e = parse_service("s.toml", Path::new("/"), &typo).unwrap_err().to_string();
         assert!(e.contains("unknown key 'idle' in [billets]"), "{e}");
+    }
+
+    /// A replay reads the thresholds from the recording's copy of the service file: the
+    /// same values and the same checks as the service, the rest of the file unread.
+    #[test]
+    fn the_pipeline_tuning_is_read_alone() {
+        let set = GOOD.replace("[[sources]]", "[billets]\nnew_billet_rise_m = 0.005\nidle_s = 45.0\n[[sources]]");
+        let t = parse_tuning("rec.mcap", &set).unwrap();
+        assert_eq!(t, parse_service("s.toml", Path::new("/"), &set).unwrap().tuning());
+        assert_eq!((t.new_billet_rise_m, t.idle_new_billet_s), (Some(0.005), 45.0));
+        let bad = set.replace("idle_s = 45.0", "idle_s = -1.0");
+        assert!(parse_tuning("rec.mcap", &bad).unwrap_err().to_string().contains("billets.idle_s"));
+        assert_eq!(parse_tuning("rec.mcap", "").unwrap().alerts, AlertConfig::default());
     }
 
     #[test]

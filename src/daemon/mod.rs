@@ -19,8 +19,9 @@ use anyhow::Context;
 use tokio::sync::{mpsc, watch};
 
 use crate::acquire::SourceEvent;
-use crate::config::service::{ServiceConfig, parse_service};
+use crate::config::service::{PipelineTuning, ServiceConfig, parse_service};
 use crate::estimate::BlowEstimate;
+use crate::estimate::billet_book::BilletSummary;
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline, PipelineConfig, PipelineEvent};
@@ -69,6 +70,8 @@ pub fn new_billet_marker() -> crate::record::Status {
 pub type BlowHook = Box<dyn FnMut(&BlowEstimate) + Send>;
 /// A front end's callback for each blow that could not be estimated.
 pub type RejectHook = Box<dyn FnMut(&str) + Send>;
+/// A front end's callback for each billet's summary.
+pub type BilletHook = Box<dyn FnMut(&BilletSummary) + Send>;
 
 /// Callbacks for a front end (the demo prints each blow).
 #[derive(Default)]
@@ -77,6 +80,8 @@ pub struct Hooks {
     pub on_listening: Option<Box<dyn FnOnce(std::net::SocketAddr) + Send>>,
     pub on_blow: Option<BlowHook>,
     pub on_rejected: Option<RejectHook>,
+    /// Called with each billet's summary, when the next starts and at the end of the run.
+    pub on_billet: Option<BilletHook>,
 }
 
 /// What the service did, when it stops.
@@ -85,6 +90,8 @@ pub struct Summary {
     pub samples: u64,
     /// Billets started, by the encoder or a signal.
     pub billets: u64,
+    /// Billets finished (the next one started); the last one is summarised unfinished.
+    pub billets_finished: u64,
     pub blows: u64,
     pub alerts: u64,
     /// Events the live queue dropped because the pipeline fell behind.
@@ -123,7 +130,7 @@ pub async fn serve(
     if let Some(t) = &parts.process_text {
         writer.write_config(t0, "process.toml", t)?;
     }
-    writer.write_config(t0, "service.toml", &std::fs::read_to_string(&parts.config_path).unwrap_or_default())?;
+    writer.write_config(t0, SERVICE_CONFIG_NAME, &std::fs::read_to_string(&parts.config_path).unwrap_or_default())?;
 
     let status: SharedStatus = Arc::new(Mutex::new(StatusSnapshot::new(parts.machine.kind().as_str())));
     let listener = tokio::net::TcpListener::bind(cfg.http_listen)
@@ -188,7 +195,7 @@ pub async fn serve(
                             let batch_end_ns = b.device_time_ns + (b.period_ns * b.len() as f64) as i64;
                             if pending_billet.is_some_and(|at| batch_end_ns > at) {
                                 pending_billet = None;
-                                start_billet(&mut feeder, &mut writer, &status);
+                                start_billet(&mut feeder, &mut writer, &status, &mut events);
                             }
                             feeder.push(b, &mut events);
                         }
@@ -209,17 +216,23 @@ pub async fn serve(
                 }
             }
             Some(c) = control_rx.recv() => match c {
-                Control::NewBillet { at_device_ns: None } => start_billet(&mut feeder, &mut writer, &status),
+                Control::NewBillet { at_device_ns: None } => {
+                    start_billet(&mut feeder, &mut writer, &status, &mut events);
+                    for e in events.drain(..) {
+                        on_event(e, host_now_ns(), &mut writer, &status, &sinks, &mut hooks, &mut summary);
+                    }
+                }
                 Control::NewBillet { at_device_ns: Some(at) } => pending_billet = Some(at),
             },
             _ = sigterm.recv() => { tracing::info!("SIGTERM: finishing the recording"); break; }
             _ = tokio::signal::ctrl_c() => { tracing::info!("interrupted: finishing the recording"); break; }
             _ = stop.changed() => { if *stop.borrow() { break; } }
             _ = sighup.recv() => {
-                match std::fs::read_to_string(&parts.config_path).map_err(anyhow::Error::from)
-                    .and_then(|t| parse_service(&parts.config_path.display().to_string(), parts.config_path.parent().unwrap_or(std::path::Path::new(".")), &t).map_err(anyhow::Error::from)) {
-                    Ok(new) => {
+                match reload(&parts.config_path) {
+                    Ok((new, text)) => {
                         feeder.pipeline_mut().set_alert_config(new.alerts);
+                        // In stream order, so that a replay changes the rules where this run did.
+                        let _ = writer.write_config(host_now_ns(), SERVICE_CONFIG_NAME, &text);
                         tracing::info!("SIGHUP: alert rules reloaded");
                     }
                     Err(e) => tracing::error!("SIGHUP: keeping the old alert rules: {e:#}"),
@@ -236,6 +249,7 @@ pub async fn serve(
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
     let _ = shutdown.send(true);
     feeder.pipeline_mut().end_of_stream(&mut events);
+    feeder.pipeline_mut().close_billet(&mut events);
     for e in events.drain(..) {
         on_event(e, host_now_ns(), &mut writer, &status, &sinks, &mut hooks, &mut summary);
     }
@@ -249,16 +263,38 @@ pub async fn serve(
 /// The pipeline's thresholds: the machine's defaults with the service file's alert rules
 /// and billet detection.
 pub fn pipeline_config(cfg: &ServiceConfig, machine: &Machine) -> PipelineConfig {
-    let mut p = PipelineConfig { alerts: cfg.alerts, ..PipelineConfig::for_machine(machine) };
-    p.estimate.new_billet_rise_m = cfg.new_billet_rise_m;
-    p.estimate.idle_new_billet_s = cfg.idle_new_billet_s;
+    tuned_config(&cfg.tuning(), machine)
+}
+
+/// The machine's defaults with a service file's alert rules and billet detection (live, or
+/// as a recording stored them for its replay).
+pub fn tuned_config(tuning: &PipelineTuning, machine: &Machine) -> PipelineConfig {
+    let mut p = PipelineConfig { alerts: tuning.alerts, ..PipelineConfig::for_machine(machine) };
+    p.estimate.new_billet_rise_m = tuning.new_billet_rise_m;
+    p.estimate.idle_new_billet_s = tuning.idle_new_billet_s;
     p
+}
+
+/// Name of the service configuration as a recording stores it (topic `/config`), at the
+/// start and again at each SIGHUP reload.
+pub const SERVICE_CONFIG_NAME: &str = "service.toml";
+
+/// The service file read again (SIGHUP), checked, with its text.
+fn reload(path: &std::path::Path) -> anyhow::Result<(ServiceConfig, String)> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let cfg = parse_service(&path.display().to_string(), path.parent().unwrap_or(std::path::Path::new(".")), &text)?;
+    Ok((cfg, text))
 }
 
 /// A new billet from here on: restart the height tracking and alert memory, and mark the
 /// point in the recording so that a replay restarts it at the same sample.
-fn start_billet(feeder: &mut Feeder, writer: &mut RecordWriter, status: &SharedStatus) {
-    feeder.pipeline_mut().new_billet();
+fn start_billet(
+    feeder: &mut Feeder,
+    writer: &mut RecordWriter,
+    status: &SharedStatus,
+    events: &mut Vec<PipelineEvent>,
+) {
+    feeder.pipeline_mut().new_billet(events);
     let _ = writer.write_status(host_now_ns(), &new_billet_marker());
     let billets = feeder.pipeline_mut().billets();
     status.lock().map(|mut s| s.billets = u64::from(billets)).ok();
@@ -306,6 +342,24 @@ fn on_event(
             }
             if let Some(f) = hooks.on_blow.as_mut() {
                 f(&estimate);
+            }
+        }
+        PipelineEvent::Billet(b) => {
+            summary.billets_finished += u64::from(b.finished);
+            if let Err(err) = writer.write_billet(log_time_ns, &b) {
+                tracing::error!("recording billet {}: {err}", b.billet);
+            }
+            tracing::info!(
+                billet = b.billet,
+                blows = b.blows,
+                efficiency = b.efficiency,
+                first_hard_blow = b.first_hard_blow,
+                finished = b.finished,
+                "billet"
+            );
+            status.lock().map(|mut s| s.on_billet(&b)).ok();
+            if let Some(f) = hooks.on_billet.as_mut() {
+                f(&b);
             }
         }
         PipelineEvent::Rejected { cut, error } => {

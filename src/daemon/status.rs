@@ -15,6 +15,7 @@ use axum::routing::{get, post};
 use serde::Serialize;
 
 use crate::estimate::BlowEstimate;
+use crate::estimate::billet_book::BilletSummary;
 use crate::record::{Gap, Status};
 use crate::signal::align::ClockModel;
 use crate::signal::merge::MergeStats;
@@ -54,8 +55,8 @@ pub struct StatusSnapshot {
     pub billet_blows: u64,
     /// Blows the last finished billet took.
     pub last_billet_blows: Option<u64>,
-    #[serde(skip)]
-    billet_of_last_blow: u64,
+    /// The last billet summarised (`/billets` in the recording).
+    pub last_billet: Option<BilletSummary>,
     pub samples: u64,
     pub blows: u64,
     pub alerts: u64,
@@ -86,7 +87,7 @@ impl StatusSnapshot {
             billets_finished: 0,
             billet_blows: 0,
             last_billet_blows: None,
-            billet_of_last_blow: 0,
+            last_billet: None,
             samples: 0,
             blows: 0,
             alerts: 0,
@@ -132,20 +133,23 @@ impl StatusSnapshot {
 
     pub fn on_blow(&mut self, e: &BlowEstimate) {
         self.blows += 1;
-        let billet = u64::from(e.billet.billet);
-        if billet != self.billet_of_last_blow && self.billet_blows > 0 {
-            // The blow started another billet: the one before is finished.
-            self.last_billet_blows = Some(self.billet_blows);
-        }
-        self.billet_of_last_blow = billet;
-        self.billets = self.billets.max(billet);
-        self.billets_finished = self.billets.saturating_sub(1);
+        self.billets = self.billets.max(u64::from(e.billet.billet));
         self.billet_blows = u64::from(e.billet.billet_blow);
         self.alerts += u64::from(e.alert.is_some());
         self.incomplete_blows += u64::from(!e.is_complete());
         self.last_efficiency = e.efficiency;
         self.last_class = Some(e.class.as_str().to_string());
         self.last_blow = Some(e.clone());
+    }
+
+    /// A billet was summarised: finished when the next one started, or the run's last.
+    pub fn on_billet(&mut self, b: &BilletSummary) {
+        if b.finished {
+            self.billets_finished += 1;
+            self.last_billet_blows = Some(u64::from(b.blows));
+            self.billet_blows = 0;
+        }
+        self.last_billet = Some(b.clone());
     }
 
     /// Prometheus text exposition (version 0.0.4).

@@ -6,6 +6,7 @@
 
 pub mod approach;
 pub mod billet;
+pub mod billet_book;
 pub mod observer;
 pub mod result;
 

@@ -146,6 +146,7 @@ pub fn encode_payload(payload: &Payload, buf: &mut Vec<u8>) -> Result<(), Decode
         Payload::Gap(g) => gap_to_pb(g).encode_raw(buf),
         Payload::Status(s) => status_to_pb(s).encode_raw(buf),
         Payload::Config(c) => pb::ConfigFile { name: c.name.clone(), text: c.text.clone() }.encode_raw(buf),
+        Payload::Billet(b) => super::billets::to_pb(b).encode_raw(buf),
     }
     Ok(())
 }
@@ -189,6 +190,7 @@ pub fn decode_payload(kind: MessageKind, bytes: &[u8]) -> Result<Payload, Decode
             let c = pb::ConfigFile::decode(bytes)?;
             Payload::Config(ConfigFile { name: c.name, text: c.text })
         }
+        MessageKind::Billet => Payload::Billet(Box::new(super::billets::from_pb(pb::BilletSummary::decode(bytes)?))),
     })
 }
 
@@ -533,6 +535,31 @@ mod tests {
         }
     }
 
+    /// A billet's summary, with or without the optional figures.
+    pub(crate) fn billet(with_optional: bool) -> crate::estimate::billet_book::BilletSummary {
+        let some = |x: f64| with_optional.then_some(x);
+        crate::estimate::billet_book::BilletSummary {
+            billet: 4,
+            t_start_s: 81.2031,
+            t_end_s: 84.9,
+            blows: 8,
+            incomplete_blows: u32::from(!with_optional),
+            energies_partial: !with_optional,
+            h_start_m: some(0.112),
+            h_start_off_sheet_m: some(-0.0021),
+            h_end_m: some(0.0401),
+            kinetic_in_j: 98_000.0,
+            plastic_j: 61_000.0,
+            friction_j: some(0.0),
+            efficiency: some(0.622),
+            first_hard_blow: with_optional.then_some(6),
+            hard_blows: 3,
+            alerts: 1,
+            checked_blows: 0,
+            finished: with_optional,
+        }
+    }
+
     pub(crate) fn alert(kind: AlertKind) -> Alert {
         Alert {
             kind,
@@ -584,6 +611,8 @@ mod tests {
                 detail: "/dev/ttyACM0".into(),
             }),
             Payload::Config(ConfigFile { name: "machine.toml".into(), text: "kind = \"hammer\"\n".into() }),
+            Payload::Billet(Box::new(billet(true))),
+            Payload::Billet(Box::new(billet(false))),
         ];
         for p in payloads {
             let mut bytes = Vec::new();

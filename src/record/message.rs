@@ -1,9 +1,10 @@
 //! What a recording holds, as typed values: the pipeline's own types (sample batches, blow
-//! estimates, alerts) plus the few that exist only to be recorded (blow boundaries, gaps,
+//! estimates, alerts, billet summaries) plus the few that exist only to be recorded (blow boundaries, gaps,
 //! transport status, configuration files), and [`Recorded`], one message with its log time.
 
 use crate::alert::Alert;
 use crate::estimate::BlowEstimate;
+use crate::estimate::billet_book::BilletSummary;
 use crate::signal::sample::SampleBatch;
 
 use super::schema::MessageKind;
@@ -81,6 +82,8 @@ pub enum Payload {
     Gap(Gap),
     Status(Status),
     Config(ConfigFile),
+    /// A billet's summary (topic `/billets`).
+    Billet(Box<BilletSummary>),
 }
 
 impl Payload {
@@ -93,6 +96,7 @@ impl Payload {
             Payload::Gap(_) => MessageKind::Gap,
             Payload::Status(_) => MessageKind::Status,
             Payload::Config(_) => MessageKind::Config,
+            Payload::Billet(_) => MessageKind::Billet,
         }
     }
 }

@@ -2,8 +2,8 @@
 //!
 //! A recording holds, on separate channels, the raw sample batches of each source
 //! (`/samples/<source>`), blow boundaries (`/blows`), blow results (`/results`), alerts
-//! (`/alerts`), gaps and drops (`/gaps`), transport status (`/status`) and the
-//! configuration files (`/config`). Every message is protobuf (`proto/forgemon.proto`) and
+//! (`/alerts`), gaps and drops (`/gaps`), transport status (`/status`), one summary per
+//! billet (`/billets`) and the configuration files (`/config`). Every message is protobuf (`proto/forgemon.proto`) and
 //! every schema record carries the full FileDescriptorSet, so Foxglove and the `mcap`
 //! tools open the files with nothing from us.
 //!
@@ -22,6 +22,7 @@
 //! `estimate/` or `alert/` depends on it.
 
 pub mod batch;
+mod billets;
 mod channels;
 mod chunk;
 pub mod codec;

@@ -26,6 +26,7 @@ pub const ALERTS_TOPIC: &str = "/alerts";
 pub const GAPS_TOPIC: &str = "/gaps";
 pub const STATUS_TOPIC: &str = "/status";
 pub const CONFIG_TOPIC: &str = "/config";
+pub const BILLETS_TOPIC: &str = "/billets";
 
 /// The kinds of message a recording holds, one protobuf message type each.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -37,10 +38,11 @@ pub enum MessageKind {
     Gap,
     Status,
     Config,
+    Billet,
 }
 
 impl MessageKind {
-    pub const ALL: [MessageKind; 7] = [
+    pub const ALL: [MessageKind; 8] = [
         MessageKind::Samples,
         MessageKind::Boundary,
         MessageKind::Result,
@@ -48,6 +50,7 @@ impl MessageKind {
         MessageKind::Gap,
         MessageKind::Status,
         MessageKind::Config,
+        MessageKind::Billet,
     ];
 
     /// The fully-qualified protobuf message name: the MCAP schema name.
@@ -60,6 +63,7 @@ impl MessageKind {
             MessageKind::Gap => "forgemon.Gap",
             MessageKind::Status => "forgemon.Status",
             MessageKind::Config => "forgemon.ConfigFile",
+            MessageKind::Billet => "forgemon.BilletSummary",
         }
     }
 
@@ -78,6 +82,7 @@ impl MessageKind {
             MessageKind::Gap => Some(GAPS_TOPIC),
             MessageKind::Status => Some(STATUS_TOPIC),
             MessageKind::Config => Some(CONFIG_TOPIC),
+            MessageKind::Billet => Some(BILLETS_TOPIC),
         }
     }
 

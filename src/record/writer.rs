@@ -153,6 +153,15 @@ impl RecordWriter {
         self.write_payload(log_time_ns, &Payload::Status(status.clone()))
     }
 
+    /// Record a billet's summary, on `/billets`.
+    pub fn write_billet(
+        &mut self,
+        log_time_ns: i64,
+        billet: &crate::estimate::billet_book::BilletSummary,
+    ) -> Result<(), RecordError> {
+        self.write_payload(log_time_ns, &Payload::Billet(Box::new(billet.clone())))
+    }
+
     /// Store a configuration file on `/config`. It is also written into every later file of
     /// a rotated recording (a later one with the same name replaces it there).
     pub fn write_config(&mut self, log_time_ns: i64, name: &str, text: &str) -> Result<(), RecordError> {

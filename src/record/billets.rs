@@ -1,0 +1,52 @@
+//! The `/billets` channel's message (issue 22): a billet's summary to and from its protobuf
+//! form, field for field.
+
+use crate::estimate::billet_book::BilletSummary;
+
+use super::schema::pb;
+
+pub(crate) fn to_pb(b: &BilletSummary) -> pb::BilletSummary {
+    pb::BilletSummary {
+        billet: b.billet,
+        t_start_s: b.t_start_s,
+        t_end_s: b.t_end_s,
+        blows: b.blows,
+        incomplete_blows: b.incomplete_blows,
+        energies_partial: b.energies_partial,
+        h_start_m: b.h_start_m,
+        h_start_off_sheet_m: b.h_start_off_sheet_m,
+        h_end_m: b.h_end_m,
+        kinetic_in_j: b.kinetic_in_j,
+        plastic_j: b.plastic_j,
+        friction_j: b.friction_j,
+        efficiency: b.efficiency,
+        first_hard_blow: b.first_hard_blow,
+        hard_blows: b.hard_blows,
+        alerts: b.alerts,
+        checked_blows: b.checked_blows,
+        finished: b.finished,
+    }
+}
+
+pub(crate) fn from_pb(b: pb::BilletSummary) -> BilletSummary {
+    BilletSummary {
+        billet: b.billet,
+        t_start_s: b.t_start_s,
+        t_end_s: b.t_end_s,
+        blows: b.blows,
+        incomplete_blows: b.incomplete_blows,
+        energies_partial: b.energies_partial,
+        h_start_m: b.h_start_m,
+        h_start_off_sheet_m: b.h_start_off_sheet_m,
+        h_end_m: b.h_end_m,
+        kinetic_in_j: b.kinetic_in_j,
+        plastic_j: b.plastic_j,
+        friction_j: b.friction_j,
+        efficiency: b.efficiency,
+        first_hard_blow: b.first_hard_blow,
+        hard_blows: b.hard_blows,
+        alerts: b.alerts,
+        checked_blows: b.checked_blows,
+        finished: b.finished,
+    }
+}
