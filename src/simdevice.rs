@@ -236,7 +236,7 @@ pub async fn drive_serial<W: tokio::io::AsyncWrite + Unpin>(
     mut sim: SimMachine,
     spec: &SerialDeviceSpec,
     mut writer: W,
-    stop: tokio::sync::watch::Receiver<bool>,
+    mut stop: tokio::sync::watch::Receiver<bool>,
     mut on_billet: impl FnMut(usize, u64),
 ) -> std::io::Result<DeviceStats> {
     use crate::acquire::serial::frame::{Frame, encode_frame};
@@ -280,7 +280,9 @@ pub async fn drive_serial<W: tokio::io::AsyncWrite + Unpin>(
                 stats.garbage_bursts += 1;
                 // Bytes that are not a valid frame and hold no 0x00 (no delimiter).
                 let junk: Vec<u8> = (0..f.garbage_bytes).map(|i| (i as u8).wrapping_mul(37) | 1).collect();
-                writer.write_all(&junk).await?;
+                if !write_unless_stopped(&mut writer, &junk, &mut stop).await? {
+                    break;
+                }
             }
             let mut bytes = encode_frame(&frame);
             if nth(f.corrupt_every) && bytes.len() > 8 {
@@ -288,14 +290,18 @@ pub async fn drive_serial<W: tokio::io::AsyncWrite + Unpin>(
                 let i = bytes.len() / 2;
                 bytes[i] = if bytes[i] == 0x55 { 0x56 } else { 0x55 };
             }
-            writer.write_all(&bytes).await?;
+            if !write_unless_stopped(&mut writer, &bytes, &mut stop).await? {
+                break;
+            }
             stats.samples += rows.len() as u64;
         }
         if spec.realtime {
             tokio::time::sleep_until(start + frame_dt * stats.frames as u32).await;
         }
     }
-    writer.flush().await?;
+    if !*stop.borrow() {
+        writer.flush().await?;
+    }
     Ok(stats)
 }
 
@@ -315,6 +321,26 @@ pub struct SplitLine<W> {
     pub writer: W,
 }
 
+/// Write `bytes` unless `stop` turns true first; whether they were written. A reader that
+/// went away (a killed service) leaves the pty's buffer full, and a plain write would block
+/// the device for ever; a dropped `stop` sender never stops it.
+async fn write_unless_stopped<W: tokio::io::AsyncWrite + Unpin>(
+    writer: &mut W,
+    bytes: &[u8],
+    stop: &mut tokio::sync::watch::Receiver<bool>,
+) -> std::io::Result<bool> {
+    use tokio::io::AsyncWriteExt;
+    let stopped = async {
+        if stop.wait_for(|s| *s).await.is_err() {
+            std::future::pending::<()>().await;
+        }
+    };
+    tokio::select! {
+        r = writer.write_all(bytes) => r.map(|()| true),
+        () = stopped => Ok(false),
+    }
+}
+
 /// Run `sim` to the end, in real time, framing each line's channels (CONTRACTS.md §7) into
 /// its own writer, frames of `frame_samples` samples of the simulated machine.
 /// `on_billet(k, device_ns)` gets the first line's device time where billet k starts.
@@ -322,7 +348,7 @@ pub async fn drive_serial_split<W: tokio::io::AsyncWrite + Unpin>(
     mut sim: SimMachine,
     frame_samples: usize,
     mut lines: Vec<SplitLine<W>>,
-    stop: tokio::sync::watch::Receiver<bool>,
+    mut stop: tokio::sync::watch::Receiver<bool>,
     mut on_billet: impl FnMut(usize, u64),
 ) -> std::io::Result<u64> {
     use crate::acquire::serial::frame::{Frame, encode_frame};
@@ -366,13 +392,15 @@ pub async fn drive_serial_split<W: tokio::io::AsyncWrite + Unpin>(
                 sample_period_ns: (true_period_ns * d as f64 * scale).round() as u32,
                 counts: to_counts(&kept, &line.channels),
             };
-            line.writer.write_all(&encode_frame(&frame)).await?;
+            if !write_unless_stopped(&mut line.writer, &encode_frame(&frame), &mut stop).await? {
+                return Ok(frames);
+            }
         }
         emitted += rows.len() as u64;
         frames += 1;
         tokio::time::sleep_until(start + frame_dt * frames as u32).await;
     }
-    for line in &mut lines {
+    for line in lines.iter_mut().filter(|_| !*stop.borrow()) {
         line.writer.flush().await?;
     }
     Ok(frames)

@@ -453,6 +453,8 @@ fn ten_billets_are_counted_over_a_pty_without_a_billet_signal() {
     assert_eq!((st["billet_blows"].as_u64(), st["last_billet_blows"].as_u64()), (Some(3), Some(3)), "{st}");
     let metrics = http_get(svc.http, "/metrics").unwrap();
     assert!(metrics.contains("forgemon_billets_total 10"), "{metrics}");
+    assert!(metrics.contains("forgemon_billets_finished_total 9"), "{metrics}");
+    assert!(metrics.contains("forgemon_last_billet_blows 3"), "{metrics}");
     let kill = Command::new("kill").args(["-TERM", &svc.child.id().to_string()]).status().unwrap();
     assert!(kill.success());
     assert!(svc.child.wait().unwrap().success());

@@ -185,6 +185,14 @@ impl StatusSnapshot {
             "Blows on the billet in the dies.",
             vec![(String::new(), self.billet_blows as f64)],
         );
+        if let Some(n) = self.last_billet_blows {
+            metric(
+                "last_billet_blows",
+                "gauge",
+                "Blows the last finished billet took.",
+                vec![(String::new(), n as f64)],
+            );
+        }
         metric(
             "incomplete_blows_total",
             "counter",
