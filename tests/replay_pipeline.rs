@@ -289,13 +289,16 @@ fn bad_input_is_refused_with_file_line_and_key() {
     let nodir = dir.join("nothing");
     std::fs::create_dir_all(&nodir).unwrap();
     fails_naming(&["replay", nodir.to_str().unwrap(), "--machine", m], &["no blow_NN.csv"]);
+    // A capture holds no machine model: without --machine, the error says what to give.
+    fails_naming(&["replay", &missing], &[&missing, "holds no machine model", "--machine"]);
 }
 
 /// Issue 22: a recording replays with the alert rules and billet detection it was recorded
 /// with (the service file it stores), unless `--service` gives others. Four billets of
 /// heights up to 8 % apart in one continuous stream: recorded with a new-billet rise of
 /// 0.5 m (more than any billet) and a low-efficiency alert on any blow below 0.99, they are
-/// one billet that alerts on at least half its blows (debounced over one); with the defaults, four billets and fewer alerts.
+/// one billet that alerts on at least half its blows (debounced over one); with the
+/// defaults, four billets and fewer alerts.
 #[test]
 fn a_recording_replays_with_the_billet_detection_and_alert_rules_it_stored() {
     let base = BilletPlan { process: steel(), v0s_mps: vec![4.0, 5.0, 5.0] };
@@ -339,8 +342,9 @@ fn a_recording_replays_with_the_billet_detection_and_alert_rules_it_stored() {
     assert_eq!(billets(&tuned_json), vec![1; 12]);
     let tuned_low = low(&tuned_json);
     assert!(tuned_low >= 6, "{tuned_low} elastic-blow alerts");
-    // The stored service file rules the replay of the recording: the same JSON, byte for byte.
-    let again = forgemon(&["replay", &rec, "--machine", &m, "--json"]);
+    // The stored service file rules the replay of the recording: the same JSON, byte for byte
+    // (the machine model and the process sheet come from the recording too).
+    let again = forgemon(&["replay", &rec, "--json"]);
     assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
     assert_eq!(again.stdout, tuned.stdout);
     // Other rules on the same recording: four billets, and fewer alerts.

@@ -95,6 +95,7 @@ fn roles_from_two_daqs_on_their_own_clocks_are_merged() {
             sources: Vec::new(),
         },
         config_path: dir.join("service.toml"),
+        config_text: String::new(),
         machine,
         machine_text: MACHINE.to_string(),
         process: Some(parse_process("p", STEEL).unwrap()),

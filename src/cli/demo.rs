@@ -86,6 +86,8 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let parts = ServiceParts {
         config,
         config_path: args.dir.join("demo.toml"),
+        // Recorded as the service file: a replay of the demo's recording uses the defaults.
+        config_text: "# forgemon demo: a simulated hammer, every threshold at its default\n".to_string(),
         machine,
         machine_text: MACHINE.to_string(),
         process: Some(parse_process("steel-16NiCrMo13.process.toml", STEEL)?),

@@ -1,5 +1,7 @@
 //! `forgemon replay` (CONTRACTS.md §5): a recording, a capture CSV or a capture directory
-//! through exactly the live pipeline; one JSON line per blow; `--out` records the replay.
+//! through exactly the live pipeline; one JSON line per blow (or a table with a line per
+//! billet); `--out` records the replay. A recording brings its own machine model, process
+//! sheet and service file (alert rules, billet detection); options replace them.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -22,9 +24,10 @@ use crate::signal::sample::SampleBatch;
 pub struct ReplayArgs {
     /// A recording (.mcap), a capture CSV, or a capture directory (blow_01.csv, ...).
     pub input: PathBuf,
-    /// The machine model (machine.toml).
+    /// The machine model (machine.toml); defaults to the one stored in the recording, or
+    /// the capture directory's machine.toml.
     #[arg(long)]
-    pub machine: PathBuf,
+    pub machine: Option<PathBuf>,
     /// The process sheet; defaults to the capture directory's process.toml, or the one
     /// stored in the recording.
     #[arg(long)]
@@ -46,40 +49,47 @@ pub struct ReplayArgs {
 enum Input {
     Files(Vec<PathBuf>),
     /// A recording, streamed in file order (the writer stores each source's samples in
-    /// time order), with the samples read ahead while looking for the stored process sheet.
+    /// time order), with the samples read ahead while looking for the stored configuration.
     Recording {
         reader: Box<RecordReader>,
         ahead: Vec<SampleBatch>,
     },
 }
 
-/// The configuration files a recording stores before its first samples.
+/// The configuration files a recording stores before its first samples, or a capture
+/// directory holds.
 #[derive(Default)]
 struct Stored {
+    machine: Option<String>,
     process: Option<String>,
     service: Option<String>,
 }
 
+/// A configuration file's text and where it came from (for error messages).
+type Origin = (String, String);
+
+/// The option's file, else the stored copy, else nothing.
+fn pick(option: &Option<PathBuf>, stored: Option<String>, input: &Path, name: &str) -> anyhow::Result<Option<Origin>> {
+    match option {
+        Some(p) => Ok(Some((p.display().to_string(), read_text(p)?))),
+        None => Ok(stored.map(|t| (format!("{} ({name} stored in it)", input.display()), t))),
+    }
+}
+
 pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
-    let machine_text = read_text(&args.machine)?;
-    let machine = parse_machine(&args.machine.display().to_string(), &machine_text)?.machine;
     let (input, stored) = open_input(&args.input)?;
-    let process_text = match (&args.process, &input) {
-        (Some(p), _) => Some((p.display().to_string(), read_text(p)?)),
-        (None, Input::Files(_)) if args.input.is_dir() => {
-            let p = args.input.join("process.toml");
-            p.exists().then(|| read_text(&p).map(|t| (p.display().to_string(), t))).transpose()?
-        }
-        _ => stored.process.map(|t| (format!("{} (process.toml stored in it)", args.input.display()), t)),
+    let Some((machine_origin, machine_text)) = pick(&args.machine, stored.machine, &args.input, "machine.toml")? else {
+        bail!("{}: holds no machine model; give one with --machine M.toml", args.input.display());
     };
+    let machine = parse_machine(&machine_origin, &machine_text)?.machine;
+    let process_text = pick(&args.process, stored.process, &args.input, "process.toml")?;
     let process: Option<Process> = match &process_text {
         Some((origin, text)) => {
             let p = parse_process_warn(origin, text)?;
             if p.machine != machine.kind() {
                 bail!(
-                    "{origin}: key 'machine' is \"{}\" but {} has kind \"{}\"",
+                    "{origin}: key 'machine' is \"{}\" but {machine_origin} has kind \"{}\"",
                     p.machine.as_str(),
-                    args.machine.display(),
                     machine.kind().as_str()
                 );
             }
@@ -88,15 +98,12 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         None => None,
     };
     // The alert rules and billet detection the live run used, unless the caller gives others.
-    let service_text = match &args.service {
-        Some(p) => Some((p.display().to_string(), read_text(p)?)),
-        None => stored.service.map(|t| (format!("{} (service.toml stored in it)", args.input.display()), t)),
-    };
+    let service_text = pick(&args.service, stored.service, &args.input, SERVICE_CONFIG_NAME)?;
     let tuning = match &service_text {
         Some((origin, text)) => parse_tuning(origin, text)?,
         None => parse_tuning("defaults", "")?,
     };
-    let mut writer = match &args.out {
+    let writer = match &args.out {
         Some(path) => {
             let mut w = RecordWriter::create(path, Rotation::default())
                 .with_context(|| format!("{}: cannot record", path.display()))?;
@@ -111,106 +118,49 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         }
         None => None,
     };
-    let mut feeder = Feeder::new(Pipeline::new(machine, process, tuned_config(&tuning, &machine)));
-    let mut input_merge = (Merger::default(), Vec::new());
     let stdout = std::io::stdout();
-    let mut w = std::io::BufWriter::new(stdout.lock());
+    let mut replay = Replay {
+        feeder: Feeder::new(Pipeline::new(machine, process, tuned_config(&tuning, &machine))),
+        merger: Merger::default(),
+        merged: Vec::new(),
+        events: Vec::new(),
+        writer,
+        out: std::io::BufWriter::new(stdout.lock()),
+        json: args.json,
+        blows: 0,
+        rejected: 0,
+    };
     if !args.json {
-        writeln!(
-            w,
-            "blow  t_contact s     v m/s  kinetic J  plastic J  elastic J  efficiency  class         final kN  h_end mm  alert"
-        )?;
+        writeln!(replay.out, "{TABLE_HEADER}")?;
     }
-    let mut events = Vec::new();
     let mut status = ExitCode::SUCCESS;
-    let (mut blows, mut rejected) = (0u64, 0u64);
-    let mut handle =
-        |events: &mut Vec<PipelineEvent>, writer: &mut Option<RecordWriter>, w: &mut dyn Write| -> anyhow::Result<()> {
-            for ev in events.drain(..) {
-                match ev {
-                    PipelineEvent::Blow { cut, estimate } => {
-                        blows += 1;
-                        if let Some(rec) = writer.as_mut() {
-                            let t_ns = (cut.t_end_s * 1e9).round() as i64;
-                            let boundary = BlowBoundary::of(estimate.blow, &cut);
-                            rec.write_payload(t_ns, &Payload::Boundary(boundary))?;
-                            rec.write_result(t_ns, &estimate)?;
-                            if let Some(a) = &estimate.alert {
-                                rec.write_alert(t_ns, a)?;
-                            }
-                        }
-                        if args.json {
-                            writeln!(w, "{}", serde_json::to_string(&estimate)?)?;
-                        } else {
-                            writeln!(
-                                w,
-                                "{:>4}  {:>12.4}  {:>6.3}  {:>9}  {:>9}  {:>9}  {:>10}  {:<12}  {:>8.0}  {:>8}  {}",
-                                estimate.blow,
-                                estimate.t_contact_s,
-                                estimate.v_impact_mps,
-                                or_dash(estimate.kinetic_in_j, 0),
-                                or_dash(estimate.plastic_j, 0),
-                                or_dash(estimate.elastic_j, 0),
-                                or_dash(estimate.efficiency, 3),
-                                estimate.class.as_str(),
-                                estimate.final_load_n / 1e3,
-                                estimate.h_end_m.map_or("-".to_string(), |h| format!("{:.2}", h * 1e3)),
-                                estimate.alert.as_ref().map_or(String::new(), |a| a.reason.clone()),
-                            )?;
-                        }
-                    }
-                    PipelineEvent::Billet(b) => {
-                        if let Some(rec) = writer.as_mut() {
-                            rec.write_billet((b.t_end_s * 1e9).round() as i64, &b)?;
-                        }
-                        if !args.json {
-                            writeln!(w, "{b}")?;
-                        }
-                    }
-                    PipelineEvent::Rejected { cut, error } => {
-                        rejected += 1;
-                        eprintln!("forgemon: blow at t = {:.6} s not estimated: {error}", cut.t_contact_s);
-                    }
-                }
-            }
-            Ok(())
-        };
     match input {
         Input::Files(files) => {
             for path in files {
-                super::for_each_capture_batch(&path, |batch| {
-                    feed_batch(&batch, &mut input_merge, &mut feeder, &mut writer, &mut events)?;
-                    handle(&mut events, &mut writer, &mut w)
-                })?;
+                super::for_each_capture_batch(&path, |batch| replay.batch(&batch))?;
             }
         }
         Input::Recording { mut reader, ahead } => {
             let mut last_log_ns = 0;
             for batch in &ahead {
                 last_log_ns = batch.host_time_ns;
-                feed_batch(batch, &mut input_merge, &mut feeder, &mut writer, &mut events)?;
-                handle(&mut events, &mut writer, &mut w)?;
+                replay.batch(batch)?;
             }
             for m in reader.by_ref() {
                 match m?.payload {
                     Payload::Samples(batch) => {
                         last_log_ns = batch.host_time_ns;
-                        feed_batch(&batch, &mut input_merge, &mut feeder, &mut writer, &mut events)?;
-                        handle(&mut events, &mut writer, &mut w)?;
+                        replay.batch(&batch)?;
                     }
                     // A new billet went into the dies here during the live run.
                     Payload::Status(st) if st.source == CONTROL_SOURCE && st.state == NEW_BILLET_STATE => {
-                        feeder.pipeline_mut().new_billet(&mut events);
-                        handle(&mut events, &mut writer, &mut w)?;
-                        if let Some(rec) = writer.as_mut() {
-                            rec.write_status(last_log_ns, &st)?;
-                        }
+                        replay.new_billet(last_log_ns, &st)?;
                     }
                     // The live run reloaded its alert rules here (SIGHUP); a rotated file
                     // repeats the same text, which changes nothing.
                     Payload::Config(c) if c.name == SERVICE_CONFIG_NAME && args.service.is_none() => {
                         let origin = format!("{} (service.toml stored in it)", args.input.display());
-                        feeder.pipeline_mut().set_alert_config(parse_tuning(&origin, &c.text)?.alerts);
+                        replay.feeder.pipeline_mut().set_alert_config(parse_tuning(&origin, &c.text)?.alerts);
                     }
                     _ => {}
                 }
@@ -221,52 +171,141 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             status = super::inspect::input_status(reader.report());
         }
     }
-    feeder.pipeline_mut().end_of_stream(&mut events);
-    feeder.pipeline_mut().close_billet(&mut events);
-    handle(&mut events, &mut writer, &mut w)?;
-    w.flush()?;
-    if let Some(rec) = writer {
-        let files = rec.finish()?;
-        for f in files {
-            eprintln!("forgemon: recorded {}", f.display());
-        }
-    }
-    let s = feeder.pipeline_mut().segment_stats();
-    eprintln!(
-        "forgemon: replayed {} samples: {blows} blows, {rejected} not estimated, {} triggers without contact, {} batches dropped",
-        feeder.samples(),
-        s.triggers_without_contact,
-        s.batches_dropped
-    );
+    replay.finish()?;
     Ok(status)
 }
 
-/// Record a batch (with `--out`) and feed it to the pipeline, through the same merge of
-/// several sources' roles as the live service (`signal::merge`).
-fn feed_batch(
-    batch: &SampleBatch,
-    input: &mut (Merger, Vec<SampleBatch>),
-    feeder: &mut Feeder,
-    writer: &mut Option<RecordWriter>,
-    events: &mut Vec<PipelineEvent>,
-) -> anyhow::Result<()> {
-    if let Some(rec) = writer.as_mut() {
-        rec.write_samples(batch)?;
-    }
-    let (merger, merged) = input;
-    if merger.push(batch, merged) {
-        feeder.push(batch, events);
-    }
-    for b in merged.drain(..) {
-        feeder.push(&b, events);
-    }
-    Ok(())
+const TABLE_HEADER: &str =
+    "blow  t_contact s     v m/s  kinetic J  plastic J  elastic J  efficiency  class         final kN  h_end mm  alert";
+
+/// The pipeline, its input merge, the recording and the output of one replay.
+struct Replay<W: Write> {
+    feeder: Feeder,
+    merger: Merger,
+    merged: Vec<SampleBatch>,
+    events: Vec<PipelineEvent>,
+    writer: Option<RecordWriter>,
+    out: W,
+    json: bool,
+    blows: u64,
+    rejected: u64,
 }
 
-/// Classify the input and, for a recording, read its samples and stored configuration.
+impl<W: Write> Replay<W> {
+    /// Record a batch (with `--out`) and feed it to the pipeline, through the same merge of
+    /// several sources' roles as the live service (`signal::merge`).
+    fn batch(&mut self, batch: &SampleBatch) -> anyhow::Result<()> {
+        if let Some(rec) = self.writer.as_mut() {
+            rec.write_samples(batch)?;
+        }
+        if self.merger.push(batch, &mut self.merged) {
+            self.feeder.push(batch, &mut self.events);
+        }
+        for b in self.merged.drain(..) {
+            self.feeder.push(&b, &mut self.events);
+        }
+        self.handle()
+    }
+
+    /// The recording's new-billet marker, at the same point in the stream.
+    fn new_billet(&mut self, log_ns: i64, marker: &crate::record::Status) -> anyhow::Result<()> {
+        self.feeder.pipeline_mut().new_billet(&mut self.events);
+        self.handle()?;
+        if let Some(rec) = self.writer.as_mut() {
+            rec.write_status(log_ns, marker)?;
+        }
+        Ok(())
+    }
+
+    /// Print and record the pipeline's events.
+    fn handle(&mut self) -> anyhow::Result<()> {
+        for ev in std::mem::take(&mut self.events) {
+            match ev {
+                PipelineEvent::Blow { cut, estimate } => {
+                    self.blows += 1;
+                    if let Some(rec) = self.writer.as_mut() {
+                        let t_ns = (cut.t_end_s * 1e9).round() as i64;
+                        rec.write_payload(t_ns, &Payload::Boundary(BlowBoundary::of(estimate.blow, &cut)))?;
+                        rec.write_result(t_ns, &estimate)?;
+                        if let Some(a) = &estimate.alert {
+                            rec.write_alert(t_ns, a)?;
+                        }
+                    }
+                    if self.json {
+                        writeln!(self.out, "{}", serde_json::to_string(&estimate)?)?;
+                    } else {
+                        writeln!(self.out, "{}", table_row(&estimate))?;
+                    }
+                }
+                PipelineEvent::Billet(b) => {
+                    if let Some(rec) = self.writer.as_mut() {
+                        rec.write_billet((b.t_end_s * 1e9).round() as i64, &b)?;
+                    }
+                    if !self.json {
+                        writeln!(self.out, "{b}")?;
+                    }
+                }
+                PipelineEvent::Rejected { cut, error } => {
+                    self.rejected += 1;
+                    eprintln!("forgemon: blow at t = {:.6} s not estimated: {error}", cut.t_contact_s);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The end of the input: the last blow and billet closed, the recording finished.
+    fn finish(mut self) -> anyhow::Result<()> {
+        self.feeder.pipeline_mut().end_of_stream(&mut self.events);
+        self.feeder.pipeline_mut().close_billet(&mut self.events);
+        self.handle()?;
+        self.out.flush()?;
+        if let Some(rec) = self.writer.take() {
+            for f in rec.finish()? {
+                eprintln!("forgemon: recorded {}", f.display());
+            }
+        }
+        let s = self.feeder.pipeline_mut().segment_stats();
+        eprintln!(
+            "forgemon: replayed {} samples: {} blows, {} not estimated, {} triggers without contact, {} batches dropped",
+            self.feeder.samples(),
+            self.blows,
+            self.rejected,
+            s.triggers_without_contact,
+            s.batches_dropped
+        );
+        Ok(())
+    }
+}
+
+/// A blow's row of the table.
+fn table_row(e: &crate::estimate::BlowEstimate) -> String {
+    format!(
+        "{:>4}  {:>12.4}  {:>6.3}  {:>9}  {:>9}  {:>9}  {:>10}  {:<12}  {:>8.0}  {:>8}  {}",
+        e.blow,
+        e.t_contact_s,
+        e.v_impact_mps,
+        or_dash(e.kinetic_in_j, 0),
+        or_dash(e.plastic_j, 0),
+        or_dash(e.elastic_j, 0),
+        or_dash(e.efficiency, 3),
+        e.class.as_str(),
+        e.final_load_n / 1e3,
+        e.h_end_m.map_or("-".to_string(), |h| format!("{:.2}", h * 1e3)),
+        e.alert.as_ref().map_or(String::new(), |a| a.reason.clone()),
+    )
+}
+
+/// Classify the input and read the configuration it stores: a recording's (read up to its
+/// first samples), or a capture directory's machine.toml and process.toml.
 fn open_input(path: &Path) -> anyhow::Result<(Input, Stored)> {
     if path.is_dir() {
-        return Ok((Input::Files(super::capture_dir_files(path)?), Stored::default()));
+        let read = |name: &str| -> anyhow::Result<Option<String>> {
+            let p = path.join(name);
+            p.exists().then(|| read_text(&p)).transpose()
+        };
+        let stored = Stored { machine: read("machine.toml")?, process: read("process.toml")?, service: None };
+        return Ok((Input::Files(super::capture_dir_files(path)?), stored));
     }
     let name = path.to_string_lossy();
     if name.ends_with(".mcap") || name.ends_with(".mcap.part") {
@@ -280,6 +319,7 @@ fn open_input(path: &Path) -> anyhow::Result<(Input, Stored)> {
                     ahead.push(b);
                     break;
                 }
+                Payload::Config(c) if c.name == "machine.toml" => stored.machine = Some(c.text),
                 Payload::Config(c) if c.name == "process.toml" => stored.process = Some(c.text),
                 Payload::Config(c) if c.name == SERVICE_CONFIG_NAME => stored.service = Some(c.text),
                 _ => {}

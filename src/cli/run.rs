@@ -73,6 +73,7 @@ pub fn load_parts(config_path: &Path) -> anyhow::Result<ServiceParts> {
     Ok(ServiceParts {
         config,
         config_path: config_path.to_path_buf(),
+        config_text: text,
         machine,
         machine_text,
         process,

@@ -8,6 +8,7 @@
 //! so the service neither knows nor cares which transport (or simulated device) feeds it.
 
 pub mod queue;
+mod service;
 pub mod sinks;
 pub mod status;
 
@@ -24,9 +25,8 @@ use crate::estimate::BlowEstimate;
 use crate::estimate::billet_book::BilletSummary;
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
-use crate::pipeline::{Feeder, Pipeline, PipelineConfig, PipelineEvent};
-use crate::record::{BlowBoundary, Payload, RecordOptions, RecordWriter, Rotation};
-use crate::signal::merge::Merger;
+use crate::pipeline::{Feeder, Pipeline, PipelineConfig};
+use crate::record::{RecordOptions, RecordWriter, Rotation};
 use status::{SharedStatus, StatusSnapshot};
 
 /// Capacity of the channel from the sources to the service. Live, a relay empties it into
@@ -38,6 +38,8 @@ pub const SOURCE_CHANNEL_CAPACITY: usize = 1024;
 pub struct ServiceParts {
     pub config: ServiceConfig,
     pub config_path: PathBuf,
+    /// The service file's text as it was read and checked, recorded on `/config`.
+    pub config_text: String,
     pub machine: Machine,
     pub machine_text: String,
     pub process: Option<Process>,
@@ -99,6 +101,8 @@ pub struct Summary {
     /// Blows reported incomplete (samples lost inside them).
     pub incomplete_blows: u64,
     pub files: Vec<PathBuf>,
+    /// Recording writes that failed (logged; the service went on).
+    pub record_errors: u64,
 }
 
 /// Wall-clock time in ns since the epoch (the service is the one place that reads it).
@@ -130,7 +134,7 @@ pub async fn serve(
     if let Some(t) = &parts.process_text {
         writer.write_config(t0, "process.toml", t)?;
     }
-    writer.write_config(t0, SERVICE_CONFIG_NAME, &std::fs::read_to_string(&parts.config_path).unwrap_or_default())?;
+    writer.write_config(t0, SERVICE_CONFIG_NAME, &parts.config_text)?;
 
     let status: SharedStatus = Arc::new(Mutex::new(StatusSnapshot::new(parts.machine.kind().as_str())));
     let listener = tokio::net::TcpListener::bind(cfg.http_listen)
@@ -141,17 +145,9 @@ pub async fn serve(
     }
     let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx));
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
+    let feeder = Feeder::new(Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine)));
+    let mut service = service::Service::new(writer, feeder, status, sinks, hooks, parts.config_path.clone());
 
-    let mut feeder =
-        Feeder::new(Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine)));
-    let mut summary = Summary::default();
-    let mut events = Vec::new();
-    // The pipeline's input: a source carrying every role as it is, or the roles of several
-    // sources merged onto one timeline through each source's clock model (signal::merge).
-    let mut merger = Merger::default();
-    let mut to_pipeline = Vec::new();
-    // A new billet announced for a device time the samples have not reached yet.
-    let mut pending_billet: Option<i64> = None;
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
     // systemd's watchdog wants a ping at least every WATCHDOG_USEC; ping at half of it.
@@ -160,102 +156,29 @@ pub async fn serve(
     let mut rx = queue::SourceQueue::new(rx, parts.backpressure);
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     tracing::info!(listen = %cfg.http_listen, dir = %cfg.recording_dir.display(), "forgemon service ready");
-
     loop {
         tokio::select! {
-            ev = rx.recv() => {
-                let ev = match ev {
-                    None => break,
-                    Some(queue::Received::Event(ev)) => ev,
-                    Some(queue::Received::Dropped(n)) => {
-                        // The pipeline fell behind a live source: the oldest events went.
-                        // Their samples' hole shows in the device times, so a blow they
-                        // fell in is reported incomplete.
-                        summary.dropped_events += n;
-                        tracing::warn!(events = n, "the pipeline fell behind: oldest events dropped");
-                        let gap = crate::record::Gap {
-                            source: "service".into(),
-                            t_s: 0.0,
-                            samples_lost: 0,
-                            reason: format!("backpressure: {n} events dropped"),
-                        };
-                        let _ = writer.write_gap(host_now_ns(), &gap);
-                        status.lock().map(|mut s| s.dropped_events += n).ok();
-                        continue;
-                    }
-                };
-                match ev {
-                    SourceEvent::Batch(batch) => {
-                        if let Err(e) = writer.write_samples(&batch) {
-                            tracing::error!("recording samples: {e}");
-                        }
-                        let direct = merger.push(&batch, &mut to_pipeline);
-                        status.lock().map(|mut s| s.on_samples(&batch, merger.clock(&batch.source), merger.stats())).ok();
-                        for b in direct.then_some(&batch).into_iter().chain(to_pipeline.iter()) {
-                            let batch_end_ns = b.device_time_ns + (b.period_ns * b.len() as f64) as i64;
-                            if pending_billet.is_some_and(|at| batch_end_ns > at) {
-                                pending_billet = None;
-                                start_billet(&mut feeder, &mut writer, &status, &mut events);
-                            }
-                            feeder.push(b, &mut events);
-                        }
-                        to_pipeline.clear();
-                        for e in events.drain(..) {
-                            on_event(e, batch.host_time_ns, &mut writer, &status, &sinks, &mut hooks, &mut summary);
-                        }
-                    }
-                    SourceEvent::Gap(g) => {
-                        tracing::warn!(source = %g.source, lost = g.samples_lost, reason = %g.reason, "gap");
-                        let _ = writer.write_gap(host_now_ns(), &g);
-                        status.lock().map(|mut s| s.on_gap(&g)).ok();
-                    }
-                    SourceEvent::Status(st) => {
-                        let _ = writer.write_status(host_now_ns(), &st);
-                        status.lock().map(|mut s| s.on_status(st)).ok();
-                    }
-                }
-            }
-            Some(c) = control_rx.recv() => match c {
-                Control::NewBillet { at_device_ns: None } => {
-                    start_billet(&mut feeder, &mut writer, &status, &mut events);
-                    for e in events.drain(..) {
-                        on_event(e, host_now_ns(), &mut writer, &status, &sinks, &mut hooks, &mut summary);
-                    }
-                }
-                Control::NewBillet { at_device_ns: Some(at) } => pending_billet = Some(at),
+            ev = rx.recv() => match ev {
+                None => break,
+                Some(queue::Received::Event(ev)) => service.on_source_event(ev),
+                Some(queue::Received::Dropped(n)) => service.on_dropped(n),
             },
+            Some(c) = control_rx.recv() => service.on_control(c),
             _ = sigterm.recv() => { tracing::info!("SIGTERM: finishing the recording"); break; }
             _ = tokio::signal::ctrl_c() => { tracing::info!("interrupted: finishing the recording"); break; }
-            _ = stop.changed() => { if *stop.borrow() { break; } }
-            _ = sighup.recv() => {
-                match reload(&parts.config_path) {
-                    Ok((new, text)) => {
-                        feeder.pipeline_mut().set_alert_config(new.alerts);
-                        // In stream order, so that a replay changes the rules where this run did.
-                        let _ = writer.write_config(host_now_ns(), SERVICE_CONFIG_NAME, &text);
-                        tracing::info!("SIGHUP: alert rules reloaded");
-                    }
-                    Err(e) => tracing::error!("SIGHUP: keeping the old alert rules: {e:#}"),
-                }
-            }
+            _ = stop.changed() => if *stop.borrow() { break },
+            _ = sighup.recv() => service.reload(),
             _ = tick.tick() => {
                 if watchdog.is_some() {
                     let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
                 }
-                status.lock().map(|mut s| s.recording = writer.current_path().display().to_string()).ok();
+                service.on_tick();
             }
         }
     }
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
     let _ = shutdown.send(true);
-    feeder.pipeline_mut().end_of_stream(&mut events);
-    feeder.pipeline_mut().close_billet(&mut events);
-    for e in events.drain(..) {
-        on_event(e, host_now_ns(), &mut writer, &status, &sinks, &mut hooks, &mut summary);
-    }
-    summary.samples = feeder.samples();
-    summary.billets = u64::from(feeder.pipeline_mut().billets());
-    summary.files = writer.finish()?;
+    let summary = service.finish()?;
     http.abort();
     Ok(summary)
 }
@@ -280,94 +203,8 @@ pub fn tuned_config(tuning: &PipelineTuning, machine: &Machine) -> PipelineConfi
 pub const SERVICE_CONFIG_NAME: &str = "service.toml";
 
 /// The service file read again (SIGHUP), checked, with its text.
-fn reload(path: &std::path::Path) -> anyhow::Result<(ServiceConfig, String)> {
+pub(crate) fn reload(path: &std::path::Path) -> anyhow::Result<(ServiceConfig, String)> {
     let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
     let cfg = parse_service(&path.display().to_string(), path.parent().unwrap_or(std::path::Path::new(".")), &text)?;
     Ok((cfg, text))
-}
-
-/// A new billet from here on: restart the height tracking and alert memory, and mark the
-/// point in the recording so that a replay restarts it at the same sample.
-fn start_billet(
-    feeder: &mut Feeder,
-    writer: &mut RecordWriter,
-    status: &SharedStatus,
-    events: &mut Vec<PipelineEvent>,
-) {
-    feeder.pipeline_mut().new_billet(events);
-    let _ = writer.write_status(host_now_ns(), &new_billet_marker());
-    let billets = feeder.pipeline_mut().billets();
-    status.lock().map(|mut s| s.billets = u64::from(billets)).ok();
-    tracing::info!("new billet");
-}
-
-fn on_event(
-    e: PipelineEvent,
-    log_time_ns: i64,
-    writer: &mut RecordWriter,
-    status: &SharedStatus,
-    sinks: &sinks::Sinks,
-    hooks: &mut Hooks,
-    summary: &mut Summary,
-) {
-    match e {
-        PipelineEvent::Blow { cut, estimate } => {
-            summary.blows += 1;
-            summary.incomplete_blows += u64::from(!estimate.is_complete());
-            let boundary = BlowBoundary::of(estimate.blow, &cut);
-            let _ = writer.write_payload(log_time_ns, &Payload::Boundary(boundary));
-            if let Err(err) = writer.write_result(log_time_ns, &estimate) {
-                tracing::error!("recording the result of blow {}: {err}", estimate.blow);
-            }
-            tracing::info!(
-                blow = estimate.blow,
-                efficiency = estimate.efficiency,
-                class = estimate.class.as_str(),
-                "blow"
-            );
-            // From the host receiving the batch that ended the blow to its result.
-            let latency_ms = (host_now_ns() - log_time_ns) as f64 * 1e-6;
-            status
-                .lock()
-                .map(|mut s| {
-                    s.on_blow(&estimate);
-                    s.last_result_latency_ms = Some(latency_ms);
-                })
-                .ok();
-            if let Some(alert) = &estimate.alert {
-                summary.alerts += 1;
-                tracing::warn!(kind = alert.kind.as_str(), blow = alert.blow, "{}", alert.reason);
-                let _ = writer.write_alert(log_time_ns, alert);
-                sinks.fire(alert, log_time_ns, status);
-            }
-            if let Some(f) = hooks.on_blow.as_mut() {
-                f(&estimate);
-            }
-        }
-        PipelineEvent::Billet(b) => {
-            summary.billets_finished += u64::from(b.finished);
-            if let Err(err) = writer.write_billet(log_time_ns, &b) {
-                tracing::error!("recording billet {}: {err}", b.billet);
-            }
-            tracing::info!(
-                billet = b.billet,
-                blows = b.blows,
-                efficiency = b.efficiency,
-                first_hard_blow = b.first_hard_blow,
-                finished = b.finished,
-                "billet"
-            );
-            status.lock().map(|mut s| s.on_billet(&b)).ok();
-            if let Some(f) = hooks.on_billet.as_mut() {
-                f(&b);
-            }
-        }
-        PipelineEvent::Rejected { cut, error } => {
-            let msg = format!("blow at t = {:.6} s not estimated: {error}", cut.t_contact_s);
-            tracing::warn!("{msg}");
-            if let Some(f) = hooks.on_rejected.as_mut() {
-                f(&msg);
-            }
-        }
-    }
 }

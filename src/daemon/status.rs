@@ -64,6 +64,8 @@ pub struct StatusSnapshot {
     pub incomplete_blows: u64,
     /// Events the live queue dropped because the pipeline fell behind.
     pub dropped_events: u64,
+    /// Recording writes that failed (logged; the service goes on).
+    pub record_errors: u64,
     pub last_efficiency: Option<f64>,
     pub last_class: Option<String>,
     pub last_blow: Option<BlowEstimate>,
@@ -93,6 +95,7 @@ impl StatusSnapshot {
             alerts: 0,
             incomplete_blows: 0,
             dropped_events: 0,
+            record_errors: 0,
             last_efficiency: None,
             last_class: None,
             last_blow: None,
@@ -171,6 +174,12 @@ impl StatusSnapshot {
             "counter",
             "Oldest events the live queue dropped because the pipeline fell behind.",
             vec![(String::new(), self.dropped_events as f64)],
+        );
+        metric(
+            "record_errors_total",
+            "counter",
+            "Recording writes that failed.",
+            vec![(String::new(), self.record_errors as f64)],
         );
         metric("billets_total", "counter", "Billets started.", vec![(String::new(), self.billets as f64)]);
         metric(
