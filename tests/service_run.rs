@@ -237,13 +237,15 @@ fn alerts_reach_the_webhook_and_the_status_endpoint_tells_the_state() {
     assert_eq!(st["last_class"], "hard");
     assert_eq!(st["sources"]["daq"]["state"], "connected");
     assert_eq!(st["sources"]["daq"]["crc_errors"], 0);
-    // The device and the service share this machine's clock, so the true drift is 0 ppm;
-    // over a ~3 s run, pty delivery jitter of a few ms bounds the estimate by 2000 ppm.
+    // The device and the service share this machine's clock, so the true drift is 0 ppm.
+    // The estimate is clamped to ±MAX_DRIFT_PPM (500); over this ~3 s run the pty's delivery
+    // jitter moved it by 16 and 33 ppm in two runs on the 2-core machine. Half the clamp
+    // leaves 7x margin and still fails an estimate that runs away to the clamp.
     let drift = st["sources"]["daq"]["clock_drift_ppm"].as_f64().expect("a clock estimate");
-    assert!(drift.abs() < 2000.0, "drift {drift} ppm");
-    let latency = st["last_result_latency_ms"].as_f64().unwrap();
+    assert!(drift.abs() < 0.5 * forgemon::signal::align::MAX_DRIFT_PPM, "drift {drift} ppm");
+    // Reported once a blow has a result (its value is a benchmark figure, not asserted).
+    let latency = st["last_result_latency_ms"].as_f64().expect("the last result's latency");
     eprintln!("last result latency: {latency:.3} ms, clock drift estimate {drift:.1} ppm");
-    assert!(latency >= 0.0);
     let alert: serde_json::Value =
         serde_json::from_str(&hooks.recv_timeout(Duration::from_secs(5)).expect("the webhook was called")).unwrap();
     assert_eq!(alert["kind"], "elastic_blow");
