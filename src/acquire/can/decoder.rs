@@ -44,7 +44,8 @@ impl CanTiming {
 pub struct CanStats {
     /// Frames with an identifier the mapping does not read (ignored).
     pub unknown_frames: u64,
-    /// Remote, error and CAN FD frames (ignored).
+    /// Remote and error frames, and data frames of the other kind: CAN FD frames on a
+    /// classic mapping, classic ones on a CAN FD mapping (ignored).
     pub unsupported_frames: u64,
     /// Sample-message frames repeating the previous counter value (dropped).
     pub duplicates: u64,
@@ -138,7 +139,8 @@ impl CanDecoder {
         self.timing.trust_timestamps = trust;
     }
 
-    /// A remote, error or CAN FD frame arrived: counted and ignored.
+    /// A remote or error frame, or a data frame of the other kind (FD on a classic
+    /// mapping, classic on an FD one) arrived: counted and ignored.
     pub fn skip_unsupported(&mut self) {
         self.stats.unsupported_frames += 1;
     }
@@ -150,7 +152,8 @@ impl CanDecoder {
     }
 
     /// Feed one data frame received at `t_ns` (host or log time). Batches and gaps go to
-    /// `out`.
+    /// `out`. A frame of a block mapping carries several samples: its time belongs to the
+    /// last of them, and the others precede it at the sample period.
     pub fn push(&mut self, t_ns: i64, frame: FrameId, data: &[u8], out: &mut Vec<SourceEvent>) {
         let Some(&(_, needed)) = self.frames.iter().find(|(f, _)| *f == frame) else {
             self.stats.unknown_frames += 1;
@@ -162,18 +165,22 @@ impl CanDecoder {
             self.counters.decode_errors += 1;
             return;
         }
+        let sample_frame = self.mapping.sample_frame();
         for (i, s) in self.mapping.signals().iter().enumerate() {
-            if s.layout.frame == frame {
+            if s.layout.frame == frame && frame != sample_frame {
                 self.held[i] = s.layout.extract(data);
             }
         }
-        if frame != self.mapping.sample_frame() {
+        if frame != sample_frame {
             return;
         }
+        let n = self.mapping.samples_per_frame();
+        // The time of the frame's first sample.
+        let t_first_ns = t_ns - ((n - 1) as f64 * self.timing.period_ns).round() as i64;
         let seq = self.mapping.sequence().and_then(|l| l.extract_raw(data)).map(|r| r as u64);
         if self.t0_ns.is_none() {
-            self.origin_ns.get_or_insert(t_ns);
-            self.t0_ns = Some(t_ns);
+            self.origin_ns.get_or_insert(t_first_ns);
+            self.t0_ns = Some(t_first_ns);
         } else if let Some(lost) = self.lost_before(seq, t_ns) {
             if !self.wraps_confirmed(lost, seq, t_ns) {
                 self.stats.wild_stamps += 1;
@@ -198,6 +205,19 @@ impl CanDecoder {
         }
         self.last_seq = seq;
         self.last_t_ns = t_ns;
+        for k in 0..n {
+            for (i, l) in self.mapping.slot(k).iter().enumerate() {
+                if l.frame == frame {
+                    self.held[i] = l.extract(data);
+                }
+            }
+            let host_ns = t_first_ns + (k as f64 * self.timing.period_ns).round() as i64;
+            self.push_sample(host_ns, out);
+        }
+    }
+
+    /// Append the held values as the next sample, received at `host_ns`.
+    fn push_sample(&mut self, host_ns: i64, out: &mut Vec<SourceEvent>) {
         let index = self.next_index;
         self.next_index += 1;
         if self.held.iter().any(Option::is_none) {
@@ -209,7 +229,7 @@ impl CanDecoder {
         }
         if self.batch.is_empty() {
             self.batch_index0 = index;
-            self.batch_host_ns = t_ns;
+            self.batch_host_ns = host_ns;
         }
         self.batch.extend(self.held.iter().map(|v| v.unwrap_or(f64::NAN)));
         self.counters.samples += 1;
@@ -241,21 +261,24 @@ impl CanDecoder {
     }
 
     /// Samples lost between the previous sample frame and this one (negative: a repeat),
-    /// or None when nothing tells.
+    /// or None when nothing tells. The counter counts samples, so from one frame of `n`
+    /// samples to the next it advances by `n`, and so do the frames' times.
     fn lost_before(&self, seq: Option<u64>, t_ns: i64) -> Option<i64> {
+        let n = self.mapping.samples_per_frame() as i64;
         let elapsed = (t_ns - self.last_t_ns) as f64 / self.timing.period_ns;
         match (seq, self.last_seq, self.mapping.sequence()) {
             (Some(seq), Some(last), Some(layout)) => {
                 let modulus = 1i64 << layout.length;
                 let diff = (seq as i64 - last as i64).rem_euclid(modulus);
                 if !self.timing.trust_timestamps {
-                    return Some(if diff == 0 { -1 } else { diff - 1 });
+                    // Back, still, or forward by less than a block: a repeat.
+                    return Some(if diff < n { -1 } else { diff - n });
                 }
-                let lost0 = (diff - 1).rem_euclid(modulus);
-                let wraps = ((elapsed - 1.0 - lost0 as f64) / modulus as f64).round() as i64;
+                let lost0 = (diff - n).rem_euclid(modulus);
+                let wraps = ((elapsed - n as f64 - lost0 as f64) / modulus as f64).round() as i64;
                 Some(lost0 + wraps * modulus)
             }
-            _ if self.timing.trust_timestamps => Some((elapsed.round() as i64 - 1).max(0)),
+            _ if self.timing.trust_timestamps => Some((elapsed.round() as i64 - n).max(0)),
             _ => None,
         }
     }
@@ -294,7 +317,7 @@ impl CanDecoder {
     /// A status line's detail: what the counters do not hold.
     pub fn detail(&self) -> String {
         format!(
-            "unknown frames {}, remote/error/FD frames {}, repeated counters {}, wild stamps {}",
+            "unknown frames {}, remote/error/other-kind frames {}, repeated counters {}, wild stamps {}",
             self.stats.unknown_frames, self.stats.unsupported_frames, self.stats.duplicates, self.stats.wild_stamps
         )
     }
