@@ -393,3 +393,34 @@ async fn live_canfd_socket_reads_blocks_or_says_it_was_skipped() {
         }
     }
 }
+
+/// Throughput of the log path (parse + decode), not a pass/fail check: run with
+/// `cargo nextest run --release --test acquire_canfd --run-ignored only --no-capture`.
+#[test]
+#[ignore = "a measurement; prints samples/s"]
+fn decode_throughput_of_a_10_s_50_khz_fd_log() {
+    let rows: Vec<CaptureRow> = (0..500_000)
+        .map(|k| CaptureRow {
+            t_s: 1.7e9 + k as f64 * PERIOD_S,
+            load_n: (k % 1000) as f64 * 100.0,
+            disp_m: 0.4,
+            acc_mps2: 9.75,
+        })
+        .collect();
+    let mut log = Vec::new();
+    forgemon::acquire::can::CanDevice::new(forgemon_fd_mapping()).write_log(&mut log, "can0", &rows).expect("write");
+    let text = String::from_utf8(log).expect("ASCII");
+    let start = std::time::Instant::now();
+    let (events, dec) = decode(&text, "mem", BadLines::Fail);
+    let dt = start.elapsed().as_secs_f64();
+    assert_eq!(dec.counters().samples, 500_000);
+    assert!(!events.is_empty());
+    eprintln!(
+        "decoded {} FD frames ({} samples, {} MB of candump text) in {dt:.3} s: {:.0} samples/s, {:.1}x real time at 50 kHz",
+        dec.counters().frames,
+        dec.counters().samples,
+        text.len() / 1_000_000,
+        500_000.0 / dt,
+        10.0 / dt
+    );
+}
