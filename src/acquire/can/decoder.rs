@@ -398,6 +398,39 @@ mod tests {
         assert_eq!(d.counters().gaps, 1);
     }
 
+    /// A block of 8 samples a frame, untrusted times: the counter alone tells a lost frame
+    /// (a gap of exactly 8) from a repeated one (dropped, counted).
+    #[test]
+    fn block_frames_count_lost_and_repeated_frames_by_the_sample_counter() {
+        use super::super::{BLOCK_FRAME, CanDevice, forgemon_fd_mapping};
+        use crate::signal::capture::CaptureRow;
+        let mut dev = CanDevice::new(forgemon_fd_mapping());
+        let mut d = CanDecoder::new("can", forgemon_fd_mapping(), CanTiming::new(50_000.0, 1.0, false));
+        let mut out = Vec::new();
+        let row = |k: usize| CaptureRow { t_s: 0.0, load_n: 100.0 * k as f64, disp_m: 0.0, acc_mps2: 0.0 };
+        let mut frames = Vec::new();
+        for b in 0..6usize {
+            let rows: Vec<CaptureRow> = (8 * b..8 * b + 8).map(row).collect();
+            frames.push(dev.encode_block(&rows));
+        }
+        // Frames 0, 1, 1 again, (2 lost), 3, 4, 5; receive times say nothing (all 0).
+        for i in [0, 1, 1, 3, 4, 5] {
+            let (f, data) = &frames[i];
+            assert_eq!(*f, BLOCK_FRAME);
+            d.push(0, *f, data, &mut out);
+        }
+        d.flush(&mut out);
+        let lost: Vec<u64> =
+            out.iter().filter_map(|e| if let SourceEvent::Gap(g) = e { Some(g.samples_lost) } else { None }).collect();
+        assert_eq!(lost, vec![8]);
+        assert_eq!((d.stats().duplicates, d.counters().samples), (1, 40));
+        let loads: Vec<f64> = batches(&out).iter().flat_map(|b| b.values.chunks(3).map(|c| c[0])).collect();
+        let want: Vec<f64> = (0..48).filter(|k| !(16..24).contains(k)).map(|k| 100.0 * k as f64).collect();
+        assert_eq!(loads, want, "each sample in its slot, in order");
+        // Device time: sample 24 (after the hole) at 24 periods.
+        assert_eq!(batches(&out)[1].device_time_ns, 24 * 20_000);
+    }
+
     #[test]
     fn trusted_times_count_whole_wraps_of_the_counter() {
         let mut d = decoder(true);

@@ -431,4 +431,30 @@ mod tests {
         assert!(CanMapping::new(vec![], None).is_err());
         assert!(CanMapping::new(vec![s], Some(layout(8, 8, ByteOrder::LittleEndian, true))).is_err());
     }
+
+    #[test]
+    fn block_mappings_check_their_slots_and_payload_kind() {
+        let at = |start_bit: u16, role: Role| CanSignalSpec {
+            role,
+            layout: layout(start_bit, 16, ByteOrder::LittleEndian, true),
+        };
+        let ok = vec![vec![at(64, Role::Load)], vec![at(80, Role::Load)]];
+        let m = CanMapping::block(ok.clone(), None, true).unwrap();
+        assert_eq!((m.samples_per_frame(), m.is_fd(), m.frames()), (2, true, vec![(FrameId::standard(0x120), 12)]));
+        assert_eq!(m.slot(1)[0].start_bit, 80);
+        // Past byte 8 only in an FD frame; past byte 64 never.
+        let e = CanMapping::block(ok, None, false).unwrap_err().to_string();
+        assert!(e.contains("8-byte classic"), "{e}");
+        let e = CanMapping::block(vec![vec![at(504, Role::Load)]], None, true).unwrap_err().to_string();
+        assert!(e.contains("64-byte CAN FD"), "{e}");
+        // Every slot the same roles, all in the sample frame.
+        let e = CanMapping::block(vec![vec![at(64, Role::Load)], vec![at(80, Role::Acc)]], None, true).unwrap_err();
+        assert!(e.to_string().contains("same roles"), "{e}");
+        let mut other = at(80, Role::Load);
+        other.layout.frame = FrameId::standard(0x121);
+        let e = CanMapping::block(vec![vec![at(64, Role::Load)], vec![other]], None, true).unwrap_err();
+        assert!(e.to_string().contains("sample frame 120"), "{e}");
+        assert_eq!(fd_len_for(9), Some(12));
+        assert_eq!(fd_len_for(65), None);
+    }
 }
