@@ -2,7 +2,8 @@
 //! three channels in 64-byte CAN FD frames, 8 samples a frame, in the block layout of
 //! `config/hammer-canfd.dbc`. Logs written by the standard tools (cantools encoding with
 //! the DBC, python-can writing `candump -L`: `tests/python/write_canfd.py`) and by
-//! `forgemon simulate-device --can-fd` are decoded with the committed DBC: samples on the
+//! `forgemon simulate-device --can-fd` (which the standard tools also read back the same,
+//! `tests/python/read_canfd.py`) are decoded with the committed DBC: samples on the
 //! 20 µs grid with the values written, a lost frame a gap of exactly 8 samples, a
 //! malformed line named by its number, and the blows found against the simulator's
 //! ledger. The live FD socket runs where AF_CAN exists and otherwise says it was skipped.
@@ -311,6 +312,29 @@ async fn simulate_device_writes_a_50_khz_fd_log_the_service_reads() {
     assert_eq!(got.len() as u64, s.samples);
     assert_eq!(got.len(), text.lines().count() * BLOCK_SAMPLES);
     assert!(got.iter().enumerate().all(|(k, (t, ..))| on_grid(*t) && (t - k as f64 * PERIOD_S).abs() < 1e-9));
+
+    // The standard tools read forgemon's log as forgemon does: python-can and cantools
+    // with the same DBC give the same counter (+8 a frame) and the same values.
+    let py = Command::new("python3")
+        .arg(root().join("tests/python/read_canfd.py"))
+        .arg(&log)
+        .arg(root().join(DBC))
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run python3 ({e}): `{INSTALL}`"));
+    assert!(py.status.success(), "read_canfd.py (`{INSTALL}`?): {}", String::from_utf8_lossy(&py.stderr));
+    let theirs: Value = serde_json::from_slice(&py.stdout).expect("read_canfd.py JSON");
+    let seq: Vec<u64> = theirs["seq"].as_array().expect("seq").iter().filter_map(Value::as_u64).collect();
+    assert_eq!(seq, (0..seq.len() as u64).map(|k| 8 * k).collect::<Vec<_>>());
+    let theirs = theirs["samples"].as_array().expect("samples");
+    assert_eq!(theirs.len(), got.len());
+    for (k, (t, ours)) in theirs.iter().zip(&got).enumerate() {
+        let v: Vec<f64> = t.as_array().expect("a sample").iter().filter_map(Value::as_f64).collect();
+        let o = [ours.1, ours.2, ours.3];
+        assert!(
+            v.len() == 3 && v.iter().zip(o).all(|(a, b)| (a - b).abs() <= 1e-9 * b.abs().max(1.0)),
+            "sample {k}: {v:?} vs {o:?}"
+        );
+    }
 
     // The ledger: `forgemon simulate` of the same blows on the same billet.
     let sim = Command::new(bin)
