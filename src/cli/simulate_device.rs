@@ -32,7 +32,8 @@ pub enum Transport {
     Pty,
     /// A Modbus TCP server with the block-mode sample ring at register 0, in real time.
     ModbusTcp,
-    /// A `candump -L` log file, one CAN frame per sample (fixtures/can/hammer.dbc).
+    /// A `candump -L` log file, one CAN frame per sample (fixtures/can/hammer.dbc), or with
+    /// `--can-fd` one CAN FD frame per 8 samples (config/hammer-canfd.dbc).
     Candump,
 }
 
@@ -76,6 +77,10 @@ pub struct SimulateDeviceArgs {
     /// candump: the log file to write.
     #[arg(long, required_if_eq("transport", "candump"))]
     pub out: Option<PathBuf>,
+    /// candump: CAN FD frames, each a block of 8 samples (config/hammer-canfd.dbc), for the
+    /// rates a classic bus cannot carry (50 kHz).
+    #[arg(long, requires = "out")]
+    pub can_fd: bool,
     /// Garbage bytes before every N-th frame (0: never).
     #[arg(long, default_value_t = 0)]
     pub garbage_every: u64,
@@ -128,8 +133,15 @@ pub fn run(args: SimulateDeviceArgs) -> anyhow::Result<ExitCode> {
             drop_every: args.drop_every,
         },
     };
+    if args.can_fd && args.transport != Transport::Candump {
+        anyhow::bail!("--can-fd needs --transport candump");
+    }
     if args.transport == Transport::Candump {
-        return write_candump(sim, args.out.as_deref().context("--out is required with --transport candump")?);
+        return write_candump(
+            sim,
+            args.out.as_deref().context("--out is required with --transport candump")?,
+            args.can_fd,
+        );
     }
     let rt = tokio::runtime::Runtime::new()?;
     if args.transport == Transport::ModbusTcp {
@@ -156,11 +168,13 @@ pub fn run(args: SimulateDeviceArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Write the whole session as a `candump -L` log (one frame per sample, counter and three
-/// signals as in `fixtures/can/hammer.dbc`), as a bus capture would hold it.
-fn write_candump(mut sim: SimMachine, out: &std::path::Path) -> anyhow::Result<ExitCode> {
+/// Write the whole session as a `candump -L` log, as a bus capture would hold it: one
+/// frame per sample (counter and three signals as in `fixtures/can/hammer.dbc`), or with
+/// `fd` one CAN FD frame per block of 8 samples (`config/hammer-canfd.dbc`).
+fn write_candump(mut sim: SimMachine, out: &std::path::Path, fd: bool) -> anyhow::Result<ExitCode> {
+    use crate::acquire::can::{CanDevice, forgemon_fd_mapping, forgemon_mapping};
     use std::io::Write;
-    let mut dev = crate::acquire::can::CanDevice::new(crate::acquire::can::forgemon_mapping());
+    let mut dev = CanDevice::new(if fd { forgemon_fd_mapping() } else { forgemon_mapping() });
     let file = std::fs::File::create(out).with_context(|| format!("{}: cannot write", out.display()))?;
     let mut w = std::io::BufWriter::new(file);
     let mut samples = 0u64;
@@ -170,7 +184,21 @@ fn write_candump(mut sim: SimMachine, out: &std::path::Path) -> anyhow::Result<E
         dev.write_log(&mut w, "can0", &rows).with_context(|| format!("{}: cannot write", out.display()))?;
     }
     w.flush()?;
-    println!("wrote {samples} frames to {} (decode with fixtures/can/hammer.dbc: Load, Disp, Acc, Seq)", out.display());
+    if fd {
+        let frames = (samples - dev.pending() as u64) / crate::acquire::can::BLOCK_SAMPLES as u64;
+        println!(
+            "wrote {frames} CAN FD frames of {} samples ({} samples; the last {} not a full block, not sent) to {} (decode with config/hammer-canfd.dbc: Seq, Load_k, Acc_k, Disp_k)",
+            crate::acquire::can::BLOCK_SAMPLES,
+            samples,
+            dev.pending(),
+            out.display()
+        );
+    } else {
+        println!(
+            "wrote {samples} frames to {} (decode with fixtures/can/hammer.dbc: Load, Disp, Acc, Seq)",
+            out.display()
+        );
+    }
     Ok(ExitCode::SUCCESS)
 }
 
@@ -233,5 +261,18 @@ mod tests {
         assert_eq!((a.height_spread, a.billet_idle), (0.05, 30.0));
         let Command::SimulateDevice(d) = Cli::try_parse_from(args).unwrap().command else { panic!() };
         assert_eq!((d.height_spread, d.billet_idle), (0.0, 0.0));
+        assert!(!d.can_fd);
+    }
+
+    /// Issue 16: a CAN FD log is asked for with --can-fd, which needs a file to write.
+    #[test]
+    fn can_fd_parses_and_needs_an_output_file() {
+        let args = ["forgemon", "simulate-device", "--machine", "m.toml", "--process", "p.toml", "--v0", "3.9"];
+        let fd = ["--transport", "candump", "--out", "x.log", "--can-fd", "--rate", "50000"];
+        let Command::SimulateDevice(a) = Cli::try_parse_from(args.iter().chain(&fd)).unwrap().command else {
+            panic!("not simulate-device")
+        };
+        assert!(a.can_fd && a.rate == 50e3);
+        assert!(Cli::try_parse_from(args.iter().chain(&["--can-fd"])).is_err());
     }
 }

@@ -382,11 +382,23 @@ gain = 0.01
     #[test]
     fn the_example_service_configs_parse_and_name_existing_files() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
-        for name in ["hammer-serial.service.toml", "hammer-can.service.toml", "press-modbus-serial.service.toml"] {
+        for name in [
+            "hammer-serial.service.toml",
+            "hammer-can.service.toml",
+            "hammer-canfd.service.toml",
+            "press-modbus-serial.service.toml",
+        ] {
             let text = std::fs::read_to_string(dir.join(name)).unwrap();
             let c = parse_service(name, &dir, &text).unwrap();
             assert!(c.machine_path.exists(), "{name}: {}", c.machine_path.display());
             assert!(c.process_path.as_ref().is_none_or(|p| p.exists()), "{name}");
+            for s in &c.sources {
+                // A CAN source's DBC file reads into its mapping (issue 16: the FD block).
+                if let SourceSpec::Can(can) = s {
+                    let m = can.resolve().unwrap_or_else(|e| panic!("{name}: {e}")).mapping;
+                    assert_eq!((m.is_fd(), m.samples_per_frame()), (can.fd, can.samples_per_frame), "{name}");
+                }
+            }
         }
     }
 

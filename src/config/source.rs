@@ -129,6 +129,8 @@ struct CanKeys {
     log: Option<IgnoredAny>,
     sample_rate_hz: Option<IgnoredAny>,
     batch_s: Option<IgnoredAny>,
+    fd: Option<IgnoredAny>,
+    samples_per_frame: Option<IgnoredAny>,
     dbc: Option<IgnoredAny>,
     signals: Option<CanSignalNames>,
     can_signals: Option<Vec<CanSignalKeys>>,

@@ -10,6 +10,9 @@
 //! interface = "can0"        # live SocketCAN; or log = "capture.log" (candump -L)
 //! sample_rate_hz = 5000     # the DAQ's sample rate (frames carry no time)
 //! batch_s = 0.05            # optional
+//! fd = false                # optional: CAN FD frames (`##`, up to 64 bytes)
+//! samples_per_frame = 1     # optional: a block of N samples a frame, DBC signals
+//!                           # Load_0 .. Load_{N-1} for the role's "Load" (needs dbc)
 //! dbc = "hammer.dbc"        # relative to the config file
 //! [sources.signals]         # role = DBC signal ("Signal" or "Message.Signal")
 //! load_N = "Load"
@@ -30,10 +33,10 @@ use crate::signal::capture::DEFAULT_BATCH_S;
 use crate::signal::sample::Role;
 
 use super::CanError;
-use super::dbc::{DbcNames, mapping_from_dbc};
+use super::dbc::{DbcNames, block_mapping_from_dbc};
 use super::decoder::CanTiming;
 use super::live::CanSourceConfig;
-use super::signal::{ByteOrder, CanMapping, CanSignalSpec, FrameId, SignalLayout};
+use super::signal::{ByteOrder, CLASSIC_MAX_LEN, CanMapping, CanSignalSpec, FD_MAX_LEN, FrameId, SignalLayout};
 
 /// Where the frames come from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -58,8 +61,15 @@ pub struct CanSourceSpec {
     pub input: CanInput,
     pub sample_rate_hz: f64,
     pub batch_s: f64,
+    /// CAN FD frames (the live driver opens an FD socket).
+    pub fd: bool,
+    /// Samples a sample frame carries (a block, `acquire::can` docs); 1 for classic.
+    pub samples_per_frame: usize,
     pub signals: CanSignals,
 }
+
+/// The most samples one frame can carry (a 64-byte payload of 1-byte samples).
+pub const MAX_SAMPLES_PER_FRAME: i64 = 64;
 
 impl CanSourceSpec {
     /// Read the DBC file (if any) and build the driver's configuration. A log's receive
@@ -71,7 +81,7 @@ impl CanSourceSpec {
                 let origin = path.display().to_string();
                 let text =
                     std::fs::read_to_string(path).map_err(|source| CanError::Io { origin: origin.clone(), source })?;
-                mapping_from_dbc(&origin, &text, names)?
+                block_mapping_from_dbc(&origin, &text, names, self.samples_per_frame, self.fd)?
             }
         };
         let iface = match &self.input {
@@ -128,6 +138,16 @@ fn parse_keys(s: &Keys<'_>, base: &Path) -> Result<CanSourceSpec, ConfigError> {
         Some(_) => s.positive("batch_s")?,
         None => DEFAULT_BATCH_S,
     };
+    let fd = boolean(s, "fd", false)?;
+    let samples_per_frame = match integer(s, "samples_per_frame")? {
+        None => 1,
+        Some(n) if (1..=MAX_SAMPLES_PER_FRAME).contains(&n) => n as usize,
+        Some(n) => return Err(s.invalid("samples_per_frame", format!("{n} is not 1..={MAX_SAMPLES_PER_FRAME}"))),
+    };
+    if samples_per_frame > 1 && !s.table.contains_key("dbc") {
+        return Err(s.invalid("samples_per_frame", "a block of samples per frame is read from a DBC file ('dbc')"));
+    }
+    let max_len = if fd { FD_MAX_LEN } else { CLASSIC_MAX_LEN };
     let signals = if s.table.contains_key("dbc") {
         let path = base.join(s.string("dbc")?);
         let sig = s.table("signals")?;
@@ -167,7 +187,7 @@ fn parse_keys(s: &Keys<'_>, base: &Path) -> Result<CanSourceSpec, ConfigError> {
                 let v = integer(&c, key)?.ok_or_else(|| c.missing(key))?;
                 u16::try_from(v)
                     .ok()
-                    .filter(|&b| b < 64 || key == "length")
+                    .filter(|&b| (b as usize) < 8 * max_len || key == "length")
                     .ok_or_else(|| c.invalid(key, format!("{v} out of range")))
             };
             let byte_order = match c.string("byte_order")? {
@@ -187,16 +207,18 @@ fn parse_keys(s: &Keys<'_>, base: &Path) -> Result<CanSourceSpec, ConfigError> {
                 offset: c.opt_number("offset")?.map(|_| c.finite("offset")).transpose()?.unwrap_or(0.0),
             };
             let role = c.string("role")?;
-            layout.validate(role).map_err(|e| c.invalid("length", e.to_string()))?;
+            layout.validate_within(role, max_len).map_err(|e| c.invalid("length", e.to_string()))?;
             match Role::from_column(role) {
                 Some(r) => roles.push(CanSignalSpec { role: r, layout }),
                 None if role == "sequence" => sequence = Some(layout),
                 None => return Err(c.invalid("role", format!("'{role}' is not load_N, disp_m, acc_mps2 or sequence"))),
             }
         }
-        CanSignals::Explicit(CanMapping::new(roles, sequence).map_err(|e| s.invalid("can_signals", e.to_string()))?)
+        let mapping =
+            CanMapping::block(vec![roles], sequence, fd).map_err(|e| s.invalid("can_signals", e.to_string()))?;
+        CanSignals::Explicit(mapping)
     };
-    Ok(CanSourceSpec { name, input, sample_rate_hz, batch_s, signals })
+    Ok(CanSourceSpec { name, input, sample_rate_hz, batch_s, fd, samples_per_frame, signals })
 }
 
 #[cfg(test)]
@@ -290,6 +312,30 @@ factor = 1e-6
         assert!(e(EXPLICIT.replacen("\"intel\"", "\"vax\"", 1)).contains("can_signals[1].byte_order"));
         assert!(e(EXPLICIT.replace("start_bit = 40", "start_bit = 48")).contains("can_signals[4]"));
         assert!(e(EXPLICIT.replace("role = \"disp_m\"", "role = \"load_N\"")).contains("role mapped twice"));
+    }
+
+    #[test]
+    fn the_canfd_example_reads_a_block_of_eight_fd_samples() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+        let text = DBC_SOURCE.replace("hammer.dbc", "hammer-canfd.dbc").replace("5000", "50000");
+        let table: toml::Table =
+            format!("{text}\n").replace("[signals]", "fd = true\nsamples_per_frame = 8\n[signals]").parse().unwrap();
+        let spec = parse_can_source("svc.toml", "sources[1]", &table, &dir).unwrap();
+        assert_eq!((spec.fd, spec.samples_per_frame), (true, 8));
+        let cfg = spec.resolve().unwrap();
+        assert_eq!(cfg.mapping, crate::acquire::can::forgemon_fd_mapping());
+        assert_eq!(cfg.mapping.samples_per_frame(), 8);
+        // A block needs a DBC; a count out of range is named.
+        let e = parse(&EXPLICIT.replace("batch_s = 0.02", "batch_s = 0.02\nsamples_per_frame = 8")).unwrap_err();
+        assert!(e.to_string().contains("'sources[1].samples_per_frame'"), "{e}");
+        let e = parse(&DBC_SOURCE.replace("[signals]", "samples_per_frame = 0\n[signals]")).unwrap_err();
+        assert!(e.to_string().contains("'sources[1].samples_per_frame'"), "{e}");
+        // Explicit signals may sit past byte 8 only in an FD frame.
+        let far = EXPLICIT.replace("start_bit = 40", "start_bit = 100");
+        assert!(parse(&far).unwrap_err().to_string().contains("can_signals[4]"));
+        let fd = parse(&far.replace("batch_s = 0.02", "batch_s = 0.02\nfd = true")).unwrap();
+        let CanSignals::Explicit(m) = &fd.signals else { panic!("{fd:?}") };
+        assert!(m.is_fd());
     }
 
     #[test]

@@ -1,8 +1,13 @@
 //! Signals from a DBC file (`can-dbc`): the config names a DBC signal for each role
 //! (`load_N`, `disp_m`, `acc_mps2`) and optionally the sequence counter, and this turns
 //! them into a [`CanMapping`]. Pure: the caller reads the file and passes its text.
+//!
+//! A CAN FD block of `n` samples per frame ([`block_mapping_from_dbc`]) names each role
+//! by its stem: `Load` reads the signals `Load_0` … `Load_{n-1}`, sample 0 the oldest
+//! (see `config/hammer-canfd.dbc`). Multiplexed signals (`M`, `m0` …) are refused with
+//! an error rather than read from frames whose multiplexor selects something else.
 
-use can_dbc::{Dbc, MessageId, ValueType};
+use can_dbc::{Dbc, MessageId, MultiplexIndicator, ValueType};
 
 use crate::signal::sample::Role;
 
@@ -29,19 +34,37 @@ impl DbcNames {
 
 /// Build the mapping from the DBC text `text` (read from `origin`, named in errors).
 pub fn mapping_from_dbc(origin: &str, text: &str, names: &DbcNames) -> Result<CanMapping, CanError> {
+    block_mapping_from_dbc(origin, text, names, 1, false)
+}
+
+/// Build a mapping of `samples_per_frame` samples per sample frame (module docs), of CAN
+/// FD frames when `fd`. With one sample per frame the names are the signals' own.
+pub fn block_mapping_from_dbc(
+    origin: &str,
+    text: &str,
+    names: &DbcNames,
+    samples_per_frame: usize,
+    fd: bool,
+) -> Result<CanMapping, CanError> {
     let dbc = Dbc::try_from(text)
         .map_err(|e| CanError::Dbc { origin: origin.to_string(), message: e.to_string().trim().replace('\n', " ") })?;
-    let mut signals = Vec::new();
-    for (role, name) in &names.roles {
-        signals.push(CanSignalSpec { role: *role, layout: find(origin, &dbc, name)? });
+    let mut slots = Vec::with_capacity(samples_per_frame);
+    for k in 0..samples_per_frame.max(1) {
+        let mut signals = Vec::new();
+        for (role, name) in &names.roles {
+            let name = if samples_per_frame > 1 { format!("{name}_{k}") } else { name.clone() };
+            signals.push(CanSignalSpec { role: *role, layout: find(origin, &dbc, &name, fd)? });
+        }
+        slots.push(signals);
     }
-    let sequence = names.sequence.as_deref().map(|n| find(origin, &dbc, n)).transpose()?;
-    CanMapping::new(signals, sequence)
+    let sequence = names.sequence.as_deref().map(|n| find(origin, &dbc, n, fd)).transpose()?;
+    CanMapping::block(slots, sequence, fd)
         .map_err(|e| CanError::DbcSignal { origin: origin.to_string(), why: e.to_string() })
 }
 
-/// The layout of the signal called `name` (or `Message.Signal`).
-fn find(origin: &str, dbc: &Dbc, name: &str) -> Result<SignalLayout, CanError> {
+/// The layout of the signal called `name` (or `Message.Signal`), in a frame of the kind
+/// `fd` says.
+fn find(origin: &str, dbc: &Dbc, name: &str, fd: bool) -> Result<SignalLayout, CanError> {
     let err = |why: String| CanError::DbcSignal { origin: origin.to_string(), why };
     let (message, signal) = match name.split_once('.') {
         Some((m, s)) => (Some(m), s),
@@ -58,6 +81,18 @@ fn find(origin: &str, dbc: &Dbc, name: &str) -> Result<SignalLayout, CanError> {
         [] => return Err(err(format!("no signal named '{name}'"))),
         _ => return Err(err(format!("several messages have a signal '{name}'; write Message.Signal"))),
     };
+    if s.multiplexer_indicator != MultiplexIndicator::Plain {
+        return Err(err(format!(
+            "signal '{name}' is multiplexed ({:?}); forgemon reads plain signals (a block of samples is Signal_0, Signal_1, ...)",
+            s.multiplexer_indicator
+        )));
+    }
+    if m.size > 8 && !fd {
+        return Err(err(format!(
+            "signal '{name}': message '{}' is {} bytes, a CAN FD frame; set fd = true",
+            m.name, m.size
+        )));
+    }
     let frame = match m.id {
         MessageId::Standard(id) => FrameId::standard(id),
         MessageId::Extended(id) => FrameId::extended(id),
@@ -76,7 +111,8 @@ fn find(origin: &str, dbc: &Dbc, name: &str) -> Result<SignalLayout, CanError> {
         factor: s.factor,
         offset: s.offset,
     };
-    layout.validate(name).map_err(|e| err(e.to_string()))?;
+    let max_len = if fd { super::signal::FD_MAX_LEN } else { super::signal::CLASSIC_MAX_LEN };
+    layout.validate_within(name, max_len).map_err(|e| err(e.to_string()))?;
     Ok(layout)
 }
 
@@ -124,6 +160,29 @@ BO_ 2147487744 Other: 8 DAQ
         assert_eq!(l.frame, FrameId::extended(0x1000)); // 2147487744 = 0x80001000
         assert_eq!((l.start_bit, l.length, l.byte_order, l.signed), (7, 16, ByteOrder::BigEndian, true));
         assert_eq!((l.factor, l.offset), (0.5, -10.0));
+    }
+
+    /// The committed CAN FD example describes the simulated DAQ's block (mod.rs docs).
+    #[test]
+    fn the_canfd_example_dbc_is_the_built_in_block() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/config/hammer-canfd.dbc");
+        let text = std::fs::read_to_string(path).unwrap();
+        let m = block_mapping_from_dbc(path, &text, &DbcNames::forgemon(), 8, true).unwrap();
+        assert_eq!(m, super::super::forgemon_fd_mapping());
+        // Without fd the 64-byte message is refused, naming the fix.
+        let e = block_mapping_from_dbc(path, &text, &DbcNames::forgemon(), 8, false).unwrap_err().to_string();
+        assert!(e.contains("set fd = true"), "{e}");
+        // A block longer than the DBC's: the missing signal is named.
+        let e = block_mapping_from_dbc(path, &text, &DbcNames::forgemon(), 9, true).unwrap_err().to_string();
+        assert!(e.contains("no signal named 'Load_8'"), "{e}");
+    }
+
+    #[test]
+    fn multiplexed_signals_are_refused() {
+        let text = DBC.replace(" SG_ Seq : 0|8@1+", " SG_ Seq M : 0|8@1+").replace(" SG_ Acc : ", " SG_ Acc m1 : ");
+        let names = DbcNames { roles: vec![(Role::Acc, "Acc".into())], sequence: None };
+        let e = mapping_from_dbc("t.dbc", &text, &names).unwrap_err().to_string();
+        assert!(e.contains("multiplexed"), "{e}");
     }
 
     #[test]

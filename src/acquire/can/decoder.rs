@@ -44,7 +44,8 @@ impl CanTiming {
 pub struct CanStats {
     /// Frames with an identifier the mapping does not read (ignored).
     pub unknown_frames: u64,
-    /// Remote, error and CAN FD frames (ignored).
+    /// Remote and error frames, and data frames of the other kind: CAN FD frames on a
+    /// classic mapping, classic ones on a CAN FD mapping (ignored).
     pub unsupported_frames: u64,
     /// Sample-message frames repeating the previous counter value (dropped).
     pub duplicates: u64,
@@ -138,7 +139,8 @@ impl CanDecoder {
         self.timing.trust_timestamps = trust;
     }
 
-    /// A remote, error or CAN FD frame arrived: counted and ignored.
+    /// A remote or error frame, or a data frame of the other kind (FD on a classic
+    /// mapping, classic on an FD one) arrived: counted and ignored.
     pub fn skip_unsupported(&mut self) {
         self.stats.unsupported_frames += 1;
     }
@@ -150,7 +152,8 @@ impl CanDecoder {
     }
 
     /// Feed one data frame received at `t_ns` (host or log time). Batches and gaps go to
-    /// `out`.
+    /// `out`. A frame of a block mapping carries several samples: its time belongs to the
+    /// last of them, and the others precede it at the sample period.
     pub fn push(&mut self, t_ns: i64, frame: FrameId, data: &[u8], out: &mut Vec<SourceEvent>) {
         let Some(&(_, needed)) = self.frames.iter().find(|(f, _)| *f == frame) else {
             self.stats.unknown_frames += 1;
@@ -162,18 +165,22 @@ impl CanDecoder {
             self.counters.decode_errors += 1;
             return;
         }
+        let sample_frame = self.mapping.sample_frame();
         for (i, s) in self.mapping.signals().iter().enumerate() {
-            if s.layout.frame == frame {
+            if s.layout.frame == frame && frame != sample_frame {
                 self.held[i] = s.layout.extract(data);
             }
         }
-        if frame != self.mapping.sample_frame() {
+        if frame != sample_frame {
             return;
         }
+        let n = self.mapping.samples_per_frame();
+        // The time of the frame's first sample.
+        let t_first_ns = t_ns - ((n - 1) as f64 * self.timing.period_ns).round() as i64;
         let seq = self.mapping.sequence().and_then(|l| l.extract_raw(data)).map(|r| r as u64);
         if self.t0_ns.is_none() {
-            self.origin_ns.get_or_insert(t_ns);
-            self.t0_ns = Some(t_ns);
+            self.origin_ns.get_or_insert(t_first_ns);
+            self.t0_ns = Some(t_first_ns);
         } else if let Some(lost) = self.lost_before(seq, t_ns) {
             if !self.wraps_confirmed(lost, seq, t_ns) {
                 self.stats.wild_stamps += 1;
@@ -198,6 +205,19 @@ impl CanDecoder {
         }
         self.last_seq = seq;
         self.last_t_ns = t_ns;
+        for k in 0..n {
+            for (i, l) in self.mapping.slot(k).iter().enumerate() {
+                if l.frame == frame {
+                    self.held[i] = l.extract(data);
+                }
+            }
+            let host_ns = t_first_ns + (k as f64 * self.timing.period_ns).round() as i64;
+            self.push_sample(host_ns, out);
+        }
+    }
+
+    /// Append the held values as the next sample, received at `host_ns`.
+    fn push_sample(&mut self, host_ns: i64, out: &mut Vec<SourceEvent>) {
         let index = self.next_index;
         self.next_index += 1;
         if self.held.iter().any(Option::is_none) {
@@ -209,7 +229,7 @@ impl CanDecoder {
         }
         if self.batch.is_empty() {
             self.batch_index0 = index;
-            self.batch_host_ns = t_ns;
+            self.batch_host_ns = host_ns;
         }
         self.batch.extend(self.held.iter().map(|v| v.unwrap_or(f64::NAN)));
         self.counters.samples += 1;
@@ -241,21 +261,24 @@ impl CanDecoder {
     }
 
     /// Samples lost between the previous sample frame and this one (negative: a repeat),
-    /// or None when nothing tells.
+    /// or None when nothing tells. The counter counts samples, so from one frame of `n`
+    /// samples to the next it advances by `n`, and so do the frames' times.
     fn lost_before(&self, seq: Option<u64>, t_ns: i64) -> Option<i64> {
+        let n = self.mapping.samples_per_frame() as i64;
         let elapsed = (t_ns - self.last_t_ns) as f64 / self.timing.period_ns;
         match (seq, self.last_seq, self.mapping.sequence()) {
             (Some(seq), Some(last), Some(layout)) => {
                 let modulus = 1i64 << layout.length;
                 let diff = (seq as i64 - last as i64).rem_euclid(modulus);
                 if !self.timing.trust_timestamps {
-                    return Some(if diff == 0 { -1 } else { diff - 1 });
+                    // Back, still, or forward by less than a block: a repeat.
+                    return Some(if diff < n { -1 } else { diff - n });
                 }
-                let lost0 = (diff - 1).rem_euclid(modulus);
-                let wraps = ((elapsed - 1.0 - lost0 as f64) / modulus as f64).round() as i64;
+                let lost0 = (diff - n).rem_euclid(modulus);
+                let wraps = ((elapsed - n as f64 - lost0 as f64) / modulus as f64).round() as i64;
                 Some(lost0 + wraps * modulus)
             }
-            _ if self.timing.trust_timestamps => Some((elapsed.round() as i64 - 1).max(0)),
+            _ if self.timing.trust_timestamps => Some((elapsed.round() as i64 - n).max(0)),
             _ => None,
         }
     }
@@ -294,7 +317,7 @@ impl CanDecoder {
     /// A status line's detail: what the counters do not hold.
     pub fn detail(&self) -> String {
         format!(
-            "unknown frames {}, remote/error/FD frames {}, repeated counters {}, wild stamps {}",
+            "unknown frames {}, remote/error/other-kind frames {}, repeated counters {}, wild stamps {}",
             self.stats.unknown_frames, self.stats.unsupported_frames, self.stats.duplicates, self.stats.wild_stamps
         )
     }
@@ -373,6 +396,39 @@ mod tests {
         assert_eq!(b.len(), 2, "the batch is cut at the gap");
         assert_eq!(b[1].device_time_ns, 5 * 200_000);
         assert_eq!(d.counters().gaps, 1);
+    }
+
+    /// A block of 8 samples a frame, untrusted times: the counter alone tells a lost frame
+    /// (a gap of exactly 8) from a repeated one (dropped, counted).
+    #[test]
+    fn block_frames_count_lost_and_repeated_frames_by_the_sample_counter() {
+        use super::super::{BLOCK_FRAME, CanDevice, forgemon_fd_mapping};
+        use crate::signal::capture::CaptureRow;
+        let mut dev = CanDevice::new(forgemon_fd_mapping());
+        let mut d = CanDecoder::new("can", forgemon_fd_mapping(), CanTiming::new(50_000.0, 1.0, false));
+        let mut out = Vec::new();
+        let row = |k: usize| CaptureRow { t_s: 0.0, load_n: 100.0 * k as f64, disp_m: 0.0, acc_mps2: 0.0 };
+        let mut frames = Vec::new();
+        for b in 0..6usize {
+            let rows: Vec<CaptureRow> = (8 * b..8 * b + 8).map(row).collect();
+            frames.push(dev.encode_block(&rows));
+        }
+        // Frames 0, 1, 1 again, (2 lost), 3, 4, 5; receive times say nothing (all 0).
+        for i in [0, 1, 1, 3, 4, 5] {
+            let (f, data) = &frames[i];
+            assert_eq!(*f, BLOCK_FRAME);
+            d.push(0, *f, data, &mut out);
+        }
+        d.flush(&mut out);
+        let lost: Vec<u64> =
+            out.iter().filter_map(|e| if let SourceEvent::Gap(g) = e { Some(g.samples_lost) } else { None }).collect();
+        assert_eq!(lost, vec![8]);
+        assert_eq!((d.stats().duplicates, d.counters().samples), (1, 40));
+        let loads: Vec<f64> = batches(&out).iter().flat_map(|b| b.values.chunks(3).map(|c| c[0])).collect();
+        let want: Vec<f64> = (0..48).filter(|k| !(16..24).contains(k)).map(|k| 100.0 * k as f64).collect();
+        assert_eq!(loads, want, "each sample in its slot, in order");
+        // Device time: sample 24 (after the hole) at 24 periods.
+        assert_eq!(batches(&out)[1].device_time_ns, 24 * 20_000);
     }
 
     #[test]

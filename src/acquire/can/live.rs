@@ -3,18 +3,22 @@
 //! arrival (`SO_TIMESTAMPNS`; without it frames are stamped when read and the timestamps
 //! are not trusted for gap counting), reconnects with `acquire::next_backoff_ms`, reports
 //! its state and counters as `Status` events, flushes a partial batch when the bus goes
-//! quiet, and hands everything over with `acquire::offer`, which never waits.
+//! quiet, and hands everything over with `acquire::offer`, which never waits. A CAN FD
+//! mapping opens an FD socket (`socketcan::tokio::CanFdSocket`, `CAN_RAW_FD_FRAMES`),
+//! which receives classic and FD frames alike; [`LoggedFrame::feed`] decodes the kind the
+//! mapping reads and counts the other.
 
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use socketcan::tokio::CanSocket;
-use socketcan::{CanFrame, EmbeddedFrame, Id, SocketOptions};
+use socketcan::tokio::{CanFdSocket, CanSocket};
+use socketcan::{CanAnyFrame, SocketOptions};
 use tokio::sync::{mpsc, watch};
 
 use crate::acquire::{SourceEvent, next_backoff_ms, offer};
 
+use super::candump::LoggedFrame;
 use super::decoder::{CanDecoder, CanTiming};
-use super::signal::{CanMapping, FrameId};
+use super::signal::CanMapping;
 
 /// How often the driver reports its counters while running.
 pub const STATUS_EVERY: Duration = Duration::from_secs(1);
@@ -32,6 +36,40 @@ pub struct CanSourceConfig {
 
 fn ns_since_epoch(t: SystemTime) -> i64 {
     t.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as i64)
+}
+
+/// A classic or an FD socket, by the mapping.
+enum Sock {
+    Classic(CanSocket),
+    Fd(CanFdSocket),
+}
+
+impl Sock {
+    fn open(iface: &str, fd: bool) -> std::io::Result<Sock> {
+        Ok(if fd { Sock::Fd(CanFdSocket::open(iface)?) } else { Sock::Classic(CanSocket::open(iface)?) })
+    }
+
+    fn set_recv_timestamp(&self, on: bool) -> bool {
+        match self {
+            Sock::Classic(s) => s.set_recv_timestamp(on).is_ok(),
+            Sock::Fd(s) => s.set_recv_timestamp(on).is_ok(),
+        }
+    }
+
+    /// The next frame and its time, ns since the epoch: the kernel's stamp when
+    /// `kernel_time`, else the time it was read.
+    async fn read(&self, kernel_time: bool) -> std::io::Result<(LoggedFrame, i64)> {
+        let now = || ns_since_epoch(SystemTime::now());
+        let (frame, t_ns) = match (self, kernel_time) {
+            (Sock::Classic(s), true) => {
+                s.read_frame_with_timestamp().await.map(|(f, t)| (f.into(), ns_since_epoch(t)))?
+            }
+            (Sock::Classic(s), false) => s.read_frame().await.map(|f| (CanAnyFrame::from(f), now()))?,
+            (Sock::Fd(s), true) => s.read_frame_with_timestamp().await.map(|(f, t)| (f, ns_since_epoch(t)))?,
+            (Sock::Fd(s), false) => s.read_frame().await.map(|f| (f, now()))?,
+        };
+        Ok((LoggedFrame::from_any(&frame), t_ns))
+    }
 }
 
 /// Send `events` and clear them; false once the service has gone.
@@ -63,7 +101,7 @@ pub async fn run(cfg: CanSourceConfig, tx: mpsc::Sender<SourceEvent>, mut shutdo
         if *shutdown.borrow() {
             break;
         }
-        let sock = match CanSocket::open(&cfg.iface) {
+        let sock = match Sock::open(&cfg.iface, cfg.mapping.is_fd()) {
             Ok(s) => s,
             Err(e) => {
                 backoff_ms = next_backoff_ms(backoff_ms);
@@ -83,7 +121,7 @@ pub async fn run(cfg: CanSourceConfig, tx: mpsc::Sender<SourceEvent>, mut shutdo
         }
         ever_connected = true;
         backoff_ms = 0;
-        let kernel_time = sock.set_recv_timestamp(true).is_ok();
+        let kernel_time = sock.set_recv_timestamp(true);
         dec.set_trust_timestamps(kernel_time && cfg.timing.trust_timestamps);
         let detail = format!("{} ({} timestamps)", cfg.iface, if kernel_time { "kernel" } else { "host" });
         if !status(&tx, &mut dec, "connected", Some(detail)) {
@@ -91,13 +129,7 @@ pub async fn run(cfg: CanSourceConfig, tx: mpsc::Sender<SourceEvent>, mut shutdo
         }
         let mut ticker = tokio::time::interval(STATUS_EVERY);
         let lost = loop {
-            let read = async {
-                if kernel_time {
-                    sock.read_frame_with_timestamp().await.map(|(f, t)| (f, ns_since_epoch(t)))
-                } else {
-                    sock.read_frame().await.map(|f| (f, ns_since_epoch(SystemTime::now())))
-                }
-            };
+            let read = sock.read(kernel_time);
             tokio::select! {
                 _ = shutdown.changed() => {
                     dec.flush(&mut events);
@@ -112,14 +144,7 @@ pub async fn run(cfg: CanSourceConfig, tx: mpsc::Sender<SourceEvent>, mut shutdo
                 }
                 r = tokio::time::timeout(quiet, read) => match r {
                     Err(_) => dec.flush(&mut events),
-                    Ok(Ok((CanFrame::Data(f), t_ns))) => {
-                        let frame = match f.id() {
-                            Id::Standard(id) => FrameId::standard(id.as_raw()),
-                            Id::Extended(id) => FrameId::extended(id.as_raw()),
-                        };
-                        dec.push(t_ns, frame, f.data(), &mut events);
-                    }
-                    Ok(Ok(_)) => dec.skip_unsupported(),
+                    Ok(Ok((frame, t_ns))) => frame.feed(t_ns, &mut dec, &mut events),
                     Ok(Err(e)) => break e,
                 },
             }

@@ -63,10 +63,7 @@ pub async fn run_log(
                     // make each run's batches, and so its results, differ.
                     tokio::time::sleep_until(due).await;
                 }
-                match f.data() {
-                    Some((frame, data)) => dec.push(f.t_ns, frame, data, &mut events),
-                    None => dec.skip_unsupported(),
-                }
+                f.feed(&mut dec, &mut events);
             }
             Ok(None) => break,
             Err(CanError::LogLine { origin, line, .. }) => {

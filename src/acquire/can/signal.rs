@@ -9,6 +9,18 @@ use crate::signal::sample::Role;
 
 use super::CanError;
 
+/// The payload of a classic CAN data frame, bytes.
+pub const CLASSIC_MAX_LEN: usize = 8;
+/// The payload of a CAN FD frame, bytes (ISO 11898-1:2015).
+pub const FD_MAX_LEN: usize = 64;
+/// The payload lengths a CAN FD frame can have (its DLC codes 0..=15).
+pub const FD_LENGTHS: [usize; 16] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64];
+
+/// The shortest valid CAN FD payload holding `n` bytes, or None above 64.
+pub fn fd_len_for(n: usize) -> Option<usize> {
+    FD_LENGTHS.iter().copied().find(|&l| l >= n)
+}
+
 /// Bit order of a signal (DBC `@1` / `@0`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ByteOrder {
@@ -107,7 +119,13 @@ impl SignalLayout {
     }
 
     /// Check the layout once, when the mapping is built; `what` names it in the error.
+    /// It must fit a classic 8-byte payload.
     pub fn validate(&self, what: &str) -> Result<(), CanError> {
+        self.validate_within(what, CLASSIC_MAX_LEN)
+    }
+
+    /// As [`validate`](Self::validate), for a payload of `max_len` bytes (64 for CAN FD).
+    pub fn validate_within(&self, what: &str, max_len: usize) -> Result<(), CanError> {
         let bad = |why: String| Err(CanError::BadSignal { signal: what.to_string(), why });
         if !self.frame.is_valid() {
             return bad(format!("identifier {} does not fit its width", self.frame));
@@ -115,8 +133,12 @@ impl SignalLayout {
         if self.length == 0 || self.length > 64 {
             return bad(format!("length {} bits is not 1..=64", self.length));
         }
-        if self.bytes_needed() > 8 {
-            return bad("does not fit an 8-byte classic CAN payload".to_string());
+        if self.bytes_needed() > max_len {
+            return bad(if max_len == CLASSIC_MAX_LEN {
+                "does not fit an 8-byte classic CAN payload".to_string()
+            } else {
+                format!("does not fit a {max_len}-byte CAN FD payload")
+            });
         }
         if !(self.factor.is_finite() && self.factor != 0.0 && self.offset.is_finite()) {
             return bad(format!("factor {} / offset {} must be finite, factor non-zero", self.factor, self.offset));
@@ -204,28 +226,52 @@ impl SignalLayout {
 /// sequence counter, and the *sample message*: the frame whose arrival completes a sample
 /// (the sequence counter's frame, or else the first signal's). Values carried by other
 /// frames are held until the next sample (sample-and-hold).
+///
+/// A *block* mapping carries several samples per sample frame: slot `k` holds sample `k`
+/// of the block, every slot the same roles, all in the sample frame. Its counter counts
+/// samples (the index of the block's first sample), so it advances by the block's length
+/// from one frame to the next. A classic mapping is a block of one.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CanMapping {
     signals: Vec<CanSignalSpec>,
+    /// Slot `k`'s layouts, in the order of `signals`; slot 0 is `signals`' own.
+    slots: Vec<Vec<SignalLayout>>,
     sequence: Option<SignalLayout>,
     sample_frame: FrameId,
+    fd: bool,
 }
 
 impl CanMapping {
     /// Validate the signals: at least one, one per role, each fitting 8 bytes; the
     /// sequence counter, if any, unsigned. The roles are kept in `Role::ALL` order.
-    pub fn new(mut signals: Vec<CanSignalSpec>, sequence: Option<SignalLayout>) -> Result<CanMapping, CanError> {
-        if signals.is_empty() {
+    pub fn new(signals: Vec<CanSignalSpec>, sequence: Option<SignalLayout>) -> Result<CanMapping, CanError> {
+        CanMapping::block(vec![signals], sequence, false)
+    }
+
+    /// A mapping of `slots.len()` samples per sample frame (see the type's docs), read
+    /// from CAN FD frames (64-byte payloads) when `fd`, else from classic ones.
+    pub fn block(
+        mut slots: Vec<Vec<CanSignalSpec>>,
+        sequence: Option<SignalLayout>,
+        fd: bool,
+    ) -> Result<CanMapping, CanError> {
+        let max_len = if fd { FD_MAX_LEN } else { CLASSIC_MAX_LEN };
+        if slots.is_empty() || slots.iter().any(Vec::is_empty) {
             return Err(CanError::BadSignal { signal: "signals".into(), why: "no signal is mapped".into() });
         }
-        for s in &signals {
-            s.layout.validate(s.role.column())?;
-            if signals.iter().filter(|o| o.role == s.role).count() > 1 {
-                return Err(CanError::BadSignal { signal: s.role.column().into(), why: "role mapped twice".into() });
+        for (k, signals) in slots.iter_mut().enumerate() {
+            for s in signals.iter() {
+                let what =
+                    if k == 0 { s.role.column().to_string() } else { format!("{} (sample {k})", s.role.column()) };
+                s.layout.validate_within(&what, max_len)?;
+                if signals.iter().filter(|o| o.role == s.role).count() > 1 {
+                    return Err(CanError::BadSignal { signal: what, why: "role mapped twice".into() });
+                }
             }
+            signals.sort_by_key(|s| s.role);
         }
         if let Some(seq) = &sequence {
-            seq.validate("sequence")?;
+            seq.validate_within("sequence", max_len)?;
             if seq.signed || seq.length > 32 {
                 return Err(CanError::BadSignal {
                     signal: "sequence".into(),
@@ -233,13 +279,47 @@ impl CanMapping {
                 });
             }
         }
-        signals.sort_by_key(|s| s.role);
+        let signals = slots[0].clone();
         let sample_frame = sequence.map(|s| s.frame).unwrap_or(signals[0].layout.frame);
-        Ok(CanMapping { signals, sequence, sample_frame })
+        if slots.len() > 1 {
+            let roles: Vec<Role> = signals.iter().map(|s| s.role).collect();
+            for (k, slot) in slots.iter().enumerate() {
+                if slot.iter().map(|s| s.role).collect::<Vec<_>>() != roles {
+                    return Err(CanError::BadSignal {
+                        signal: format!("sample {k}"),
+                        why: "every sample of a block carries the same roles".into(),
+                    });
+                }
+                if let Some(s) = slot.iter().find(|s| s.layout.frame != sample_frame) {
+                    return Err(CanError::BadSignal {
+                        signal: format!("{} (sample {k})", s.role.column()),
+                        why: format!("a block's samples all sit in the sample frame {sample_frame}"),
+                    });
+                }
+            }
+        }
+        let slots = slots.into_iter().map(|slot| slot.into_iter().map(|s| s.layout).collect()).collect();
+        Ok(CanMapping { signals, slots, sequence, sample_frame, fd })
     }
 
+    /// The signals of the first sample of a frame (the only one of a classic mapping).
     pub fn signals(&self) -> &[CanSignalSpec] {
         &self.signals
+    }
+
+    /// Slot `k`'s layouts, in the order of [`signals`](Self::signals).
+    pub fn slot(&self, k: usize) -> &[SignalLayout] {
+        &self.slots[k]
+    }
+
+    /// Samples per sample frame (1 for a classic mapping).
+    pub fn samples_per_frame(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Whether the frames are CAN FD frames (`##` in candump, up to 64 bytes).
+    pub fn is_fd(&self) -> bool {
+        self.fd
     }
 
     pub fn sequence(&self) -> Option<&SignalLayout> {
@@ -263,7 +343,7 @@ impl CanMapping {
     /// The frames this mapping reads, each with the payload length it needs.
     pub fn frames(&self) -> Vec<(FrameId, usize)> {
         let mut out: Vec<(FrameId, usize)> = Vec::new();
-        let layouts = self.signals.iter().map(|s| &s.layout).chain(self.sequence.iter());
+        let layouts = self.slots.iter().flatten().chain(self.sequence.iter());
         for l in layouts {
             match out.iter_mut().find(|(f, _)| *f == l.frame) {
                 Some((_, n)) => *n = (*n).max(l.bytes_needed()),
@@ -350,5 +430,31 @@ mod tests {
         assert!(CanMapping::new(vec![s, s], None).is_err());
         assert!(CanMapping::new(vec![], None).is_err());
         assert!(CanMapping::new(vec![s], Some(layout(8, 8, ByteOrder::LittleEndian, true))).is_err());
+    }
+
+    #[test]
+    fn block_mappings_check_their_slots_and_payload_kind() {
+        let at = |start_bit: u16, role: Role| CanSignalSpec {
+            role,
+            layout: layout(start_bit, 16, ByteOrder::LittleEndian, true),
+        };
+        let ok = vec![vec![at(64, Role::Load)], vec![at(80, Role::Load)]];
+        let m = CanMapping::block(ok.clone(), None, true).unwrap();
+        assert_eq!((m.samples_per_frame(), m.is_fd(), m.frames()), (2, true, vec![(FrameId::standard(0x120), 12)]));
+        assert_eq!(m.slot(1)[0].start_bit, 80);
+        // Past byte 8 only in an FD frame; past byte 64 never.
+        let e = CanMapping::block(ok, None, false).unwrap_err().to_string();
+        assert!(e.contains("8-byte classic"), "{e}");
+        let e = CanMapping::block(vec![vec![at(504, Role::Load)]], None, true).unwrap_err().to_string();
+        assert!(e.contains("64-byte CAN FD"), "{e}");
+        // Every slot the same roles, all in the sample frame.
+        let e = CanMapping::block(vec![vec![at(64, Role::Load)], vec![at(80, Role::Acc)]], None, true).unwrap_err();
+        assert!(e.to_string().contains("same roles"), "{e}");
+        let mut other = at(80, Role::Load);
+        other.layout.frame = FrameId::standard(0x121);
+        let e = CanMapping::block(vec![vec![at(64, Role::Load)], vec![other]], None, true).unwrap_err();
+        assert!(e.to_string().contains("sample frame 120"), "{e}");
+        assert_eq!(fd_len_for(9), Some(12));
+        assert_eq!(fd_len_for(65), None);
     }
 }
