@@ -113,8 +113,9 @@ fn run_pipeline(events: &[SourceEvent]) -> Vec<Value> {
     }
     p.end_of_stream(&mut out);
     out.into_iter()
-        .map(|e| match e {
-            PipelineEvent::Blow { estimate, .. } => serde_json::to_value(&estimate).expect("serialise"),
+        .filter_map(|e| match e {
+            PipelineEvent::Blow { estimate, .. } => Some(serde_json::to_value(&estimate).expect("serialise")),
+            PipelineEvent::Billet(_) => None,
             PipelineEvent::Rejected { cut, error } => panic!("blow at {} rejected: {error}", cut.t_contact_s),
         })
         .collect()
