@@ -206,6 +206,7 @@ fn alert_kind_str(kind: AlertKind) -> &'static str {
     match kind {
         AlertKind::ElasticBlow => "elastic_blow",
         AlertKind::ModelHealth => "model_health",
+        AlertKind::Sensor => "sensor",
     }
 }
 
@@ -222,6 +223,7 @@ fn alert_from_pb(a: pb::Alert) -> Result<Alert, DecodeError> {
     let kind = match a.kind.as_str() {
         "elastic_blow" => AlertKind::ElasticBlow,
         "model_health" => AlertKind::ModelHealth,
+        "sensor" => AlertKind::Sensor,
         _ => return Err(DecodeError::UnknownAlertKind { kind: a.kind }),
     };
     Ok(Alert { kind, blow: a.blow, reason: a.reason, figures: a.figures })
@@ -257,6 +259,7 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
         billet_blow: (r.billet.billet > 0).then_some(r.billet.billet_blow),
         billet_check: r.billet.billet_check.map(|c| c.as_str().to_string()),
         h_start_off_sheet_m: r.billet.h_start_off_sheet_m,
+        sensor_check: r.sensor_check,
     }
 }
 
@@ -288,6 +291,7 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
         t_end_s: r.t_end_s,
         peak_load_n: r.peak_load_n,
         residual: energy(r.residual),
+        sensor_check: r.sensor_check,
         gap_s: r.gap_s,
         h_start_m: r.h_start_m,
         height_check: r.height_check.map(|h| HeightCheck {
@@ -516,6 +520,7 @@ mod tests {
             t_end_s: 81.2152,
             peak_load_n: 2.6e6,
             residual: Some(-0.012),
+            sensor_check: with_optional.then_some(0.034),
             gap_s: if with_optional { 2e-5 } else { 0.0 },
             h_start_m: with_optional.then_some(0.0151),
             height_check: with_optional.then_some(HeightCheck {
@@ -565,11 +570,13 @@ mod tests {
                 elastic_j: None,
                 efficiency: None,
                 residual: None,
+                sensor_check: None,
                 gap_s: 0.01,
                 ..estimate(false)
             })),
             Payload::Alert(alert(AlertKind::ElasticBlow)),
             Payload::Alert(alert(AlertKind::ModelHealth)),
+            Payload::Alert(alert(AlertKind::Sensor)),
             Payload::Gap(Gap { source: "daq0".into(), t_s: 12.5, samples_lost: 400, reason: "sequence_jump".into() }),
             Payload::Status(Status {
                 source: "daq0".into(),
