@@ -126,10 +126,10 @@ impl AlertRules {
     }
 
     /// A new billet: forget the recent blows' efficiencies and the debounce (not the
-    /// sensor checks: the sensors are the same).
+    /// sensor checks nor the sensor alert's debounce: the sensors are the same).
     pub fn reset(&mut self) {
         self.recent.clear();
-        self.last_fired.clear();
+        self.last_fired.retain(|kind, _| *kind == AlertKind::Sensor.as_str());
     }
 
     /// Judge one blow; at most one alert (elastic blows first, then the sensors, then model
