@@ -322,6 +322,45 @@ mod tests {
         assert_eq!(a.figures["blows_below_threshold"], 3.0);
     }
 
+    fn checked(n: u32, sensor_check: Option<f64>) -> BlowEstimate {
+        BlowEstimate { sensor_check, ..blow(n, 0.9, 0.0) }
+    }
+
+    #[test]
+    fn three_of_four_blows_over_the_sensor_limit_alert_and_incomplete_ones_do_not_count() {
+        let mut r = AlertRules::new(AlertConfig::default());
+        let over = AlertConfig::DEFAULT_SENSOR_LIMIT * 1.2;
+        assert_eq!(r.on_blow(&checked(1, Some(over))), None);
+        assert_eq!(r.on_blow(&checked(2, Some(-over))), None);
+        assert_eq!(r.on_blow(&incomplete(3)), None);
+        assert_eq!(r.on_blow(&checked(4, Some(0.0))), None);
+        let a = r.on_blow(&checked(5, Some(over))).unwrap();
+        assert_eq!(a.kind, AlertKind::Sensor);
+        assert_eq!(a.figures["blows_failing_sensor_check"], 3.0);
+        assert_eq!(a.figures["sensor_check"], over);
+        assert!(a.reason.starts_with("3 of the last 4 blows failed the sensor check"), "{}", a.reason);
+        // Within the limit, on either side, nothing.
+        let mut r = AlertRules::new(AlertConfig::default());
+        for n in 1..10 {
+            let x = AlertConfig::DEFAULT_SENSOR_LIMIT * 0.9 * if n % 2 == 0 { 1.0 } else { -1.0 };
+            assert_eq!(r.on_blow(&checked(n, Some(x))), None, "blow {n}");
+        }
+    }
+
+    #[test]
+    fn complete_blows_without_a_check_fail_it_and_a_new_billet_keeps_the_sensor_memory() {
+        let mut r = AlertRules::new(AlertConfig::default());
+        assert_eq!(r.on_blow(&checked(1, None)), None);
+        assert_eq!(r.on_blow(&checked(2, None)), None);
+        r.reset();
+        let a = r.on_blow(&checked(3, None)).unwrap();
+        assert_eq!(a.kind, AlertKind::Sensor);
+        assert!(a.reason.contains("the accelerometer gave nothing to compare"), "{}", a.reason);
+        // The debounce also survives the billet change.
+        r.reset();
+        assert_eq!(r.on_blow(&checked(4, None)), None);
+    }
+
     #[test]
     fn a_broken_energy_balance_is_a_model_health_alert() {
         let mut r = AlertRules::new(AlertConfig::default());

@@ -140,3 +140,92 @@ fn first_order_step(x0: f64, u0: f64, u1: f64, dt: f64, tau: f64) -> f64 {
     let alpha = (-r).exp();
     alpha * x0 + u1 - alpha * u0 - (u1 - u0) * (-r).exp_m1().abs() / r
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::machine::Hammer;
+    use crate::signal::segment::Sample;
+
+    const DT: f64 = 1e-5;
+
+    /// The paper hammer (seed 000 Table 1).
+    fn hammer() -> Machine {
+        Machine::Hammer(Hammer {
+            m1_kg: 732.0,
+            m2_kg: 19.0,
+            k_n_per_m: 3.15e9,
+            c_ns_per_m: 18540.0,
+            k_tool_contact_n_per_m: 6e10,
+        })
+    }
+
+    /// A blow in the model's own terms: a half-sine billet force of `peak_n` over 10 ms
+    /// decelerates the ram (`a = -F / m1`), and the load sensor carries it with the lower
+    /// tool's momentum `m2 v0` added as a short 0.5 ms pulse at impact (how the lower tool is
+    /// brought to rest on its spring).
+    fn blow(peak_n: f64, v0: f64, gain: f64) -> Blow {
+        let (m1, m2) = (732.0, 19.0);
+        let (t_blow, t_pulse) = (0.01, 0.0005);
+        let pulse_peak = m2 * v0 * std::f64::consts::PI / (2.0 * t_pulse);
+        let n = 1500;
+        let samples = (0..n)
+            .map(|i| {
+                let t = (i as f64 - 100.0) * DT;
+                let half_sine = |len: f64, peak: f64| {
+                    if (0.0..=len).contains(&t) { peak * (std::f64::consts::PI * t / len).sin() } else { 0.0 }
+                };
+                let f = half_sine(t_blow, peak_n);
+                Sample {
+                    t_s: t,
+                    load_n: 1000.0 + gain * (f + half_sine(t_pulse, pulse_peak)),
+                    disp_m: 0.0,
+                    acc_mps2: -f / m1,
+                    filled: false,
+                }
+            })
+            .collect();
+        Blow { samples, i_trigger: 95, i_contact: 101, i_end: n - 1, load_zero_n: 1000.0, period_s: DT, lost_s: 0.0 }
+    }
+
+    #[test]
+    fn the_model_s_own_blow_checks_to_zero_and_a_gain_shows_as_itself() {
+        // Trapezoids of half-sines at 100 samples per 1 ms: their error is below 1e-4.
+        let x = sensor_check(&hammer(), &blow(400e3, 3.9, 1.0), 3.9).unwrap();
+        assert!(x.abs() < 1e-4, "{x}");
+        let x = sensor_check(&hammer(), &blow(400e3, 3.9, 1.1), 3.9).unwrap();
+        assert!((x - 0.1).abs() < 2e-4, "{x}");
+        let i = impulses(&hammer(), &blow(400e3, 3.9, 0.9), 3.9).unwrap();
+        // ∫ half-sine = peak · 2 T / π, plus m2 v0.
+        let want = 400e3 * 2.0 * 0.01 / std::f64::consts::PI + 19.0 * 3.9;
+        assert!((i.momentum_ns - want).abs() < 1e-3 * want, "{i:?} vs {want}");
+        assert!((i.load_ns - 0.9 * want).abs() < 1e-3 * want, "{i:?}");
+    }
+
+    #[test]
+    fn a_flat_accelerometer_has_no_check() {
+        let mut b = blow(400e3, 3.9, 1.0);
+        for s in &mut b.samples {
+            s.acc_mps2 = 9.81;
+        }
+        assert_eq!(sensor_check(&hammer(), &b, 3.9), Err(NoCheck::FlatAccelerometer { acc_mps2: 9.81 }));
+    }
+
+    #[test]
+    fn an_accelerometer_mounted_upside_down_has_no_check() {
+        // A reversed accelerometer makes the ram gain momentum in the blow.
+        let mut b = blow(400e3, 3.9, 1.0);
+        for s in &mut b.samples {
+            s.acc_mps2 = -s.acc_mps2;
+        }
+        assert!(matches!(sensor_check(&hammer(), &b, 3.9), Err(NoCheck::NoMomentumLost { .. })));
+    }
+
+    #[test]
+    fn a_blow_without_samples_after_contact_has_no_check() {
+        let mut b = blow(400e3, 3.9, 1.0);
+        b.i_contact = 0;
+        b.i_end = 0;
+        assert_eq!(sensor_check(&hammer(), &b, 3.9), Err(NoCheck::Empty));
+    }
+}

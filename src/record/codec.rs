@@ -609,6 +609,19 @@ mod tests {
         assert_eq!(back.h_end_m, None);
     }
 
+    /// Issue 16: `sensor_check` is field 24, present when reported and absent when not (an
+    /// incomplete blow, or a recording from before it existed).
+    #[test]
+    fn the_sensor_check_round_trips_and_stays_absent_when_absent() {
+        for check in [Some(0.1), Some(0.0), Some(-0.031), None] {
+            let r = BlowEstimate { sensor_check: check, ..estimate(false) };
+            let mut bytes = Vec::new();
+            encode_payload(&Payload::Result(Box::new(r.clone())), &mut bytes).expect("encodes");
+            assert_eq!(pb::BlowResult::decode(bytes.as_slice()).expect("decodes").sensor_check, check);
+            assert_eq!(decode_payload(MessageKind::Result, &bytes).expect("decodes"), Payload::Result(Box::new(r)));
+        }
+    }
+
     #[test]
     fn unknown_strings_are_errors() {
         let mut r = result_to_pb(&estimate(false));
