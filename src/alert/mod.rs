@@ -149,7 +149,7 @@ impl AlertRules {
             self.recent.pop_front();
         }
         let low = self.recent.iter().filter(|e| **e < c.low_efficiency).count();
-        let sensor_failed = b.sensor_check.is_none_or(|x| !(x.abs() <= c.sensor_limit));
+        let sensor_failed = b.sensor_check.is_none_or(|x| x.is_nan() || x.abs() > c.sensor_limit);
         self.sensor_recent.push_back(sensor_failed);
         while self.sensor_recent.len() > c.sensor_n.max(1) {
             self.sensor_recent.pop_front();
