@@ -62,6 +62,7 @@ fn result(blow: u32) -> BlowEstimate {
         t_end_s: 0.7 * f64::from(blow) + 0.02,
         peak_load_n: 1.16e6,
         residual: Some(0.001 * f64::from(blow)),
+        sensor_check: Some(-0.002 * f64::from(blow)),
         gap_s: 0.0,
         h_start_m: None,
         height_check: None,

@@ -59,6 +59,7 @@ fn result(blow: u32, with_sheet: bool) -> BlowEstimate {
         t_end_s: 81.2152 + f64::from(blow),
         peak_load_n: 2.6e6,
         residual: whole.then_some(-0.012),
+        sensor_check: whole.then_some(0.021),
         gap_s: if whole { 0.0 } else { 0.0125 },
         h_start_m: with_sheet.then_some(0.0151),
         height_check: None,

@@ -103,6 +103,11 @@ pub const BILLET_IDLE_S: Limits = Limits { min: 1.0, max: 86_400.0, unit: "s" };
 /// Model-health limit on |energy-balance residual|, a fraction of the kinetic energy.
 pub const RESIDUAL_LIMIT: Limits = Limits { min: 1e-4, max: 10.0, unit: "" };
 
+/// Sensor-health limit on |`sensor_check`|, a fraction of the blow's momentum: from 0.1 %
+/// (below the simulated spread at 5 kHz, `AlertConfig::DEFAULT_SENSOR_LIMIT`) to 100 %
+/// (the two sensors disagree by the whole blow).
+pub const SENSOR_LIMIT: Limits = Limits { min: 1e-3, max: 1.0, unit: "" };
+
 impl Limits {
     /// `x` if it is finite and in the range; otherwise why not, in words.
     pub fn check(&self, x: f64) -> Result<f64, String> {

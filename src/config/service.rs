@@ -14,7 +14,7 @@ use serde::de::IgnoredAny;
 use super::document::Document;
 use super::limits::{
     ALERT_WINDOW_BLOWS, BILLET_IDLE_S, DEBOUNCE_BLOWS, EFFICIENCY, NEW_BILLET_RISE_M, RESIDUAL_LIMIT, ROTATE_BYTES,
-    ROTATE_SECONDS,
+    ROTATE_SECONDS, SENSOR_LIMIT,
 };
 use super::{ConfigError, source};
 use crate::acquire::ChannelSpec;
@@ -124,6 +124,9 @@ struct RawAlerts {
     k_low: Option<u64>,
     n_window: Option<u64>,
     residual_limit: Option<f64>,
+    sensor_limit: Option<f64>,
+    sensor_k: Option<u64>,
+    sensor_n: Option<u64>,
     debounce_blows: Option<u64>,
     webhook: Option<String>,
     plc_coil: Option<RawPlcCoil>,
@@ -271,6 +274,18 @@ fn parse_alerts(
     if let Some(r) = a.residual_limit {
         alerts.residual_limit = doc.in_range("alerts.residual_limit", r, &RESIDUAL_LIMIT)?;
     }
+    if let Some(x) = a.sensor_limit {
+        alerts.sensor_limit = doc.in_range("alerts.sensor_limit", x, &SENSOR_LIMIT)?;
+    }
+    if let Some(n) = a.sensor_n {
+        alerts.sensor_n = doc.in_whole_range("alerts.sensor_n", n, &ALERT_WINDOW_BLOWS)? as usize;
+    }
+    if let Some(k) = a.sensor_k {
+        alerts.sensor_k = doc.in_whole_range("alerts.sensor_k", k, &ALERT_WINDOW_BLOWS)? as usize;
+    }
+    if alerts.sensor_k > alerts.sensor_n {
+        return Err(doc.invalid("alerts.sensor_k", format!("{} exceeds sensor_n {}", alerts.sensor_k, alerts.sensor_n)));
+    }
     if let Some(d) = a.debounce_blows {
         alerts.debounce_blows = doc.in_whole_range("alerts.debounce_blows", d, &DEBOUNCE_BLOWS)? as u32;
     }
@@ -363,6 +378,26 @@ gain = 0.01
         let bad = set.replace("idle_s = 45.0", "idle_s = -1.0");
         assert!(parse_tuning("rec.mcap", &bad).unwrap_err().to_string().contains("billets.idle_s"));
         assert_eq!(parse_tuning("rec.mcap", "").unwrap().alerts, AlertConfig::default());
+    }
+
+    /// Issue 16: the sensor-health rule is tuned in `[alerts]`, ranges and typos checked.
+    #[test]
+    fn the_sensor_rule_is_tuned_in_alerts() {
+        let c = parse_service("s.toml", Path::new("/"), GOOD).unwrap();
+        assert_eq!(
+            (c.alerts.sensor_limit, c.alerts.sensor_k, c.alerts.sensor_n),
+            (AlertConfig::DEFAULT_SENSOR_LIMIT, AlertConfig::DEFAULT_SENSOR_K, AlertConfig::DEFAULT_SENSOR_N)
+        );
+        let set = GOOD.replace("[alerts]\n", "[alerts]\nsensor_limit = 0.08\nsensor_k = 2\nsensor_n = 5\n");
+        let c = parse_service("s.toml", Path::new("/"), &set).unwrap();
+        assert_eq!((c.alerts.sensor_limit, c.alerts.sensor_k, c.alerts.sensor_n), (0.08, 2, 5));
+        let e = |text: &str| parse_service("s.toml", Path::new("/"), text).unwrap_err().to_string();
+        let big = e(&GOOD.replace("[alerts]\n", "[alerts]\nsensor_limit = 5.0\n"));
+        assert!(big.contains("alerts.sensor_limit") && big.contains("1e-3..1"), "{big}");
+        let k = e(&GOOD.replace("[alerts]\n", "[alerts]\nsensor_k = 5\nsensor_n = 4\n"));
+        assert!(k.contains("alerts.sensor_k") && k.contains("exceeds sensor_n 4"), "{k}");
+        let typo = e(&GOOD.replace("[alerts]\n", "[alerts]\nsensor_limt = 0.05\n"));
+        assert!(typo.contains("unknown key 'sensor_limt' in [alerts]; did you mean 'sensor_limit'?"), "{typo}");
     }
 
     #[test]

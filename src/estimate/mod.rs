@@ -9,6 +9,7 @@ pub mod billet;
 pub mod billet_book;
 pub mod observer;
 pub mod result;
+pub mod sensor;
 
 pub use result::{BilletTag, BlowClass, BlowEstimate, HeightCheck};
 
@@ -275,6 +276,7 @@ impl Estimator {
             t_end_s: blow.samples[blow.i_end].t_s,
             peak_load_n: 0.0,
             residual: None,
+            sensor_check: None,
             gap_s,
             h_start_m,
             height_check,
@@ -337,6 +339,7 @@ impl Estimator {
         e.class = self.cfg.classify(efficiency);
         e.peak_load_n = o.peak_load_n;
         e.residual = Some((o.kinetic_in_j - o.deform_j - o.damped_j - o.elastic_j) / o.kinetic_in_j);
+        e.sensor_check = sensor::sensor_check(&self.machine, blow, v0).ok();
         // The next contact on this billet comes lower by what the billet lost; without a
         // height, by the ram's deepest travel past contact is all that is known.
         self.last_end = Some(match (h_start_m, h_end_m) {

@@ -94,6 +94,10 @@ pub struct BlowEstimate {
     pub peak_load_n: f64,
     /// Energy-balance residual `(in - out) / in`: the model-health figure (DESIGN.md §2.4).
     pub residual: Option<f64>,
+    /// Load sensor against accelerometer (`estimate::sensor`): the load's impulse over the
+    /// momentum the machine lost, less 1; `None` on an incomplete blow or when the
+    /// accelerometer gave nothing to compare (CONTRACTS.md §5).
+    pub sensor_check: Option<f64>,
     /// Time lost inside the blow, s: samples interpolated across holes between the start of
     /// the approach fit and the blow's end, plus any time a break in the stream cut off.
     pub gap_s: f64,

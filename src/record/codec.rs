@@ -208,6 +208,7 @@ fn alert_kind_str(kind: AlertKind) -> &'static str {
     match kind {
         AlertKind::ElasticBlow => "elastic_blow",
         AlertKind::ModelHealth => "model_health",
+        AlertKind::Sensor => "sensor",
     }
 }
 
@@ -224,6 +225,7 @@ fn alert_from_pb(a: pb::Alert) -> Result<Alert, DecodeError> {
     let kind = match a.kind.as_str() {
         "elastic_blow" => AlertKind::ElasticBlow,
         "model_health" => AlertKind::ModelHealth,
+        "sensor" => AlertKind::Sensor,
         _ => return Err(DecodeError::UnknownAlertKind { kind: a.kind }),
     };
     Ok(Alert { kind, blow: a.blow, reason: a.reason, figures: a.figures })
@@ -259,6 +261,7 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
         billet_blow: (r.billet.billet > 0).then_some(r.billet.billet_blow),
         billet_check: r.billet.billet_check.map(|c| c.as_str().to_string()),
         h_start_off_sheet_m: r.billet.h_start_off_sheet_m,
+        sensor_check: r.sensor_check,
     }
 }
 
@@ -290,6 +293,7 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
         t_end_s: r.t_end_s,
         peak_load_n: r.peak_load_n,
         residual: energy(r.residual),
+        sensor_check: r.sensor_check,
         gap_s: r.gap_s,
         h_start_m: r.h_start_m,
         height_check: r.height_check.map(|h| HeightCheck {
@@ -518,6 +522,7 @@ mod tests {
             t_end_s: 81.2152,
             peak_load_n: 2.6e6,
             residual: Some(-0.012),
+            sensor_check: with_optional.then_some(0.034),
             gap_s: if with_optional { 2e-5 } else { 0.0 },
             h_start_m: with_optional.then_some(0.0151),
             height_check: with_optional.then_some(HeightCheck {
@@ -592,11 +597,13 @@ mod tests {
                 elastic_j: None,
                 efficiency: None,
                 residual: None,
+                sensor_check: None,
                 gap_s: 0.01,
                 ..estimate(false)
             })),
             Payload::Alert(alert(AlertKind::ElasticBlow)),
             Payload::Alert(alert(AlertKind::ModelHealth)),
+            Payload::Alert(alert(AlertKind::Sensor)),
             Payload::Gap(Gap { source: "daq0".into(), t_s: 12.5, samples_lost: 400, reason: "sequence_jump".into() }),
             Payload::Status(Status {
                 source: "daq0".into(),
@@ -629,6 +636,19 @@ mod tests {
         let back = pb::BlowResult::decode(bytes.as_slice()).expect("decodes");
         assert_eq!(back.friction_j, Some(0.0), "proto3 optional keeps an explicit zero");
         assert_eq!(back.h_end_m, None);
+    }
+
+    /// Issue 16: `sensor_check` is field 24, present when reported and absent when not (an
+    /// incomplete blow, or a recording from before it existed).
+    #[test]
+    fn the_sensor_check_round_trips_and_stays_absent_when_absent() {
+        for check in [Some(0.1), Some(0.0), Some(-0.031), None] {
+            let r = BlowEstimate { sensor_check: check, ..estimate(false) };
+            let mut bytes = Vec::new();
+            encode_payload(&Payload::Result(Box::new(r.clone())), &mut bytes).expect("encodes");
+            assert_eq!(pb::BlowResult::decode(bytes.as_slice()).expect("decodes").sensor_check, check);
+            assert_eq!(decode_payload(MessageKind::Result, &bytes).expect("decodes"), Payload::Result(Box::new(r)));
+        }
     }
 
     #[test]

@@ -328,6 +328,7 @@ mod tests {
             t_end_s: 0.14,
             peak_load_n: 1.16e6,
             residual: Some(0.004),
+            sensor_check: Some(0.012),
             gap_s: 0.0,
             h_start_m: None,
             height_check: None,
