@@ -1,7 +1,7 @@
 //! A small kit for self-contained HTML reports: line and bar plots rendered to inline SVG
 //! (`plot`), and a page of sections, paragraphs, tables and figures rendered to one HTML
-//! file with inline CSS and no JavaScript or external assets (`page`). `identify` uses it
-//! now and `diagnose` later; it knows nothing about forging.
+//! file with inline CSS and no JavaScript or external assets (`page`). `identify` and
+//! `diagnose` write their reports with it; it knows nothing about forging.
 //!
 //! Everything here is presentation: no physics, no clock. The only IO is
 //! [`Page::write`], which names the file in its error.
