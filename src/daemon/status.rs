@@ -296,3 +296,39 @@ pub async fn serve_http(
         tracing::error!("status endpoint stopped: {e}");
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The README's `/status` table names exactly the fields the endpoint returns, so the
+    /// two cannot drift apart.
+    #[test]
+    fn the_readme_documents_every_status_field() {
+        let readme = include_str!("../../README.md");
+        let start = readme.find("### `/status`: what the service reports").expect("the README's /status section");
+        let table: Vec<&str> = readme[start..]
+            .lines()
+            .skip_while(|l| !l.starts_with("| field"))
+            .skip(2)
+            .take_while(|l| l.starts_with("| `"))
+            .filter_map(|l| l.split('`').nth(1))
+            .collect();
+        let json = serde_json::to_value(StatusSnapshot::new("hammer")).expect("serialises");
+        let mut fields: Vec<&str> = json.as_object().expect("an object").keys().map(String::as_str).collect();
+        let mut documented = table.clone();
+        fields.sort_unstable();
+        documented.sort_unstable();
+        assert_eq!(documented, fields);
+        // The per-source and merge objects' keys are named in their rows.
+        let row = |name: &str| readme[start..].lines().find(|l| l.starts_with(&format!("| `{name}`"))).unwrap_or("");
+        let source = serde_json::to_value(SourceState::default()).expect("serialises");
+        for key in source.as_object().expect("an object").keys() {
+            assert!(row("sources").contains(&format!("`{key}`")), "sources.{key} is not documented");
+        }
+        for key in serde_json::to_value(MergeStats::default()).expect("serialises").as_object().expect("object").keys()
+        {
+            assert!(row("merge").contains(&format!("`{key}`")), "merge.{key} is not documented");
+        }
+    }
+}
