@@ -75,16 +75,17 @@ fn a_hammer_is_identified_from_one_billet_blow_and_predicts_the_others() {
     let out = dir.join("fitted.machine.toml");
     let (stdout, fitted) = identify(&caps, &out, &["--kind", "hammer", "--fit-blows", "1"]);
     eprintln!("{stdout}");
-    // The bound: within 5 % for every parameter the data determines, and the
-    // ram mass, which carries the blow's energy, must be one of them.
+    // The bound: within 5 % for every parameter the data determines. One blow on a
+    // billet determines all four: the ram mass carries the blow's momentum (the load's
+    // impulse against the impact speed), the lower tool's mass and spring set the ~2 kHz
+    // ring's frequency and its share of the load, and the damper its decay; so all four must
+    // be called determined and be within the bound.
     let truth: toml::Table = HAMMER.parse().unwrap();
-    assert!(determined(&fitted, "m1_kg"), "{fitted}");
     for key in ["m1_kg", "m2_kg", "k_N_per_m", "c_Ns_per_m"] {
         let t = truth[key].as_float().or_else(|| truth[key].as_integer().map(|i| i as f64)).unwrap();
         let v = value(&fitted, key);
-        if determined(&fitted, key) {
-            assert!((v / t - 1.0).abs() < 0.05, "{key}: {v} vs {t}\n{fitted}");
-        }
+        assert!(determined(&fitted, key), "{key} should be determined\n{fitted}");
+        assert!((v / t - 1.0).abs() < 0.05, "{key}: {v} vs {t}\n{fitted}");
     }
     // The fitted file is a machine file every other command reads.
     ok(&forgemon(&["simulate", "--machine", out.to_str().unwrap(), "--process", STEEL, "--v0", "3.9"]));
@@ -157,10 +158,22 @@ fn five_starting_guesses_give_the_same_parameters() {
         .unwrap();
         let out = dir.join(format!("fit{i}.machine.toml"));
         let seed = (i + 11).to_string();
+        // One start: the guess itself, so that each fit is one local search from it.
         let (_, fitted) = identify(
             &caps,
             &out,
-            &["--kind", "hammer", "--fit-blows", "1", "--initial", prior.to_str().unwrap(), "--seed", &seed],
+            &[
+                "--kind",
+                "hammer",
+                "--fit-blows",
+                "1",
+                "--initial",
+                prior.to_str().unwrap(),
+                "--seed",
+                &seed,
+                "--starts",
+                "1",
+            ],
         );
         results.push(["m1_kg", "m2_kg", "k_N_per_m", "c_Ns_per_m"].map(|k| value(&fitted, k)));
     }
