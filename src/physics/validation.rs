@@ -8,7 +8,6 @@ use super::blow::{BlowResult, SimOptions, simulate_blow};
 use super::effects::{EFFECT_NAMES, Effect, EffectSet};
 use super::integrator::Method;
 use super::machine::{Machine, MachineKind};
-use super::plant::Plant;
 use super::process::Process;
 use super::sequence::{blow_plant, simulate_bare, simulate_sequence};
 use crate::config::{parse_machine, parse_process};
@@ -81,7 +80,15 @@ fn press_paper_copper_ten_blows() {
     assert!(rel(blows[0].peak_load_n, 1124e3) < 0.15, "blow 1 peak {} N", blows[0].peak_load_n);
     // Seed 001 §3.4: 87 % on blow 1 falling to 25 % by blow 10; bounds of issue #2.
     assert!(blows[0].efficiency() >= 0.80, "blow 1 efficiency {}", blows[0].efficiency());
-    assert!(blows[9].efficiency() <= 0.40, "blow 10 efficiency {}", blows[9].efficiency());
+    // Blow 10: the model gives 0.071 (0.089 with friction) where the paper's Fig. 13 says
+    // 0.25. The model's heights follow the paper's measured ones (7.6 mm against 7.5 mm after
+    // ten blows), and its tenth blow takes 0.15 mm off at a 4.2 MN peak: about 600 J of the
+    // 6531 J. 25 % (1630 J) would take some 0.4 mm off at that load, more than the measured
+    // heights leave for the last blow; we keep the model's figure and bound it on both sides:
+    // below the paper's 0.25 plus the issue #2 margin, and above 0.04 (what is left if the
+    // last blow took only the 0.1 mm of the height measurement's resolution).
+    let e10 = blows[9].efficiency();
+    assert!((0.04..=0.30).contains(&e10), "blow 10 efficiency {e10}");
     // Seed 001 §3.4: elastic energy exceeds plastic from the 6th blow; by blow 7 at the latest.
     let first = blows.iter().position(|b| b.energy.elastic_j > b.energy.plastic_j).map(|i| i + 1);
     assert!(first.is_some_and(|n| n <= 7), "elastic > plastic first on blow {first:?}");
@@ -286,11 +293,14 @@ fn sensor_highpass_undershoots_zero_after_the_blow() {
     assert!(sb(&hp) < sb(&base));
 }
 
+/// The shipped sheets name the machine kind the papers forged them on (a sheet paired with
+/// the wrong kind is refused by every command).
 #[test]
 fn process_sheets_pair_with_their_machines() {
     assert_eq!(steel().machine, MachineKind::Hammer);
     assert_eq!(copper().machine, MachineKind::ScrewPress);
-    let _ = Plant::new(&hammer(), &EffectSet::NONE, None, 0.0);
+    assert_eq!(hammer().kind(), steel().machine);
+    assert_eq!(press().kind(), copper().machine);
 }
 
 /// Regression: a Monte Carlo draw (seed 7) whose stick force touched the flow load at the
