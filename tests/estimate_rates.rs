@@ -155,6 +155,14 @@ fn run(rig: Rig, rate_hz: f64, seed: u64) -> Vec<Row> {
 fn check(rig: Rig, rate_hz: f64) {
     for seed in ASSERT_SEEDS {
         let rows = run(rig, rate_hz, seed);
+        let de = rows.iter().map(|r| (r.efficiency - r.true_efficiency).abs()).fold(0.0, f64::max);
+        let dv = rows.iter().map(|r| r.v_rel_err.abs()).fold(0.0, f64::max);
+        let dh = rows.iter().filter_map(|r| r.h_err_m.map(f64::abs)).fold(0.0, f64::max);
+        eprintln!(
+            "{rig:?} {} kHz seed {seed}: max |Δeff| {de:.4}, max |Δv|/v {dv:.4}, max |Δh| {:.1} µm",
+            rate_hz / 1e3,
+            dh * 1e6
+        );
         for r in &rows {
             let at = format!("{rig:?} at {} kHz, seed {seed}, blow {}: {r:?}", rate_hz / 1e3, r.blow);
             assert!((r.efficiency - r.true_efficiency).abs() <= EFFICIENCY_TOL, "efficiency: {at}");
