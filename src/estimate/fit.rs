@@ -53,12 +53,6 @@ pub const SCALE_BOUNDS: (f64, f64) = (0.2, 5.0);
 /// ring, at the filter's edge, throws precursors past the segmenter's contact level up to
 /// three samples early.
 pub const CONTACT_BOUNDS_SAMPLES: (f64, f64) = (-4.0, 6.0);
-/// The search starts from the best of the contact instants on this grid (samples) across
-/// the bounds: the cost has a local minimum per period of the ring.
-pub const CONTACT_GRID_SAMPLES: f64 = 1.0;
-/// Searches started from the grid's lowest local minima (0: no grid; the encoder's own fit
-/// finds the basin, measured on the tuning seeds, and the grid cost 11 simulations).
-pub const GRID_STARTS: usize = 0;
 /// Levenberg–Marquardt: most iterations, and the relative cost change that ends it.
 pub const MAX_ITERATIONS: usize = 12;
 pub const COST_RTOL: f64 = 1e-5;
@@ -338,8 +332,8 @@ fn levenberg_marquardt(
 }
 
 /// Fit the blow, starting from flow-stress scale `scale0` and the contact `delta0` samples
-/// after the segmenter's contact sample, or from the best contact on the grid across the
-/// bounds when `search_contact`.
+/// after the segmenter's contact sample, and, when `search_contact`, also from the optimum
+/// of the encoder's residuals alone (the better of the two is kept).
 pub fn fit_blow(
     p: &FitProblem<'_>,
     encoder_resolution_m: f64,
@@ -350,31 +344,10 @@ pub fn fit_blow(
     let setup = Setup::new(p, encoder_resolution_m)?;
     let u0 = clamp_u([scale0.max(1e-3).ln(), delta0]);
     let mut starts = vec![u0];
-    if search_contact && GRID_STARTS > 0 {
-        // The contact grid at the start scale; its lowest local minima start the searches
-        // (at a wrong scale the best contact shifts, so one start is not enough).
-        let mut grid = Vec::new();
-        let mut d = CONTACT_BOUNDS_SAMPLES.0;
-        while d <= CONTACT_BOUNDS_SAMPLES.1 {
-            grid.push((d, setup.eval([u0[0], d], true).map_or(f64::INFINITY, |e| cost(&e.r))));
-            d += CONTACT_GRID_SAMPLES;
-        }
-        let mut minima: Vec<(f64, f64)> = (0..grid.len())
-            .filter(|&i| {
-                let c = grid[i].1;
-                c.is_finite() && (i == 0 || grid[i - 1].1 >= c) && (i + 1 == grid.len() || grid[i + 1].1 >= c)
-            })
-            .map(|i| grid[i])
-            .collect();
-        minima.sort_by(|a, b| a.1.total_cmp(&b.1));
-        starts = minima.iter().take(GRID_STARTS).map(|(d, _)| [u0[0], *d]).collect();
-        if starts.is_empty() {
-            starts.push(u0);
-        }
-    }
     // First the encoder alone: its cost is smooth in both parameters, where the load's has
-    // a local minimum per period of the ring; its optimum is one more start.
-    if let Ok((u1, ..)) = levenberg_marquardt(&setup, u0, false) {
+    // a local minimum per period of the ring (a grid of contact instants at the start scale
+    // found the wrong one at 10 kHz on the tuning seeds); its optimum is one more start.
+    if search_contact && let Ok((u1, ..)) = levenberg_marquardt(&setup, u0, false) {
         starts.insert(0, u1);
     }
     let mut best: Option<([f64; 2], Eval, f64, usize)> = None;
