@@ -6,6 +6,7 @@ pub mod alert;
 pub mod cli;
 pub mod config;
 pub mod daemon;
+pub mod daq;
 pub mod diagnose;
 pub mod estimate;
 pub mod identify;

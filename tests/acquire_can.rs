@@ -215,10 +215,10 @@ fn every_blow_of_the_candump_fixture_is_found_as_expected_and_as_simulated() {
     let at = format!("blows (after an intended change to the pipeline: {REGENERATE})");
     assert_same(&Value::Array(found.clone()), &expected["blows"], &at);
     // Against the simulated truth, with issue #3's tolerances: every blow, impact speed
-    // within 1 %, contact within 1 ms. Efficiency is not compared: at the 5 kHz a classic
-    // CAN bus carries, the estimator reads it low (0.69 / 0.67 / 0.64 against the true
-    // 0.93 / 0.91 / 0.87; the same stream without CAN at 10, 20 and 100 kHz gives 0.77,
-    // 0.85 and 0.926 for blow 1), a limit of the estimator at low rates, not of the bus.
+    // within 1 %, contact within 1 ms; and issue 16's: efficiency within 0.02 of the
+    // simulator's ledger, both sides (at the 5 kHz a classic CAN bus carries the estimator
+    // fits the machine model; the observer read 0.69 / 0.67 / 0.64 against the true
+    // 0.93 / 0.91 / 0.87). This log is point-sampled, without an anti-alias filter.
     let truth = expected["truth"].as_array().unwrap();
     assert_eq!(found.len(), V0S_MPS.len(), "every blow, no extra");
     // The truth is in the log's clock; device time counts from the log's first frame.
@@ -227,7 +227,7 @@ fn every_blow_of_the_candump_fixture_is_found_as_expected_and_as_simulated() {
         let b = v["blow"].clone();
         assert!((f(v, "v_impact_mps") / f(t, "v0_mps") - 1.0).abs() < 0.01, "blow {b}: {v} vs {t}");
         assert!((f(v, "t_contact_s") + t_first_s - f(t, "t_contact_s")).abs() < 1e-3, "blow {b}: {v} vs {t}");
-        assert!(f(v, "efficiency") > 0.0 && f(v, "efficiency") < f(t, "efficiency"), "blow {b}: {v} vs {t}");
+        assert!((f(v, "efficiency") - f(t, "efficiency")).abs() <= 0.02, "blow {b}: {v} vs {t}");
     }
 }
 

@@ -33,6 +33,18 @@ pub struct ApproachFit {
     pub x_contact_m: f64,
 }
 
+impl ApproachFit {
+    /// The same approach with contact `tau_s` after the contact sample (negative: before
+    /// it): the parabola's slope and position there.
+    pub fn at(&self, tau_s: f64) -> ApproachFit {
+        ApproachFit {
+            v_impact_mps: self.v_impact_mps + self.acc_mps2 * tau_s,
+            acc_mps2: self.acc_mps2,
+            x_contact_m: self.x_contact_m + self.v_impact_mps * tau_s + 0.5 * self.acc_mps2 * tau_s * tau_s,
+        }
+    }
+}
+
 /// Fit over `samples[i_contact - n .. i_contact]`, `n` samples of the window `fit_s`
 /// (clipped to what the capture holds), ending `guard` samples before contact.
 pub fn fit_impact_speed(

@@ -1,12 +1,21 @@
 //! Per-blow estimation with the identified model on measured signals (DESIGN.md §2.4):
-//! impact speed from the approach, the model observer's energy terms, the split into
+//! impact speed from the approach, the energy terms either from the model observer run on
+//! the samples or from the machine model fitted to them (`fit`, issue 16), the split into
 //! plastic and friction work along the billet's tracked height when a process sheet is
 //! given, the efficiency class and the energy-balance residual. Which billet each blow
 //! forged comes from the encoder (`billet`) or a new-billet signal. Pure code.
+//!
+//! **Which method, per blow** (`Estimator::method_for`): the observer differentiates the
+//! measured load through the machine's second mode, so it needs that mode resolved: it is
+//! used when the samples give at least `OBSERVER_MIN_SAMPLES_PER_MODE` per period of the
+//! second mode, or when there is nothing to fit (no process sheet, no tracked height).
+//! Otherwise the model is fitted. Contact is located between samples either way: by the
+//! fit, or by extrapolating the load's rise back to zero (`contact_between_samples`).
 
 pub mod approach;
 pub mod billet;
 pub mod billet_book;
+pub mod fit;
 pub mod observer;
 pub mod result;
 pub mod sensor;
@@ -17,13 +26,41 @@ use crate::physics::billet::{BilletLaw, LoadEffects};
 use crate::physics::machine::{Machine, MachineKind};
 use crate::physics::process::Process;
 use crate::signal::segment::Blow;
-use approach::{ApproachError, fit_impact_speed};
+use approach::{ApproachError, ApproachFit, fit_impact_speed};
 use billet::{BilletCheck, BilletDetect, Transition};
 
 /// A tracked billet height below this fraction of the sheet's is impossible for an upset
 /// cylinder: the billets changed without a new-billet signal, so the height is no longer
 /// known (until `new_billet`).
 pub const MIN_TRACKED_HEIGHT_FRACTION: f64 = 0.02;
+
+/// The observer is used when a period of the machine's second mode spans at least this
+/// many samples (see the module's doc). Measured on the DAQ chain of `daq` (issue 16,
+/// tuning seeds of `tests/estimate_rates.rs`): on the hammer (2049 Hz) the observer read
+/// 0.03 low at 50 kHz (24 samples a period) and 0.016 low at 100 kHz (49), the fit 0.013
+/// at every rate; on the press (275 Hz) both stayed within 0.007 from 5 kHz up. Below 40
+/// the fit is needed; above it the observer is within the issue's 0.02 and keeps the
+/// latency of a 100 kHz blow near a millisecond, where the fit took 0.16 s (hammer) to
+/// 0.9 s (press) in `benches/estimate_rates.rs`.
+pub const OBSERVER_MIN_SAMPLES_PER_MODE: f64 = 40.0;
+
+/// How a blow's energies were estimated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// The model observer run on the samples (DESIGN.md §2.4).
+    Observer,
+    /// The machine model fitted to the samples (`fit`).
+    ModelFit,
+}
+
+impl Method {
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Method::Observer => "observer",
+            Method::ModelFit => "model_fit",
+        }
+    }
+}
 
 /// Thresholds of the estimator, with the defaults named.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -119,6 +156,10 @@ pub struct Estimator {
     /// contact and the sheet's height; each later billet's real height is this minus its
     /// first contact.
     die_x_m: Option<f64>,
+    /// The flow-stress scale fitted on the last blow: the next fit's start.
+    scale: f64,
+    /// How the last blow was estimated.
+    last_method: Option<Method>,
 }
 
 /// Where the last blow left the billet, in encoder terms.
@@ -150,7 +191,21 @@ impl Estimator {
             signalled: false,
             last_end: None,
             die_x_m: None,
+            scale: 1.0,
+            last_method: None,
         }
+    }
+
+    /// How the last blow's energies were estimated (`None` before the first, and for an
+    /// incomplete blow).
+    pub fn last_method(&self) -> Option<Method> {
+        self.last_method
+    }
+
+    /// The rule of the module's doc: the observer when the samples resolve the second mode.
+    pub fn method_for(&self, period_s: f64) -> Method {
+        let per_period = 1.0 / (period_s * self.machine.second_mode_hz());
+        if per_period >= OBSERVER_MIN_SAMPLES_PER_MODE { Method::Observer } else { Method::ModelFit }
     }
 
     /// Billets started so far (by the encoder or a signal).
@@ -242,12 +297,25 @@ impl Estimator {
     /// Estimate the next blow.
     pub fn estimate(&mut self, blow: &Blow) -> Result<BlowEstimate, EstimateError> {
         self.blows += 1;
+        self.last_method = None;
         let n = self.blows;
-        let fit = fit_impact_speed(&blow.samples, blow.i_contact, self.cfg.fit_s, blow.period_s)
+        let approach = fit_impact_speed(&blow.samples, blow.i_contact, self.cfg.fit_s, blow.period_s)
             .map_err(|source| EstimateError::Approach { blow: n, source })?;
-        let v0 = fit.v_impact_mps;
+        // Contact between samples: from the load's rise, or where the model fits it.
+        let delta0 = contact_between_samples(blow);
         let gap_s = self.gap_s(blow);
-        let t_contact_s = blow.samples[blow.i_contact].t_s;
+        let complete = blow.lost_s == 0.0 && gap_s <= self.max_bridged_s();
+        let h_guess_m = self.h_m.or(self.process.as_ref().map(|p| p.billet.height_m));
+        let mut fitted = match h_guess_m {
+            Some(h) if complete && self.method_for(blow.period_s) == Method::ModelFit => {
+                self.fit(blow, approach, h, self.scale, delta0, true)
+            }
+            _ => None,
+        };
+        let delta = fitted.as_ref().map_or(delta0, |f| f.contact_samples);
+        let fit = approach.at(delta * blow.period_s);
+        let v0 = fit.v_impact_mps;
+        let t_contact_s = blow.samples[blow.i_contact].t_s + delta * blow.period_s;
         let tolerance_m = self.contact_tolerance_m(v0 * blow.period_s);
         let mut billet_check = self.follow_billet(fit.x_contact_m, t_contact_s, tolerance_m);
         let mut h_start_off_sheet_m = None;
@@ -261,7 +329,7 @@ impl Estimator {
         let (h_start_m, height_check) = self.start_height(fit.x_contact_m, v0 * blow.period_s);
         let mut e = BlowEstimate {
             blow: n,
-            t_contact_s: blow.samples[blow.i_contact].t_s,
+            t_contact_s,
             v_impact_mps: v0,
             kinetic_in_j: None,
             plastic_j: None,
@@ -290,14 +358,121 @@ impl Estimator {
         self.chain = h_start_m.map(|h| (fit.x_contact_m, h));
         let t_end_s = e.t_end_s;
         self.last_end = Some(LastEnd { x_m: fit.x_contact_m, end_known: false, h_end_m: None, t_s: t_end_s });
-        if blow.lost_s > 0.0 || gap_s > self.max_bridged_s() {
+        if !complete {
             // Cut short or holed beyond bridging: nothing after the hole is known, not even
             // the billet's height (the encoder chain takes it up again at the next blow).
             self.h_m = None;
             return Ok(e);
         }
+        // The fit ran on a guess of the start height: again from its optimum if the
+        // billet's follow-up says otherwise.
+        if let (Some(f), Some(h0)) = (&fitted, h_start_m)
+            && (f.h_start_m - h0).abs() > REFIT_HEIGHT_M
+        {
+            fitted = self.fit(blow, approach, h0, f.scale, f.contact_samples, false);
+        }
+        if h_start_m.is_none() {
+            fitted = None;
+        }
+        let h_end_m = match fitted {
+            Some(f) => {
+                self.scale = f.scale;
+                self.fill_from_fit(&mut e, blow, &f)
+            }
+            None => self.fill_from_observer(&mut e, blow, h_start_m, delta0),
+        };
+        e.sensor_check = sensor::sensor_check(&self.machine, blow, e.v_impact_mps).ok();
+        // The next contact on this billet comes lower by what the billet lost; without a
+        // height, by the ram's deepest travel past contact is all that is known.
+        self.last_end = Some(match (h_start_m, h_end_m) {
+            (Some(h0), Some(h1)) => {
+                LastEnd { x_m: fit.x_contact_m + (h0 - h1), end_known: true, h_end_m: Some(h1), t_s: t_end_s }
+            }
+            _ => LastEnd { x_m: fit.x_contact_m, end_known: false, h_end_m: None, t_s: t_end_s },
+        });
+        Ok(e)
+    }
+
+    /// The model fitted to `blow` from start height `h0_m` (`None`: it could not be, and
+    /// the observer takes the blow).
+    fn fit(
+        &self,
+        blow: &Blow,
+        approach: ApproachFit,
+        h0_m: f64,
+        scale0: f64,
+        delta0: f64,
+        search_contact: bool,
+    ) -> Option<fit::ModelFit> {
+        let process = self.process.as_ref()?;
+        let problem = fit::FitProblem {
+            machine: &self.machine,
+            process,
+            blow_index: self.billet_blows + 1,
+            h_start_m: h0_m,
+            blow,
+            approach,
+        };
+        fit::fit_blow(&problem, self.cfg.encoder_resolution_m, scale0, delta0, search_contact).ok()
+    }
+
+    /// The energies and the end height from the fitted simulated blow. Returns the height.
+    fn fill_from_fit(&mut self, e: &mut BlowEstimate, blow: &Blow, f: &fit::ModelFit) -> Option<f64> {
+        self.last_method = Some(Method::ModelFit);
+        let l = f.blow.energy;
+        let h_end = f.blow.forming.map(|fm| fm.h_end_m);
+        let lost = match (&self.process, h_end) {
+            (Some(p), Some(h)) => h < MIN_TRACKED_HEIGHT_FRACTION * p.billet.height_m,
+            _ => true,
+        };
+        let (plastic_j, friction_j, h_end_m) = if lost {
+            self.h_m = None;
+            self.chain = None;
+            (l.plastic_j + l.friction_j, None, None)
+        } else {
+            self.h_m = h_end;
+            (l.plastic_j, Some(l.friction_j), h_end)
+        };
+        let efficiency = (plastic_j / l.kinetic_in_j).clamp(0.0, 1.0);
+        e.t_contact_s = f.t_contact_s;
+        e.v_impact_mps = f.v0_mps;
+        e.kinetic_in_j = Some(l.kinetic_in_j);
+        e.plastic_j = Some(plastic_j);
+        e.friction_j = friction_j;
+        e.damped_j = Some(l.damped_j);
+        e.elastic_j = Some(l.elastic_j);
+        e.efficiency = Some(efficiency);
+        e.final_load_n = f.blow.forming.map_or(0.0, |fm| fm.final_load_n);
+        e.h_end_m = h_end_m;
+        e.class = self.cfg.classify(efficiency);
+        e.peak_load_n =
+            blow.samples[blow.i_contact..=blow.i_end].iter().map(|s| s.load_n - blow.load_zero_n).fold(0.0, f64::max);
+        e.residual = Some(f.ram_energy_residual);
+        h_end_m
+    }
+
+    /// The energies and the end height from the model observer run on the samples, contact
+    /// `delta0` samples after the contact sample. Returns the height.
+    fn fill_from_observer(
+        &mut self,
+        e: &mut BlowEstimate,
+        blow: &Blow,
+        h_start_m: Option<f64>,
+        delta0: f64,
+    ) -> Option<f64> {
+        self.last_method = Some(Method::Observer);
+        let n = self.blows;
+        let v0 = e.v_impact_mps;
         let o = observer::observe(&self.machine, blow, v0);
-        let max_comp = o.compression_m.iter().copied().fold(0.0, f64::max);
+        // The observer's compression starts at the contact sample. On a press the support
+        // is massless, so the ram's travel from the located contact to that sample was all
+        // compression already; on a hammer the lower tool first moves with the ram and the
+        // part missed is second order.
+        let before_m = match self.machine {
+            Machine::ScrewPress(_) => (-delta0).max(0.0) * blow.period_s * v0,
+            Machine::Hammer(_) => 0.0,
+        };
+        let max_comp = o.compression_m.iter().copied().fold(0.0, f64::max) + before_m;
         let (plastic_j, friction_j, h_end_m) = match (&self.process, h_start_m) {
             (Some(p), Some(h0)) => {
                 let law =
@@ -306,7 +481,7 @@ impl Estimator {
                 let mut h_min = h0;
                 for (comp, dw) in o.compression_m.iter().zip(&o.work_j) {
                     // The billet only gets flatter: its height is the running minimum.
-                    h_min = h_min.min(h0 - comp);
+                    h_min = h_min.min(h0 - comp - before_m);
                     let l = law.load(h_min.max(1e-6), 0.0);
                     let share = if l.total_n > 0.0 { l.frictionless_n / l.total_n } else { 1.0 };
                     plastic += dw * share;
@@ -339,16 +514,7 @@ impl Estimator {
         e.class = self.cfg.classify(efficiency);
         e.peak_load_n = o.peak_load_n;
         e.residual = Some((o.kinetic_in_j - o.deform_j - o.damped_j - o.elastic_j) / o.kinetic_in_j);
-        e.sensor_check = sensor::sensor_check(&self.machine, blow, v0).ok();
-        // The next contact on this billet comes lower by what the billet lost; without a
-        // height, by the ram's deepest travel past contact is all that is known.
-        self.last_end = Some(match (h_start_m, h_end_m) {
-            (Some(h0), Some(h1)) => {
-                LastEnd { x_m: fit.x_contact_m + (h0 - h1), end_known: true, h_end_m: Some(h1), t_s: t_end_s }
-            }
-            _ => LastEnd { x_m: fit.x_contact_m, end_known: false, h_end_m: None, t_s: t_end_s },
-        });
-        Ok(e)
+        h_end_m
     }
 
     /// Time lost inside the blow: interpolated samples from the start of the approach fit
@@ -391,6 +557,49 @@ impl Estimator {
         let h = if self.process.is_some() { self.h_m.or(chained) } else { None };
         (h, check)
     }
+}
+
+/// A fit whose start height differs from the billet's by more than this is run again, m:
+/// a tenth of the encoder's resolution.
+pub const REFIT_HEIGHT_M: f64 = 1e-6;
+
+/// Most samples of the load's rise that `contact_between_samples` fits a line through.
+pub const CONTACT_RISE_SAMPLES: usize = 4;
+/// The located contact lies at most this many samples before the segmenter's contact
+/// sample (which walks back to where the load left its noise band), and at most
+/// `CONTACT_AFTER_SAMPLES` after it.
+pub const CONTACT_BEFORE_SAMPLES: f64 = 3.0;
+pub const CONTACT_AFTER_SAMPLES: f64 = 0.5;
+
+/// First contact, in samples after the segmenter's contact sample (negative: before it):
+/// a line through the load's rise from the contact sample on (at most
+/// `CONTACT_RISE_SAMPLES`, while it keeps rising), extrapolated back to zero.
+pub fn contact_between_samples(blow: &Blow) -> f64 {
+    let z = |k: usize| blow.samples.get(k).map(|s| s.load_n - blow.load_zero_n);
+    let i = blow.i_contact;
+    let mut pts: Vec<(f64, f64)> = Vec::with_capacity(CONTACT_RISE_SAMPLES);
+    let mut last = f64::MIN;
+    for k in i..(i + CONTACT_RISE_SAMPLES).min(blow.i_end + 1) {
+        match z(k) {
+            Some(v) if v > last => {
+                pts.push(((k - i) as f64, v));
+                last = v;
+            }
+            _ => break,
+        }
+    }
+    if pts.len() < 2 {
+        return 0.0;
+    }
+    let nf = pts.len() as f64;
+    let (st, sy) = pts.iter().fold((0.0, 0.0), |(a, b), (t, y)| (a + t, b + y));
+    let (stt, sty) = pts.iter().fold((0.0, 0.0), |(a, b), (t, y)| (a + t * t, b + t * y));
+    let slope = (nf * sty - st * sy) / (nf * stt - st * st);
+    let intercept = (sy - slope * st) / nf;
+    if !(slope.is_finite() && slope > 0.0) {
+        return 0.0;
+    }
+    (-intercept / slope).clamp(-CONTACT_BEFORE_SAMPLES, CONTACT_AFTER_SAMPLES)
 }
 
 /// Fraction of the second-mode period that a hole inside a blow may last and still be

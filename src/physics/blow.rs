@@ -251,6 +251,18 @@ fn scales(plant: &Plant, v0_mps: f64, kinetic_in_j: f64) -> [f64; N] {
 
 /// Simulate one blow at impact speed `v0_mps`.
 pub fn simulate_blow(plant: &Plant, v0_mps: f64, opts: &SimOptions) -> Result<BlowResult, BlowError> {
+    simulate_blow_traced_from(plant, v0_mps, opts, 0.0)
+}
+
+/// `simulate_blow` with the trace's first point at `trace_t0_s` (≥ 0, clamped) after first
+/// contact instead of at contact: the model fit samples the simulated blow on the
+/// measurement's grid, which contact falls between (`estimate::fit`).
+pub fn simulate_blow_traced_from(
+    plant: &Plant,
+    v0_mps: f64,
+    opts: &SimOptions,
+    trace_t0_s: f64,
+) -> Result<BlowResult, BlowError> {
     if !(v0_mps.is_finite() && v0_mps > 0.0) {
         return Err(BlowError::BadSpeed { v0_mps });
     }
@@ -267,7 +279,7 @@ pub fn simulate_blow(plant: &Plant, v0_mps: f64, opts: &SimOptions) -> Result<Bl
         sensor_zeros: Vec::new(),
         separation: None,
         trace_dt: opts.trace_dt_s,
-        next_sample: 0.0,
+        next_sample: trace_t0_s.max(0.0),
         trace: Vec::new(),
         last_end: None,
     };

@@ -3,6 +3,7 @@
 
 pub mod align;
 pub mod capture;
+pub mod fir;
 pub mod merge;
 pub mod sample;
 pub mod segment;

@@ -1,0 +1,224 @@
+//! Per-blow energy at every DAQ rate (issue 16): the hammer paper's machine (LG1000, steel,
+//! the Table 3 series of blow 1 at 3.9 m/s then 5.3 m/s) and the press paper's (SPR 400,
+//! copper, ten blows at 0.346 m/s), rendered by the DAQ chain of `forgemon::daq` (RK4 at a
+//! fine fixed step, a linear-phase anti-alias low-pass at 0.4 × the sample rate, decimation,
+//! 3 kN load noise, 10 µm encoder steps, the accelerometer's noise, a load offset) and read
+//! through the whole pipeline. The truth is off the sheet the estimator is given: the flow
+//! stress scaled by a factor it is not told, the billet a little higher or lower.
+//!
+//! Tolerances (issue 16): efficiency within 0.02 absolute and impact speed within 1 % of
+//! the simulator's ledger, both sides, every blow. The end height's drift from the sheet's
+//! start is printed but NOT asserted: issue 16 asks for it below the encoder's 10 µm, and it
+//! is 10–20 µm with the fit and 60–120 µm elsewhere (README "Sample rate"), an open item.
+//!
+//! Seeds: the estimator's thresholds (`OBSERVER_MIN_SAMPLES_PER_MODE`, the fit's scales)
+//! were tuned on `TUNING_SEEDS` (run `cargo test --release --test estimate_rates -- --ignored
+//! --nocapture` for their table); the tests assert on `ASSERT_SEEDS`, never used in tuning.
+
+use forgemon::config::{parse_machine, parse_process};
+use forgemon::daq::{DaqSpec, daq_blows};
+use forgemon::physics::EffectSet;
+use forgemon::physics::billet::FlowStress;
+use forgemon::physics::blow::BlowResult;
+use forgemon::physics::machine::Machine;
+use forgemon::physics::process::Process;
+use forgemon::pipeline::{Pipeline, PipelineConfig, PipelineEvent};
+use forgemon::signal::capture::CaptureRow;
+use forgemon::synth::{CaptureSpec, idle_rows, rows_batch};
+
+/// Issue 16's accuracy target.
+const EFFICIENCY_TOL: f64 = 0.02;
+const SPEED_REL_TOL: f64 = 0.01;
+
+const TUNING_SEEDS: [u64; 2] = [11, 12];
+const ASSERT_SEEDS: [u64; 1] = [1601];
+
+#[derive(Clone, Copy, Debug)]
+enum Rig {
+    Hammer,
+    Press,
+}
+
+fn machine(rig: Rig) -> Machine {
+    match rig {
+        Rig::Hammer => parse_machine("m", include_str!("../config/hammer-lg1000.machine.toml")),
+        Rig::Press => parse_machine("m", include_str!("../config/screw-press-spr400.machine.toml")),
+    }
+    .expect("machine file")
+    .machine
+}
+
+/// The process sheet the estimator is given.
+fn sheet(rig: Rig) -> Process {
+    match rig {
+        Rig::Hammer => parse_process("p", include_str!("../config/steel-16NiCrMo13.process.toml")),
+        Rig::Press => parse_process("p", include_str!("../config/copper-cu99.process.toml")),
+    }
+    .expect("process file")
+}
+
+/// What was really forged: the flow stress and the billet's height off the sheet by
+/// factors the estimator is not told.
+fn truth_process(rig: Rig) -> Process {
+    let mut p = sheet(rig);
+    let (stress, height) = match rig {
+        Rig::Hammer => (1.07, 1.015),
+        Rig::Press => (0.93, 0.985),
+    };
+    p.material = match p.material {
+        FlowStress::Constant { sigma0_pa } => FlowStress::Constant { sigma0_pa: sigma0_pa * stress },
+        FlowStress::HanselSpittel { a_pa, m1, m2, m3, m4, temperature_c } => {
+            FlowStress::HanselSpittel { a_pa: a_pa * stress, m1, m2, m3, m4, temperature_c }
+        }
+    };
+    p.billet.height_m *= height;
+    p
+}
+
+fn speeds(rig: Rig) -> Vec<f64> {
+    match rig {
+        // Hammer paper §3.1: blow 1 at 3.9 m/s, the later blows at 5.3 m/s.
+        Rig::Hammer => vec![3.9, 5.3, 5.3, 5.3, 5.3],
+        // Press paper §2.2 Table 1: ten blows at 0.346 m/s.
+        Rig::Press => vec![0.346; 10],
+    }
+}
+
+fn capture(rig: Rig, rate_hz: f64, seed: u64) -> CaptureSpec {
+    let base = match rig {
+        Rig::Hammer => CaptureSpec::hammer(seed),
+        Rig::Press => CaptureSpec::press(seed),
+    };
+    let mut c = CaptureSpec { sample_rate_hz: rate_hz, ..base };
+    // Issue 16: 3 kN load noise; the encoder's 10 µm and the accelerometer's noise as synth's.
+    c.sensors.load_sd_n = 3e3;
+    c
+}
+
+/// One blow: the estimate against the truth.
+#[derive(Debug)]
+struct Row {
+    blow: usize,
+    efficiency: f64,
+    true_efficiency: f64,
+    v_rel_err: f64,
+    /// End height less the simulated one, less the sheet's start height less the true one.
+    h_err_m: Option<f64>,
+}
+
+/// Render the session through the DAQ, run it through the pipeline, compare every blow.
+fn run(rig: Rig, rate_hz: f64, seed: u64) -> Vec<Row> {
+    let m = machine(rig);
+    let spec = DaqSpec::new(capture(rig, rate_hz, seed));
+    let blows = daq_blows(&m, &EffectSet::NONE, &truth_process(rig), &speeds(rig), &spec).expect("simulate");
+    let c = spec.capture;
+    let idle = (0.15 * rate_hz) as usize;
+    let mut rows: Vec<CaptureRow> = Vec::new();
+    for (i, b) in blows.iter().enumerate() {
+        rows.extend(idle_rows(idle, 0.0, &c, b.rows[0].disp_m, seed * 100 + i as u64));
+        rows.extend_from_slice(&b.rows);
+    }
+    let last = rows.last().map_or(0.0, |r| r.disp_m);
+    rows.extend(idle_rows(idle, 0.0, &c, last, seed * 100 + 99));
+    let period_ns = 1e9 / rate_hz;
+    let per_batch = (rate_hz * 0.01) as usize;
+    let mut p = Pipeline::new(m, Some(sheet(rig)), PipelineConfig::for_machine(&m));
+    let mut events = Vec::new();
+    for (k, chunk) in rows.chunks(per_batch).enumerate() {
+        let t0 = (k * per_batch) as f64 * period_ns;
+        p.push(&rows_batch("daq", k as u64, t0 as i64, period_ns, chunk), &mut events);
+    }
+    p.end_of_stream(&mut events);
+    let truth: Vec<&BlowResult> = blows.iter().map(|b| &b.truth).collect();
+    // The estimator starts from the sheet's height, which is off the truth's by a height it
+    // cannot know; what it must get right is every blow's set after that.
+    let start_off_m = sheet(rig).billet.height_m - truth_process(rig).billet.height_m;
+    assert_eq!(events.len(), truth.len(), "{rig:?} at {rate_hz} Hz: one result per blow");
+    events
+        .iter()
+        .zip(truth)
+        .enumerate()
+        .map(|(i, (e, t))| {
+            let PipelineEvent::Blow { estimate, .. } = e else { panic!("{rig:?} {rate_hz} Hz blow {}: {e:?}", i + 1) };
+            Row {
+                blow: i + 1,
+                efficiency: estimate.efficiency.unwrap_or(f64::NAN),
+                true_efficiency: t.efficiency(),
+                v_rel_err: estimate.v_impact_mps / t.v0_mps - 1.0,
+                h_err_m: estimate.h_end_m.zip(t.forming.map(|f| f.h_end_m)).map(|(a, b)| a - b - start_off_m),
+            }
+        })
+        .collect()
+}
+
+fn check(rig: Rig, rate_hz: f64) {
+    for seed in ASSERT_SEEDS {
+        let rows = run(rig, rate_hz, seed);
+        let de = rows.iter().map(|r| (r.efficiency - r.true_efficiency).abs()).fold(0.0, f64::max);
+        let dv = rows.iter().map(|r| r.v_rel_err.abs()).fold(0.0, f64::max);
+        let dh = rows.iter().filter_map(|r| r.h_err_m.map(f64::abs)).fold(0.0, f64::max);
+        eprintln!(
+            "{rig:?} {} kHz seed {seed}: max |Δeff| {de:.4}, max |Δv|/v {dv:.4}, max |Δh| {:.1} µm",
+            rate_hz / 1e3,
+            dh * 1e6
+        );
+        for r in &rows {
+            let at = format!("{rig:?} at {} kHz, seed {seed}, blow {}: {r:?}", rate_hz / 1e3, r.blow);
+            assert!((r.efficiency - r.true_efficiency).abs() <= EFFICIENCY_TOL, "efficiency: {at}");
+            assert!(r.v_rel_err.abs() <= SPEED_REL_TOL, "impact speed: {at}");
+        }
+    }
+}
+
+macro_rules! rate_tests {
+    ($($name:ident: $rig:expr, $rate:expr;)*) => {$(
+        #[test]
+        fn $name() {
+            check($rig, $rate);
+        }
+    )*};
+}
+
+rate_tests! {
+    hammer_at_5_khz: Rig::Hammer, 5e3;
+    hammer_at_10_khz: Rig::Hammer, 10e3;
+    hammer_at_20_khz: Rig::Hammer, 20e3;
+    hammer_at_50_khz: Rig::Hammer, 50e3;
+    hammer_at_100_khz: Rig::Hammer, 100e3;
+    press_at_5_khz: Rig::Press, 5e3;
+    press_at_10_khz: Rig::Press, 10e3;
+    press_at_20_khz: Rig::Press, 20e3;
+    press_at_50_khz: Rig::Press, 50e3;
+    press_at_100_khz: Rig::Press, 100e3;
+}
+
+/// The tuning table: every rate, both machines, on the tuning seeds.
+#[test]
+#[ignore = "prints the tuning table; run with --ignored --nocapture"]
+fn tuning_table() {
+    for rig in [Rig::Hammer, Rig::Press] {
+        for rate in [5e3, 10e3, 20e3, 50e3, 100e3] {
+            for seed in TUNING_SEEDS {
+                let rows = run(rig, rate, seed);
+                let de = rows.iter().map(|r| (r.efficiency - r.true_efficiency).abs()).fold(0.0, f64::max);
+                let dv = rows.iter().map(|r| r.v_rel_err.abs()).fold(0.0, f64::max);
+                let dh = rows.iter().filter_map(|r| r.h_err_m.map(f64::abs)).fold(0.0, f64::max);
+                eprintln!(
+                    "{rig:?} {:>5} kHz seed {seed}: max |Δeff| {de:.4}, max |Δv|/v {dv:.4}, max |Δh| {:.1} µm",
+                    rate / 1e3,
+                    dh * 1e6
+                );
+                for r in &rows {
+                    eprintln!(
+                        "    blow {:>2}: eff {:.4} vs {:.4}  Δv/v {:+.4}  Δh {:?}",
+                        r.blow,
+                        r.efficiency,
+                        r.true_efficiency,
+                        r.v_rel_err,
+                        r.h_err_m.map(|h| (h * 1e7).round() / 10.0)
+                    );
+                }
+            }
+        }
+    }
+}
