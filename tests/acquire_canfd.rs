@@ -38,13 +38,12 @@ const PERIOD_S: f64 = 20e-6;
 /// Blow 1 of the paper at 3.9 m/s, then two at 5.3 m/s (seed 000 §3.1).
 const V0S_MPS: [f64; 3] = [3.9, 5.3, 5.3];
 const SEED: u64 = 1616;
-/// Efficiency against the simulator's ledger. Issue 16's target is 0.02; the estimator of
-/// today does not quite reach it at 50 kHz: it reads low by 0.0196 to 0.0210 on these
-/// blows (measured on the cantools log and the simulate-device log alike, and the same rows
-/// fed without CAN give the same numbers, so it is the estimator at this rate, not the
-/// bus; another engineer is fixing the estimator at low rates). Asserted is what is true
-/// now, two-sided: within 0.025, and never above the truth by more than 0.005.
-const EFFICIENCY_TOL: f64 = 0.025;
+/// Efficiency against the simulator's ledger, two-sided: issue 16's 0.02. This session is
+/// rendered by the project's own simulator and point-sampled (no anti-alias filter), and at
+/// 50 kHz the hammer's blows go to the model fit, which runs that same simulator: it reads
+/// within 1e-5 here. What this test shows is the CAN FD path losing nothing; the estimator's
+/// accuracy on independently rendered, filtered data is `tests/estimate_rates.rs`'s.
+const EFFICIENCY_TOL: f64 = 0.02;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -172,7 +171,7 @@ fn check_blows(found: &[Value], truth: &[(f64, f64)], what: &str) -> Vec<f64> {
     }
     eprintln!("{what}: efficiency - ledger per blow at 50 kHz: {errs:?}");
     for (e, (eff, _)) in errs.iter().zip(truth) {
-        assert!(e.abs() <= EFFICIENCY_TOL && *e <= 0.005, "{what}: efficiency off by {e} from the ledger's {eff}");
+        assert!(e.abs() <= EFFICIENCY_TOL, "{what}: efficiency off by {e} from the ledger's {eff}");
     }
     errs
 }
