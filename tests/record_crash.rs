@@ -63,6 +63,7 @@ fn result(blow: u32) -> BlowEstimate {
         peak_load_n: 1.16e6,
         residual: Some(0.001 * f64::from(blow)),
         sensor_check: Some(-0.002 * f64::from(blow)),
+        method: None,
         gap_s: 0.0,
         h_start_m: None,
         height_check: None,

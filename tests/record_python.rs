@@ -60,6 +60,7 @@ fn result(blow: u32, with_sheet: bool) -> BlowEstimate {
         peak_load_n: 2.6e6,
         residual: whole.then_some(-0.012),
         sensor_check: whole.then_some(0.021),
+        method: with_sheet.then_some(forgemon::estimate::Method::Observer),
         gap_s: if whole { 0.0 } else { 0.0125 },
         h_start_m: with_sheet.then_some(0.0151),
         height_check: None,
@@ -248,6 +249,7 @@ fn python_mcap_protobuf_decodes_every_channel() {
         assert_eq!(r["class"], want.class.as_str());
         assert_eq!(r["friction_J"].as_f64(), want.friction_j, "blow {blow}");
         assert_eq!(r["h_end_m"].as_f64(), want.h_end_m, "blow {blow}");
+        assert_eq!(r["method"].as_str(), want.method.map(|m| m.as_str()), "blow {blow}");
         match &want.alert {
             Some(a) => {
                 assert_eq!(r["alert"]["kind"], "elastic_blow");

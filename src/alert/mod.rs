@@ -253,6 +253,7 @@ mod tests {
             peak_load_n: 1e6,
             residual: Some(residual),
             sensor_check: Some(0.0),
+            method: None,
             gap_s: 0.0,
             h_start_m: None,
             height_check: None,
@@ -269,6 +270,7 @@ mod tests {
             efficiency: None,
             residual: None,
             sensor_check: None,
+            method: None,
             class: BlowClass::Incomplete,
             gap_s: 0.01,
             ..blow(n, 0.3, 0.0)

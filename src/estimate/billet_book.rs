@@ -195,6 +195,7 @@ mod tests {
             h_start_m: Some(0.1 - 0.01 * f64::from(billet_blow - 1)),
             height_check: None,
             sensor_check: None,
+            method: None,
             billet: BilletTag { billet, billet_blow, billet_check: None, h_start_off_sheet_m: None },
         }
     }

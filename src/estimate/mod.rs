@@ -44,8 +44,9 @@ pub const MIN_TRACKED_HEIGHT_FRACTION: f64 = 0.02;
 /// 0.9 s (press) in `benches/estimate_rates.rs`.
 pub const OBSERVER_MIN_SAMPLES_PER_MODE: f64 = 40.0;
 
-/// How a blow's energies were estimated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// How a blow's energies were estimated (`"method"` in the results).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Method {
     /// The model observer run on the samples (DESIGN.md §2.4).
     Observer,
@@ -59,6 +60,11 @@ impl Method {
             Method::Observer => "observer",
             Method::ModelFit => "model_fit",
         }
+    }
+
+    /// The method named `s` (`as_str`), `None` for a name this version does not know.
+    pub fn parse(s: &str) -> Option<Self> {
+        [Method::Observer, Method::ModelFit].into_iter().find(|m| m.as_str() == s)
     }
 }
 
@@ -345,6 +351,7 @@ impl Estimator {
             peak_load_n: 0.0,
             residual: None,
             sensor_check: None,
+            method: None,
             gap_s,
             h_start_m,
             height_check,
@@ -419,6 +426,7 @@ impl Estimator {
     /// The energies and the end height from the fitted simulated blow. Returns the height.
     fn fill_from_fit(&mut self, e: &mut BlowEstimate, blow: &Blow, f: &fit::ModelFit) -> Option<f64> {
         self.last_method = Some(Method::ModelFit);
+        e.method = self.last_method;
         let l = f.blow.energy;
         let h_end = f.blow.forming.map(|fm| fm.h_end_m);
         let lost = match (&self.process, h_end) {
@@ -461,6 +469,7 @@ impl Estimator {
         delta0: f64,
     ) -> Option<f64> {
         self.last_method = Some(Method::Observer);
+        e.method = self.last_method;
         let n = self.blows;
         let v0 = e.v_impact_mps;
         let o = observer::observe(&self.machine, blow, v0);

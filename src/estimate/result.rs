@@ -98,6 +98,9 @@ pub struct BlowEstimate {
     /// momentum the machine lost, less 1; `None` on an incomplete blow or when the
     /// accelerometer gave nothing to compare (CONTRACTS.md §5).
     pub sensor_check: Option<f64>,
+    /// How the energies were estimated: `observer` or `model_fit` (`Estimator::method_for`);
+    /// `None` on an incomplete blow.
+    pub method: Option<super::Method>,
     /// Time lost inside the blow, s: samples interpolated across holes between the start of
     /// the approach fit and the blow's end, plus any time a break in the stream cut off.
     pub gap_s: f64,

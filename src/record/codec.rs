@@ -262,6 +262,7 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
         billet_check: r.billet.billet_check.map(|c| c.as_str().to_string()),
         h_start_off_sheet_m: r.billet.h_start_off_sheet_m,
         sensor_check: r.sensor_check,
+        method: r.method.map(|m| m.as_str().to_string()),
     }
 }
 
@@ -294,6 +295,7 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
         peak_load_n: r.peak_load_n,
         residual: energy(r.residual),
         sensor_check: r.sensor_check,
+        method: r.method.as_deref().and_then(crate::estimate::Method::parse),
         gap_s: r.gap_s,
         h_start_m: r.h_start_m,
         height_check: r.height_check.map(|h| HeightCheck {
@@ -523,6 +525,7 @@ mod tests {
             peak_load_n: 2.6e6,
             residual: Some(-0.012),
             sensor_check: with_optional.then_some(0.034),
+            method: with_optional.then_some(crate::estimate::Method::ModelFit),
             gap_s: if with_optional { 2e-5 } else { 0.0 },
             h_start_m: with_optional.then_some(0.0151),
             height_check: with_optional.then_some(HeightCheck {
@@ -598,6 +601,7 @@ mod tests {
                 efficiency: None,
                 residual: None,
                 sensor_check: None,
+                method: None,
                 gap_s: 0.01,
                 ..estimate(false)
             })),

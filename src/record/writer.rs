@@ -329,6 +329,7 @@ mod tests {
             peak_load_n: 1.16e6,
             residual: Some(0.004),
             sensor_check: Some(0.012),
+            method: None,
             gap_s: 0.0,
             h_start_m: None,
             height_check: None,

@@ -73,6 +73,7 @@ def describe(schema_name, msg):
             "residual": optional(msg, "residual"),
             "gap_s": msg.gap_s,
             "h_start_m": optional(msg, "h_start_m"),
+            "method": optional(msg, "method"),
         }
     if schema_name == "forgemon.Alert":
         return alert_dict(msg)
