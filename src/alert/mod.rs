@@ -7,43 +7,11 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
-use serde::Serialize;
-
 use crate::estimate::{BlowClass, BlowEstimate};
 
-/// Which rule fired.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum AlertKind {
-    /// The blows have turned elastic (CONTRACTS.md §5 `"elastic_blow"`).
-    ElasticBlow,
-    /// The energy balance no longer closes: the model does not describe the machine.
-    ModelHealth,
-    /// The load sensor and the accelerometer disagree (`sensor_check`) on `sensor_k` of
-    /// the last `sensor_n` complete blows: a wrong gain, a drifting charge amplifier, a
-    /// loose or dead accelerometer.
-    Sensor,
-}
-
-impl AlertKind {
-    pub fn as_str(&self) -> &'static str {
-        match self {
-            AlertKind::ElasticBlow => "elastic_blow",
-            AlertKind::ModelHealth => "model_health",
-            AlertKind::Sensor => "sensor",
-        }
-    }
-}
-
-/// An alert with the blow, the figures and a plain-language reason.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Alert {
-    pub kind: AlertKind,
-    pub blow: u32,
-    pub reason: String,
-    /// The figures behind it, by name (e.g. "efficiency": 0.31).
-    pub figures: BTreeMap<String, f64>,
-}
+// The alert itself is part of a blow's result (`estimate::result`), where the estimate that
+// carries it is defined; the rules here read estimates, so the dependency runs one way.
+pub use crate::estimate::result::{Alert, AlertKind};
 
 /// The rules' thresholds, with the defaults named.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -1,10 +1,45 @@
 //! What the estimator reports for each blow: the JSON line of `forgemon replay`
 //! (CONTRACTS.md §5) and the MCAP blow-result message.
 
+use std::collections::BTreeMap;
+
 use serde::Serialize;
 
-use crate::alert::Alert;
 use crate::estimate::billet::BilletCheck;
+
+/// Which rule fired.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AlertKind {
+    /// The blows have turned elastic (CONTRACTS.md §5 `"elastic_blow"`).
+    ElasticBlow,
+    /// The energy balance no longer closes: the model does not describe the machine.
+    ModelHealth,
+    /// The load sensor and the accelerometer disagree (`sensor_check`) on `sensor_k` of
+    /// the last `sensor_n` complete blows: a wrong gain, a drifting charge amplifier, a
+    /// loose or dead accelerometer.
+    Sensor,
+}
+
+impl AlertKind {
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            AlertKind::ElasticBlow => "elastic_blow",
+            AlertKind::ModelHealth => "model_health",
+            AlertKind::Sensor => "sensor",
+        }
+    }
+}
+
+/// An alert with the blow, the figures and a plain-language reason.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Alert {
+    pub kind: AlertKind,
+    pub blow: u32,
+    pub reason: String,
+    /// The figures behind it, by name (e.g. "efficiency": 0.31).
+    pub figures: BTreeMap<String, f64>,
+}
 
 /// Efficiency class of a blow (seed 000 §4.3: soft blows 80–90 %, hard 20–50 %).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]

@@ -11,9 +11,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use mcap::records::MessageHeader;
 
 use super::error::RecordError;
+use super::options::{ChunkCompression, RecordOptions, SyncPoint};
 use super::rotation::{Rotation, part_path_of};
 use super::schema::{FILE_DESCRIPTOR_SET, MESSAGE_ENCODING, MessageKind, SCHEMA_ENCODING, samples_topic};
-use super::writer::{ChunkCompression, RecordOptions, SyncPoint};
 
 /// A `File` behind a `BufWriter` that counts the file's length, shared with the writer so
 /// it can rotate by size (the `mcap` writer owns the stream and hides it).

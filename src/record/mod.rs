@@ -30,6 +30,7 @@ pub mod error;
 mod file;
 mod linear;
 pub mod message;
+pub mod options;
 pub mod reader;
 pub mod report;
 pub mod rotation;

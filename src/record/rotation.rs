@@ -5,7 +5,13 @@
 use std::path::{Path, PathBuf};
 
 use super::error::RecordError;
-use super::writer::{DEFAULT_FILE_STEM, FINISHED_EXTENSION, PART_EXTENSION};
+
+/// File-name stem of the numbered files when the target is a directory.
+pub const DEFAULT_FILE_STEM: &str = "forgemon";
+/// Extension of a finished recording.
+pub const FINISHED_EXTENSION: &str = "mcap";
+/// Extension of a recording being written (or left by a crash).
+pub const PART_EXTENSION: &str = "mcap.part";
 
 /// When to start a new file. Both limits may be set; the first one reached rotates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -24,57 +24,10 @@ use super::rotation::Naming;
 pub use super::rotation::Rotation;
 use super::schema::{MessageKind, pb, samples_topic};
 
-/// Close the chunk and `sync_data` after this much log time (DESIGN.md §3: "at least every
-/// second").
-pub const DEFAULT_SYNC_INTERVAL_NS: u64 = 1_000_000_000;
-/// Target uncompressed chunk size. A chunk also closes at every sync.
-pub const DEFAULT_CHUNK_SIZE_BYTES: u64 = 1024 * 1024;
-/// zstd level: 1 is the fastest standard level; sample doubles barely compress at any level.
-pub const DEFAULT_ZSTD_LEVEL: u32 = 1;
-/// File-name stem of the numbered files when the target is a directory.
-pub const DEFAULT_FILE_STEM: &str = "forgemon";
-/// Extension of a finished recording.
-pub const FINISHED_EXTENSION: &str = "mcap";
-/// Extension of a recording being written (or left by a crash).
-pub const PART_EXTENSION: &str = "mcap.part";
-
-/// Chunk compression.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ChunkCompression {
-    Zstd { level: u32 },
-    Lz4,
-    None,
-}
-
-/// How to record. [`RecordOptions::default`] is zstd, 1 MiB chunks, sync every second of
-/// log time, no rotation.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct RecordOptions {
-    pub rotation: Rotation,
-    pub compression: ChunkCompression,
-    pub chunk_size_bytes: u64,
-    pub sync_interval_ns: u64,
-}
-
-impl Default for RecordOptions {
-    fn default() -> Self {
-        RecordOptions {
-            rotation: Rotation::NEVER,
-            compression: ChunkCompression::Zstd { level: DEFAULT_ZSTD_LEVEL },
-            chunk_size_bytes: DEFAULT_CHUNK_SIZE_BYTES,
-            sync_interval_ns: DEFAULT_SYNC_INTERVAL_NS,
-        }
-    }
-}
-
-/// The state of the current file at its last `sync_data`: everything up to `file_bytes`
-/// survives a crash, and holds `file_messages` messages.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct SyncPoint {
-    pub file_bytes: u64,
-    pub file_messages: u64,
-    pub log_time_ns: u64,
-}
+pub use super::options::{
+    ChunkCompression, DEFAULT_CHUNK_SIZE_BYTES, DEFAULT_SYNC_INTERVAL_NS, DEFAULT_ZSTD_LEVEL, RecordOptions, SyncPoint,
+};
+pub use super::rotation::{DEFAULT_FILE_STEM, FINISHED_EXTENSION, PART_EXTENSION};
 
 /// Records forgemon messages to MCAP. See the module docs for the guarantees.
 ///
