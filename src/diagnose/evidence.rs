@@ -1,15 +1,22 @@
 //! The evidence that one model's holdout errors are lower than another's (issue #17, item
-//! 2): a paired one-sided t-test on the per-blow log-ratio of the errors.
+//! 2): two paired one-sided t-tests over the blows, either of which suffices.
 //!
-//! Why the log-ratio: the holdout blows of a billet differ in speed, so their errors differ
-//! in size; an effect scales a blow's error rather than subtracting a fixed amount from it.
-//! The difference of errors (the former rule: mean improvement over twice its standard
-//! error) carries that blow-to-blow spread of scale into its variance and lost cases that
-//! shrank the error by 0.6–0.7 on 5 blows. The log-ratio removes the scale, so its spread
-//! is the spread of the effect's relative improvement only.
+//! - On the per-blow log-ratio ln(after/before): an effect that scales every blow's error.
+//!   The holdout blows of a billet differ in speed, so their errors differ in size; the
+//!   log-ratio removes that scale, which the former rule (mean difference over twice its
+//!   standard error) carried into its variance, losing cases that shrank the error by
+//!   0.6–0.7 on 5 blows.
+//! - On the per-blow difference before − after: an effect that removes error where the error
+//!   is large and leaves noise-sized blows alone (friction rising as the billet flattens
+//!   acts on the last blows; their first blows' log-ratios are noise and swamp the test).
 //!
-//! The error rates of the whole verdict that uses this test (false positives on no-effect
-//! billets, the share of single effects found) are measured by `rates.rs`.
+//! Chosen on the tuning seeds of `rates.rs`: the log-ratio alone missed 1 of 20
+//! `friction_rise:exponent=0.03` hammer billets (shrink 0.65–0.72) that the difference
+//! (then at the former 2 standard errors) found; both at 2.5 % (a Bonferroni union) lost half the runs of the weakest cases; an
+//! exact sign-flip test on the log-ratios cannot pass `thermal` (whose first blow is
+//! unchanged by definition) at 5 % on 5 blows. The union's nominal level is ≤ 2 × `ALPHA`;
+//! the verdict's false-positive rate on no-effect billets, which also passes the noise and
+//! shrink gates, is measured by `rates.rs`.
 
 /// One-sided level of the test.
 pub const ALPHA: f64 = 0.05;
@@ -34,8 +41,19 @@ pub struct Comparison {
     pub std_error: f64,
     /// The one-sided critical value for `n − 1` degrees of freedom.
     pub t_critical: f64,
+    /// Mean over the blows of before − after, and its standard error.
+    pub mean_diff: f64,
+    pub diff_std_error: f64,
     /// 1 − mean(after)/mean(before): the contract's `holdout_shrink`.
     pub shrink: f64,
+}
+
+/// Mean and standard error of the mean (n ≥ 2).
+fn mean_se(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    (m, sd / n.sqrt())
 }
 
 impl Comparison {
@@ -47,15 +65,17 @@ impl Comparison {
             return None;
         }
         let l: Vec<f64> = before.iter().zip(after).map(|(b, a)| (a / b).ln()).collect();
-        let m = l.iter().sum::<f64>() / n as f64;
-        let sd = (l.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
+        let d: Vec<f64> = before.iter().zip(after).map(|(b, a)| b - a).collect();
+        let (mean_log_ratio, std_error) = mean_se(&l);
+        let (mean_diff, diff_std_error) = mean_se(&d);
         let shrink = 1.0 - after.iter().sum::<f64>() / before.iter().sum::<f64>();
-        Some(Comparison { mean_log_ratio: m, std_error: sd / (n as f64).sqrt(), t_critical: t95(n - 1), shrink })
+        Some(Comparison { mean_log_ratio, std_error, t_critical: t95(n - 1), mean_diff, diff_std_error, shrink })
     }
 
-    /// `after` is lower than `before` at the test's level.
+    /// `after` is lower than `before` by either test at its level.
     pub fn significant(&self) -> bool {
         self.mean_log_ratio < -self.t_critical * self.std_error
+            || self.mean_diff > self.t_critical * self.diff_std_error
     }
 }
 
@@ -83,11 +103,9 @@ mod tests {
         let before = [0.02, 0.05, 0.10, 0.30, 0.04];
         let after = [0.006, 0.012, 0.03, 0.08, 0.014];
         assert!(improves(&before, &after, 0.2));
-        // The former rule on the same numbers (mean improvement > 2 standard errors) fails.
-        let d: Vec<f64> = before.iter().zip(&after).map(|(b, a)| b - a).collect();
-        let m = d.iter().sum::<f64>() / 5.0;
-        let sd = (d.iter().map(|x| (x - m).powi(2)).sum::<f64>() / 4.0).sqrt();
-        assert!(m < 2.0 * sd / 5f64.sqrt());
+        // The difference of errors alone (the former rule) does not see it.
+        let c = Comparison::of(&before, &after).unwrap();
+        assert!(c.mean_diff < 2.0 * c.diff_std_error, "{c:?}");
     }
 
     // `thermal` does nothing on a billet's first blow by its definition: one blow unchanged
@@ -96,6 +114,19 @@ mod tests {
     fn one_unchanged_blow_does_not_hide_an_effect() {
         let before = [0.05, 0.08, 0.10, 0.12, 0.13];
         let after = [0.051, 0.02, 0.02, 0.025, 0.03];
+        assert!(improves(&before, &after, 0.2));
+    }
+
+    // Error removed where it is large, noise-sized blows made a little worse (the kind of
+    // billet the tuning seeds' `hammer-friction-0.03` miss was): the log-ratio alone is not
+    // significant, the difference is, and the union takes it.
+    #[test]
+    fn an_improvement_on_the_large_blows_only_is_significant() {
+        let before = [0.001, 0.001, 0.020, 0.022, 0.025];
+        let after = [0.002, 0.002, 0.005, 0.006, 0.006];
+        let c = Comparison::of(&before, &after).unwrap();
+        assert!(c.mean_log_ratio > -c.t_critical * c.std_error, "{c:?}");
+        assert!(c.mean_diff > c.t_critical * c.diff_std_error, "{c:?}");
         assert!(improves(&before, &after, 0.2));
     }
 

@@ -204,7 +204,7 @@ impl Diagnosis {
             "rule": {
                 "noise_nrmse": self.noise_nrmse, "noise_factor": NOISE_FACTOR, "min_shrink": MIN_SHRINK,
                 "min_pair_shrink": MIN_PAIR_SHRINK,
-                "test": "paired one-sided t-test on the per-blow ln(holdout after / holdout before)",
+                "test": "paired one-sided t-tests over the holdout blows on ln(after/before) or on before - after, either suffices",
                 "test_level": evidence::ALPHA,
                 "explanation": self.why,
             },

@@ -6,7 +6,8 @@
 //! 1. There is a gap to explain only if the baseline's holdout nrmse exceeds
 //!    `NOISE_FACTOR` times the sensor noise over the peak (measured before contact).
 //! 2. An effect is real when its holdout errors are significantly lower than the
-//!    baseline's by the paired log-ratio test (`evidence.rs`, one-sided 5 %) and the
+//!    baseline's by the paired tests of `evidence.rs` (log-ratio or difference over the
+//!    blows, one-sided 5 % each) and the
 //!    holdout shrink is at least `MIN_SHRINK`.
 //! 3. Ties and parsimony: the real effects whose errors the same test cannot tell from the
 //!    lowest one's are equivalent; of those, the one with the fewest fitted parameters wins
@@ -80,17 +81,15 @@ pub fn decide(machine: &Machine, base_hold: &[f64], noise_nrmse: f64, singles: &
     real.sort_by(|a, b| a.holdout.total_cmp(&b.holdout));
     let Some(best) = real.first() else {
         return none(format!(
-            "No effect lowers the holdout errors significantly (paired log-ratio test over the blows, one-sided {:.0} %) and by at least {:.0} % overall.",
+            "No effect lowers the holdout errors significantly (paired log-ratio or difference t-test over the blows, one-sided {:.0} % each) and by at least {:.0} % overall.",
             ALPHA * 100.0,
             MIN_SHRINK * 100.0
         ));
     };
     let ties: Vec<&Fitted> =
         real.iter().copied().filter(|f| equivalent(&best.holdout_per_blow, &f.holdout_per_blow)).collect();
-    let winner = *ties
-        .iter()
-        .min_by(|a, b| a.n_params.cmp(&b.n_params).then(a.holdout.total_cmp(&b.holdout)))
-        .unwrap_or(best);
+    let winner =
+        *ties.iter().min_by(|a, b| a.n_params.cmp(&b.n_params).then(a.holdout.total_cmp(&b.holdout))).unwrap_or(best);
     let equivalent: Vec<(String, Option<String>)> =
         ties.iter().filter(|f| f.name != winner.name).map(|f| (f.name.clone(), series_spring(f, machine))).collect();
     let shrink = |f: &Fitted| (1.0 - f.holdout / base) * 100.0;
@@ -124,7 +123,7 @@ pub fn decide(machine: &Machine, base_hold: &[f64], noise_nrmse: f64, singles: &
         None => Verdict {
             chosen: Some(winner.clone()),
             why: format!(
-                "{} lowers the holdout errors significantly (paired log-ratio test, one-sided {:.0} %) and shrinks the holdout error by {:.0} %; no pair improves on it by the pair test.{tie_note}",
+                "{} lowers the holdout errors significantly (paired log-ratio or difference t-test, one-sided {:.0} % each) and shrinks the holdout error by {:.0} %; no pair improves on it by the pair test.{tie_note}",
                 winner.name,
                 ALPHA * 100.0,
                 shrink(winner)
