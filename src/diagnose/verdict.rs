@@ -71,7 +71,7 @@ fn series_spring(f: &Fitted, machine: &Machine) -> Option<String> {
 pub fn decide(machine: &Machine, base_hold: &[f64], noise_nrmse: f64, singles: &[Fitted], pairs: &[Fitted]) -> Verdict {
     let base = base_hold.iter().sum::<f64>() / base_hold.len().max(1) as f64;
     let none = |why: String| Verdict { chosen: None, equivalent: Vec::new(), why };
-    if !(base > NOISE_FACTOR * noise_nrmse) {
+    if base.is_nan() || base <= NOISE_FACTOR * noise_nrmse {
         return none(format!(
             "The base model's holdout error ({base:.4}) is within {NOISE_FACTOR}× the sensor noise ({noise_nrmse:.4}): there is no gap for an effect to explain."
         ));
