@@ -88,6 +88,9 @@ fn diagnose(dir: &Path, machine: &Path) -> Value {
     let r: Value = serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     // Each holdout blow's caption gives its error before and, with a verdict, after.
     let verdict = r["verdict"]["effect"].as_str().unwrap();
+    // Issue #17: the effects the verdict's test cannot tell from it, never the verdict itself.
+    let equivalent = r["verdict"]["equivalent"].as_array().expect("verdict.equivalent is a list");
+    assert!(equivalent.iter().all(|e| e.as_str().is_some_and(|e| e != verdict)), "{r:#}");
     let after = html.matches(&format!(", with {verdict} ")).count();
     assert_eq!(after, if verdict == "none" { 0 } else { 5 }, "{verdict}");
     // Localisation by indicator (issue #6): every one named, with a value for every blow

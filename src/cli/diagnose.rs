@@ -121,12 +121,26 @@ fn write_html(d: &Diagnosis, machine: &Machine, path: &Path, elapsed_s: f64) -> 
     ));
     page.paragraph(format!(
         "The rule: a gap exists only when the baseline holdout error exceeds {}× the sensor noise ({:.4} of the peak); an effect \
-         is real when the mean improvement over the holdout blows exceeds twice its standard error and the holdout error \
-         shrinks by at least {:.0} %; a pair replaces its best single effect only when it removes at least {:.0} % of what that \
-         effect leaves, by the same test. Effect parameters are fitted on the calibration billet only.",
+         is real when its holdout errors are significantly lower than the base model's, blow by blow (paired one-sided t-tests \
+         on ln(after/before) or on before − after, 5 % each), and the holdout error shrinks by at least {:.0} %; effects the same test cannot tell apart \
+         are equivalent and the one with the fewest fitted parameters wins{}; a pair replaces its single effect only when it \
+         removes at least {:.0} % of what that effect leaves, by the same test. Effect parameters are fitted on the calibration \
+         billet only.",
         crate::diagnose::NOISE_FACTOR,
         d.noise_nrmse,
         crate::diagnose::MIN_SHRINK * 100.0,
+        if d.equivalent.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " (equivalent here: {})",
+                d.equivalent
+                    .iter()
+                    .map(|(n, why)| why.as_ref().map_or(n.clone(), |w| format!("{n}: {w}")))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            )
+        },
         crate::diagnose::MIN_PAIR_SHRINK * 100.0
     ));
     page.section("Where the gap lies (calibration blows, base model)");

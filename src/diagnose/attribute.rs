@@ -128,6 +128,8 @@ pub struct Fitted {
     /// `"a"` or `"a+b"`.
     pub name: String,
     pub effects: Vec<Effect>,
+    /// Parameters fitted (the parsimony of issue #17: fewer wins a tie).
+    pub n_params: usize,
     /// Mean nrmse on the calibration and holdout blows, and per holdout blow.
     pub calib: f64,
     pub holdout: f64,
@@ -213,6 +215,7 @@ pub fn fit_candidates(
     Some(Fitted {
         name: cands.iter().map(|c| c.name).collect::<Vec<_>>().join("+"),
         effects: effects_of(&values),
+        n_params: params.len(),
         calib: mean(&calib_n),
         holdout: mean(&hold_n),
         holdout_per_blow: hold_n,

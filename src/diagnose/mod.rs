@@ -2,24 +2,16 @@
 //! and the measured blows part (`localise`), which library effect closes the gap on blows
 //! it was not fitted on (`attribute`), and a verdict under an explicit rule.
 //!
-//! The verdict rule (also written into the report):
-//! 1. There is a gap to explain only if the baseline's holdout nrmse exceeds
-//!    `NOISE_FACTOR` times the sensor noise over the peak (measured before contact).
-//! 2. An effect is real when, over the holdout blows, the mean improvement exceeds twice
-//!    its standard error (blow-to-blow scatter) and the holdout shrink is at least
-//!    `MIN_SHRINK`. (Not "every blow improves": `thermal` does nothing on a billet's first
-//!    blow, by its definition.)
-//! 3. The verdict is the real single effect with the lowest holdout error. The best single
-//!    effect is fitted together with each other one; a pair that contains it replaces it when the pair improves on it by the same test with a shrink
-//!    of at least `MIN_PAIR_SHRINK`: the second effect must remove most of what the first
-//!    leaves, since any extra parameter takes up some of a misfit. That threshold is set
-//!    from the withheld-effect suite (a lone clearance leaves a misfit that a friction
-//!    exponent halves; a true second effect removes ~98 % of it).
-//! 4. Otherwise: "none".
+//! The verdict rule is `verdict.rs`'s (also written into the report); its error rates are
+//! measured by `rates.rs`.
 
 pub mod attribute;
+pub mod evidence;
 pub mod indicators;
 pub mod localise;
+#[cfg(test)]
+mod rates;
+pub mod verdict;
 
 use rayon::prelude::*;
 use serde_json::{Value, json};
@@ -31,12 +23,7 @@ use attribute::{BlowSet, Candidate, Fitted, library, mean};
 use indicators::{Indicators, Summary, indicators, summarise};
 use localise::{ByBand, ByPhase, Localised, localise};
 
-/// The baseline error must exceed this many times the noise for a gap to exist.
-pub const NOISE_FACTOR: f64 = 2.0;
-/// Smallest holdout shrink that counts.
-pub const MIN_SHRINK: f64 = 0.2;
-/// Smallest further shrink of a pair over its best single effect.
-pub const MIN_PAIR_SHRINK: f64 = 0.8;
+pub use verdict::{MIN_PAIR_SHRINK, MIN_SHRINK, NOISE_FACTOR};
 
 /// The whole diagnosis.
 #[derive(Debug, Clone)]
@@ -52,6 +39,8 @@ pub struct Diagnosis {
     /// Every single effect and the pairs tried, best holdout first.
     pub candidates: Vec<Fitted>,
     pub verdict: Option<Fitted>,
+    /// Effects the verdict's test cannot tell from it, with the physics reason if any.
+    pub equivalent: Vec<(String, Option<String>)>,
     /// Sensor noise over the peak, mean over the holdout blows.
     pub noise_nrmse: f64,
     pub why: String,
@@ -92,16 +81,6 @@ fn noise(set: &BlowSet, loc: &[Localised]) -> f64 {
         })
         .collect();
     mean(&v)
-}
-
-/// Whether `after` improves on `before` per rule 2 (module docs), with `min_shrink`.
-fn real(before: &[f64], after: &[f64], min_shrink: f64) -> bool {
-    let d: Vec<f64> = before.iter().zip(after).map(|(b, a)| b - a).collect();
-    let n = d.len() as f64;
-    let m = mean(&d);
-    let sd = (d.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0).max(1.0)).sqrt();
-    let shrink = 1.0 - mean(after) / mean(before);
-    m > 2.0 * sd / n.sqrt() && shrink >= min_shrink
 }
 
 /// Diagnose `machine` (with its own `effects`) on calibration and holdout blows.
@@ -156,54 +135,8 @@ pub fn diagnose(
     candidates.sort_by(|a, b| a.holdout.total_cmp(&b.holdout));
     let noise_nrmse = noise(&holdout, &hold_loc);
     let baseline_holdout = mean(&base_hold);
-    let (verdict, why) = if baseline_holdout <= NOISE_FACTOR * noise_nrmse {
-        (
-            None,
-            format!(
-                "The base model's holdout error ({:.4}) is within {NOISE_FACTOR}× the sensor noise ({:.4}): there is no gap for an effect to explain.",
-                baseline_holdout, noise_nrmse
-            ),
-        )
-    } else {
-        let best_single = ranked.iter().map(|(_, f)| f).find(|f| real(&base_hold, &f.holdout_per_blow, MIN_SHRINK));
-        match best_single {
-            None => (
-                None,
-                format!(
-                    "No effect improves the holdout blows by more than twice the standard error of the improvement and by at least {:.0} % overall.",
-                    MIN_SHRINK * 100.0
-                ),
-            ),
-            Some(single) => {
-                let pair = pairs
-                    .iter()
-                    .filter(|p| {
-                        p.name.split('+').any(|n| n == single.name)
-                            && real(&single.holdout_per_blow, &p.holdout_per_blow, MIN_PAIR_SHRINK)
-                    })
-                    .min_by(|a, b| a.holdout.total_cmp(&b.holdout));
-                match pair {
-                    Some(p) => (
-                        Some(p.clone()),
-                        format!(
-                            "{} alone shrinks the holdout error by {:.0} %; the second effect removes at least {:.0} % of what is left, beyond twice the standard error of the improvement.",
-                            single.name,
-                            (1.0 - single.holdout / baseline_holdout) * 100.0,
-                            MIN_PAIR_SHRINK * 100.0
-                        ),
-                    ),
-                    None => (
-                        Some(single.clone()),
-                        format!(
-                            "{} improves the holdout blows by more than twice the standard error of the improvement and shrinks the holdout error by {:.0} %; no pair improves on it by the pair test.",
-                            single.name,
-                            (1.0 - single.holdout / baseline_holdout) * 100.0
-                        ),
-                    ),
-                }
-            }
-        }
-    };
+    let singles: Vec<Fitted> = ranked.iter().map(|(_, f)| f.clone()).collect();
+    let v = verdict::decide(machine, &base_hold, noise_nrmse, &singles, &pairs);
     Some(Diagnosis {
         baseline_calib: base_calib,
         baseline_holdout,
@@ -213,9 +146,10 @@ pub fn diagnose(
         indicator_summary: summarise(&calib_ind),
         indicators: calib_ind,
         candidates,
-        verdict,
+        verdict: v.chosen,
+        equivalent: v.equivalent,
         noise_nrmse,
-        why,
+        why: v.why,
         calib,
         holdout,
     })
@@ -260,13 +194,18 @@ impl Diagnosis {
             })).collect::<Vec<_>>(),
             "verdict": match &self.verdict {
                 Some(f) => json!({"effect": f.name, "holdout_before": self.baseline_holdout, "holdout_after": f.holdout,
-                                  "holdout_shrink": shrink(f.holdout), "params": params(f)}),
+                                  "holdout_shrink": shrink(f.holdout), "params": params(f),
+                                  "equivalent": self.equivalent.iter().map(|(n, _)| n).collect::<Vec<_>>(),
+                                  "equivalent_why": self.equivalent.iter().filter_map(|(n, w)| w.as_ref().map(|w| (n.clone(), json!(w))))
+                                      .collect::<serde_json::Map<_, _>>()}),
                 None => json!({"effect": "none", "holdout_before": self.baseline_holdout, "holdout_after": self.baseline_holdout,
-                               "holdout_shrink": 0.0}),
+                               "holdout_shrink": 0.0, "equivalent": [], "equivalent_why": {}}),
             },
             "rule": {
                 "noise_nrmse": self.noise_nrmse, "noise_factor": NOISE_FACTOR, "min_shrink": MIN_SHRINK,
-                "min_pair_shrink": MIN_PAIR_SHRINK, "mean_improvement_over_standard_errors": 2.0,
+                "min_pair_shrink": MIN_PAIR_SHRINK,
+                "test": "paired one-sided t-tests over the holdout blows on ln(after/before) or on before - after, either suffices",
+                "test_level": evidence::ALPHA,
                 "explanation": self.why,
             },
         })
