@@ -116,7 +116,8 @@ fn decoder() -> CanDecoder {
     CanDecoder::new("can", fixture_mapping(), CanTiming::new(SAMPLE_RATE_HZ, 0.05, true))
 }
 
-/// Decoded events through the pipeline, ending the stream at each gap as the service does.
+/// Decoded events through the pipeline, ending the stream at each gap (the service instead
+/// bridges short holes by device time, `pipeline::Feeder`, tested in `tests/service_faults.rs`).
 fn run_pipeline(events: &[SourceEvent]) -> Vec<Value> {
     let m = machine();
     let mut p = Pipeline::new(m, Some(process()), PipelineConfig::for_machine(&m));

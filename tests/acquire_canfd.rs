@@ -98,7 +98,8 @@ fn on_grid(t_s: f64) -> bool {
     (t_s - k * PERIOD_S).abs() < 1e-9
 }
 
-/// Decoded events through the pipeline, ending the stream at each gap as the service does.
+/// Decoded events through the pipeline, ending the stream at each gap (the service instead
+/// bridges short holes by device time, `pipeline::Feeder`, tested in `tests/service_faults.rs`).
 fn run_pipeline(events: &[SourceEvent]) -> Vec<Value> {
     let m = machine();
     let mut p = Pipeline::new(m, Some(process()), PipelineConfig::for_machine(&m));

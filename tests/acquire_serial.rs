@@ -153,7 +153,8 @@ async fn wait_for_samples(rx: &mut watch::Receiver<u64>, n: u64) {
     assert!(ok, "timed out waiting for {n} samples, got {}", *rx.borrow());
 }
 
-/// Feed the events through the live pipeline (a gap ends the stream, as in the service).
+/// Feed the events through the pipeline, a gap ending the stream (the service instead bridges
+/// short holes by device time, `pipeline::Feeder`, tested in `tests/service_faults.rs`).
 fn blows_found(events: &[SourceEvent]) -> Vec<forgemon::estimate::BlowEstimate> {
     let (machine, process) = machine_and_process();
     let mut p = Pipeline::new(machine, Some(process), PipelineConfig::for_machine(&machine));
