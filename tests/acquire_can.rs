@@ -8,6 +8,8 @@
 //! Regenerate the fixtures with
 //! `cargo test --test acquire_can -- --ignored regenerate_can_fixtures`.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use forgemon::acquire::SourceEvent;
@@ -20,7 +22,7 @@ use forgemon::config::{parse_machine, parse_process};
 use forgemon::physics::EffectSet;
 use forgemon::physics::machine::Machine;
 use forgemon::physics::process::Process;
-use forgemon::pipeline::{Pipeline, PipelineConfig, PipelineEvent};
+use forgemon::pipeline::{Pipeline, PipelineConfig};
 use forgemon::signal::capture::CaptureRow;
 use forgemon::synth::{CaptureSpec, idle_rows, synth_blows};
 use serde_json::{Value, json};
@@ -116,27 +118,11 @@ fn decoder() -> CanDecoder {
     CanDecoder::new("can", fixture_mapping(), CanTiming::new(SAMPLE_RATE_HZ, 0.05, true))
 }
 
-/// Decoded events through the pipeline, ending the stream at each gap (the service instead
-/// bridges short holes by device time, `pipeline::Feeder`, tested in `tests/service_faults.rs`).
+/// Decoded events through the pipeline (`common::blows_through`), each blow as its JSON.
 fn run_pipeline(events: &[SourceEvent]) -> Vec<Value> {
     let m = machine();
-    let mut p = Pipeline::new(m, Some(process()), PipelineConfig::for_machine(&m));
-    let mut out = Vec::new();
-    for e in events {
-        match e {
-            SourceEvent::Batch(b) => p.push(b, &mut out),
-            SourceEvent::Gap(_) => p.end_of_stream(&mut out),
-            SourceEvent::Status(_) => {}
-        }
-    }
-    p.end_of_stream(&mut out);
-    out.into_iter()
-        .filter_map(|e| match e {
-            PipelineEvent::Blow { estimate, .. } => Some(serde_json::to_value(&estimate).expect("serialise")),
-            PipelineEvent::Billet(_) => None,
-            PipelineEvent::Rejected { cut, error } => panic!("blow at {} rejected: {error}", cut.t_contact_s),
-        })
-        .collect()
+    let p = Pipeline::new(m, Some(process()), PipelineConfig::for_machine(&m));
+    common::blows_through(p, events).iter().map(|e| serde_json::to_value(e).expect("serialise")).collect()
 }
 
 fn decode(text: &str, origin: &str, bad: BadLines) -> (Vec<SourceEvent>, CanDecoder) {

@@ -5,6 +5,8 @@
 //! pipeline, which must find every blow with the simulated efficiency; injected garbage,
 //! corrupt CRCs, dropped frames and a lost link are counted and recorded as gaps.
 
+mod common;
+
 use std::time::Duration;
 
 use forgemon::acquire::serial::{
@@ -13,7 +15,7 @@ use forgemon::acquire::serial::{
 use forgemon::acquire::{ChannelSpec, SourceEvent};
 use forgemon::config::{parse_machine, parse_process};
 use forgemon::physics::{EffectSet, Machine, Process};
-use forgemon::pipeline::{Pipeline, PipelineConfig, PipelineEvent};
+use forgemon::pipeline::{Pipeline, PipelineConfig};
 use forgemon::record::{Gap, Status};
 use forgemon::signal::capture::CaptureRow;
 use forgemon::signal::sample::{Role, SampleBatch};
@@ -153,27 +155,10 @@ async fn wait_for_samples(rx: &mut watch::Receiver<u64>, n: u64) {
     assert!(ok, "timed out waiting for {n} samples, got {}", *rx.borrow());
 }
 
-/// Feed the events through the pipeline, a gap ending the stream (the service instead bridges
-/// short holes by device time, `pipeline::Feeder`, tested in `tests/service_faults.rs`).
+/// Feed the events through the pipeline (`common::blows_through`).
 fn blows_found(events: &[SourceEvent]) -> Vec<forgemon::estimate::BlowEstimate> {
     let (machine, process) = machine_and_process();
-    let mut p = Pipeline::new(machine, Some(process), PipelineConfig::for_machine(&machine));
-    let mut out = Vec::new();
-    for ev in events {
-        match ev {
-            SourceEvent::Batch(b) => p.push(b, &mut out),
-            SourceEvent::Gap(_) => p.end_of_stream(&mut out),
-            SourceEvent::Status(_) => {}
-        }
-    }
-    p.end_of_stream(&mut out);
-    out.into_iter()
-        .filter_map(|e| match e {
-            PipelineEvent::Blow { estimate, .. } => Some(*estimate),
-            PipelineEvent::Billet(_) => None,
-            PipelineEvent::Rejected { cut, error } => panic!("blow at {cut:?} rejected: {error}"),
-        })
-        .collect()
+    common::blows_through(Pipeline::new(machine, Some(process), PipelineConfig::for_machine(&machine)), events)
 }
 
 /// Issue #4: every blow found; efficiency within 0.03 of the simulated truth (the bound
