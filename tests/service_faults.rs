@@ -10,11 +10,12 @@
 //! The live results are read back by replaying the recording each run made (live equals
 //! replay is `tests/service_live.rs`'s test).
 
-use std::io::Write as _;
-use std::net::TcpListener;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+mod common;
+
+use std::process::Command;
+use std::time::Duration;
+
+use common::{files_in, free_port, spawn_service};
 
 use forgemon::config::{parse_machine, parse_process};
 use forgemon::physics::EffectSet;
@@ -158,20 +159,6 @@ fn ascii_stream(rows: &[CaptureRow], fault: Fault, hit: usize) -> Vec<Vec<u8>> {
     out
 }
 
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
-fn http_get(port: u16, path: &str) -> Option<String> {
-    use std::io::Read;
-    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).ok()?;
-    s.set_read_timeout(Some(Duration::from_secs(2))).ok()?;
-    write!(s, "GET {path} HTTP/1.1\r\nhost: localhost\r\nconnection: close\r\n\r\n").ok()?;
-    let mut out = String::new();
-    s.read_to_string(&mut out).ok()?;
-    out.split_once("\r\n\r\n").map(|(_, b)| b.to_string())
-}
-
 /// Run the service on a pty, write `chunks` into it at real time, stop it, and replay what
 /// it recorded: one JSON value per blow.
 fn through_the_service(name: &str, ascii: bool, chunks: Vec<Vec<u8>>) -> Vec<Value> {
@@ -209,17 +196,7 @@ gain = {}
         GAINS[0], GAINS[1], GAINS[2]
     );
     std::fs::write(dir.join("service.toml"), cfg).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_forgemon"))
-        .args(["run", "--config", dir.join("service.toml").to_str().unwrap()])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while http_get(http, "/status").is_none() {
-        assert!(Instant::now() < deadline, "the service did not come up");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let mut child = spawn_service(&dir.join("service.toml"), http);
     // Each chunk is 10 ms of samples: sent at real time.
     rt.block_on(async move {
         use tokio::io::AsyncWriteExt;
@@ -236,7 +213,7 @@ gain = {}
     // SIGTERM finishes the recording.
     Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
     let _ = child.wait();
-    let rec = recordings(&dir.join("rec"));
+    let rec = files_in(&dir.join("rec"));
     assert_eq!(rec.len(), 1, "{rec:?}");
     let out = Command::new(env!("CARGO_BIN_EXE_forgemon"))
         .args(["replay", rec[0].to_str().unwrap(), "--machine", HAMMER, "--json"])
@@ -244,12 +221,6 @@ gain = {}
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     String::from_utf8(out.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect()
-}
-
-fn recordings(dir: &Path) -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(dir).unwrap().filter_map(|e| e.ok()).map(|e| e.path()).collect();
-    v.sort();
-    v
 }
 
 fn efficiency(b: &Value) -> Option<f64> {

@@ -4,6 +4,8 @@
 //! SIGTERM finishes the recording cleanly, and after `kill -9` the file left behind is
 //! recovered, losing at most the last second.
 
+mod common;
+
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
@@ -11,6 +13,8 @@ use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
+
+use common::{files_in, free_port, http_get, spawn_service};
 
 use forgemon::acquire::ChannelSpec;
 use forgemon::config::parse_process;
@@ -31,10 +35,6 @@ fn channels() -> Vec<ChannelSpec> {
         ChannelSpec { role: Role::Disp, gain: 1e-6, offset: 0.0 },
         ChannelSpec { role: Role::Acc, gain: 1e-3, offset: 0.0 },
     ]
-}
-
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
 /// A one-request-at-a-time HTTP server that hands each request body to the test.
@@ -60,15 +60,6 @@ fn webhook_server() -> (u16, mpsc::Receiver<String>) {
         }
     });
     (port, rx)
-}
-
-fn http_get(port: u16, path: &str) -> Option<String> {
-    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).ok()?;
-    s.set_read_timeout(Some(Duration::from_secs(2))).ok()?;
-    write!(s, "GET {path} HTTP/1.1\r\nhost: localhost\r\nconnection: close\r\n\r\n").ok()?;
-    let mut out = String::new();
-    s.read_to_string(&mut out).ok()?;
-    out.split_once("\r\n\r\n").map(|(_, b)| b.to_string())
 }
 
 struct Service {
@@ -112,17 +103,7 @@ gain = 1e-3
 "#
     );
     std::fs::write(dir.join("service.toml"), cfg).unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_forgemon"))
-        .args(["run", "--config", dir.join("service.toml").to_str().unwrap()])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while http_get(http, "/status").is_none() {
-        assert!(Instant::now() < deadline, "the service did not come up");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let child = spawn_service(&dir.join("service.toml"), http);
     Service { child, dir, http }
 }
 
@@ -131,10 +112,7 @@ fn status(port: u16) -> serde_json::Value {
 }
 
 fn recordings(dir: &Path) -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> =
-        std::fs::read_dir(dir.join("rec")).unwrap().filter_map(|e| e.ok()).map(|e| e.path()).collect();
-    v.sort();
-    v
+    files_in(&dir.join("rec"))
 }
 
 /// Drive `billets` billets of eight blows, `interval_s` apart, into the pty master in real
