@@ -94,7 +94,7 @@ impl EstimatorConfig {
     /// Seed 000 §4.3 puts soft blows at 80–90 % and hard ones at 20–50 %, and calls its
     /// blows 1–4 soft (simulated efficiency down to 0.807) and 5–6 intermediate (0.722 and
     /// 0.614): a soft threshold between 0.722 and 0.807 classes the paper's blows as the
-    /// paper does, and 0.75 is its middle, rounded. Below 0.50 a blow is hard, the top of
+    /// paper does, and 0.75 lies within that gap. Below 0.50 a blow is hard, the top of
     /// the paper's hard range.
     pub const DEFAULT_SOFT_MIN: f64 = 0.75;
     pub const DEFAULT_INTERMEDIATE_MIN: f64 = 0.50;
