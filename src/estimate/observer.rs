@@ -48,8 +48,9 @@ pub fn observe(machine: &Machine, blow: &Blow, v0_mps: f64) -> Observed {
     }
 }
 
-/// Exact step of `tau x' + x = u(t)` with u linear from `u0` to `u1` over `dt`.
-fn first_order_step(x0: f64, u0: f64, u1: f64, dt: f64, tau: f64) -> f64 {
+/// Exact step of `tau x' + x = u(t)` with u linear from `u0` to `u1` over `dt` (also the
+/// sensor check's link filter, `sensor.rs`).
+pub(super) fn first_order_step(x0: f64, u0: f64, u1: f64, dt: f64, tau: f64) -> f64 {
     if tau <= 0.0 {
         return u1;
     }

@@ -33,6 +33,8 @@
 use crate::physics::machine::{Machine, ScrewPress};
 use crate::signal::segment::Blow;
 
+use super::observer::first_order_step;
+
 /// Why a blow has no sensor check (`sensor_check` is `null`).
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum NoCheck {
@@ -129,16 +131,6 @@ fn link_stretch_rate_end(p: &ScrewPress, link_n: impl Iterator<Item = f64>, dt: 
         f_last = f;
     }
     if c > 0.0 { (f_last - k * st) / c } else { (st - st_prev) / dt }
-}
-
-/// Exact step of `tau x' + x = u(t)` with `u` linear from `u0` to `u1` over `dt`.
-fn first_order_step(x0: f64, u0: f64, u1: f64, dt: f64, tau: f64) -> f64 {
-    if tau <= 0.0 {
-        return u1;
-    }
-    let r = dt / tau;
-    let alpha = (-r).exp();
-    alpha * x0 + u1 - alpha * u0 - (u1 - u0) * (-r).exp_m1().abs() / r
 }
 
 #[cfg(test)]
