@@ -10,7 +10,9 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+use common::{read, root};
 
 use forgemon::acquire::SourceEvent;
 use forgemon::acquire::can::candump::BadLines;
@@ -40,14 +42,6 @@ const V0S_MPS: [f64; 3] = [3.9, 5.3, 5.3];
 const SAMPLE_RATE_HZ: f64 = 5000.0;
 const IDLE_SAMPLES: usize = 750; // 0.15 s before each blow and after the last
 const SEED: u64 = 4004;
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn read(rel: &str) -> String {
-    std::fs::read_to_string(root().join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
-}
 
 fn machine() -> Machine {
     parse_machine(MACHINE, &read(MACHINE)).expect("machine file").machine

@@ -10,8 +10,10 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
+
+use common::{read, root};
 
 use forgemon::acquire::SourceEvent;
 use forgemon::acquire::can::candump::BadLines;
@@ -46,14 +48,6 @@ const SEED: u64 = 1616;
 /// within 1e-5 here. What this test shows is the CAN FD path losing nothing; the estimator's
 /// accuracy on independently rendered, filtered data is `tests/estimate_rates.rs`'s.
 const EFFICIENCY_TOL: f64 = 0.02;
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn read(rel: &str) -> String {
-    std::fs::read_to_string(root().join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
-}
 
 fn machine() -> Machine {
     parse_machine(MACHINE, &read(MACHINE)).expect("machine file").machine
