@@ -10,11 +10,13 @@
 //! used when the samples give at least `OBSERVER_MIN_SAMPLES_PER_MODE` per period of the
 //! second mode, or when there is nothing to fit (no process sheet, no tracked height).
 //! Otherwise the model is fitted. Contact is located between samples either way: by the
-//! fit, or by extrapolating the load's rise back to zero (`contact_between_samples`).
+//! fit, or by a hinge fitted to the start of the load's rise (`contact`).
 
 pub mod approach;
 pub mod billet;
 pub mod billet_book;
+pub mod contact;
+pub mod decimate;
 pub mod fit;
 pub mod observer;
 pub mod result;
@@ -28,6 +30,7 @@ use crate::physics::process::Process;
 use crate::signal::segment::Blow;
 use approach::{ApproachError, ApproachFit, fit_impact_speed};
 use billet::{BilletCheck, BilletDetect, Transition};
+pub use contact::contact_between_samples;
 
 /// A tracked billet height below this fraction of the sheet's is impossible for an upset
 /// cylinder: the billets changed without a new-billet signal, so the height is no longer
@@ -312,11 +315,11 @@ impl Estimator {
         let n = self.blows;
         let approach = fit_impact_speed(&blow.samples, blow.i_contact, self.cfg.fit_s, blow.period_s)
             .map_err(|source| EstimateError::Approach { blow: n, source })?;
+        let h_guess_m = self.h_m.or(self.process.as_ref().map(|p| p.billet.height_m));
         // Contact between samples: from the load's rise, or where the model fits it.
-        let delta0 = contact_between_samples(blow);
+        let delta0 = self.locate_contact(blow, approach.v_impact_mps, h_guess_m);
         let gap_s = self.gap_s(blow);
         let complete = blow.lost_s == 0.0 && gap_s <= self.max_bridged_s();
-        let h_guess_m = self.h_m.or(self.process.as_ref().map(|p| p.billet.height_m));
         let mut fitted = match h_guess_m {
             Some(h) if complete && self.method_for(blow.period_s) == Method::ModelFit => {
                 self.fit(blow, approach, h, self.scale, delta0, true)
@@ -405,6 +408,21 @@ impl Estimator {
         Ok(e)
     }
 
+    /// First contact, samples after the segmenter's contact sample: the hinge shaped by the
+    /// process sheet's law from height `h_m` when both are known, else a straight line.
+    fn locate_contact(&self, blow: &Blow, v0_mps: f64, h_m: Option<f64>) -> f64 {
+        let law = self.process.as_ref().map(|p| {
+            let n = self.billet_blows + 1;
+            BilletLaw::new(p.billet.clone(), p.material.clone(), p.friction, LoadEffects::NEUTRAL, n)
+        });
+        let rise = law
+            .as_ref()
+            .zip(h_m)
+            .zip(contact::support_stiffness(&self.machine))
+            .map(|((law, h0_m), k)| contact::RiseModel { law, h0_m, v0_mps, k_series_n_per_m: k });
+        contact_between_samples(blow, rise.as_ref())
+    }
+
     /// The model fitted to `blow` from start height `h0_m` (`None`: it could not be, and
     /// the observer takes the blow).
     fn fit(
@@ -417,15 +435,21 @@ impl Estimator {
         search_contact: bool,
     ) -> Option<fit::ModelFit> {
         let process = self.process.as_ref()?;
+        // Above the fit's rate, a decimated copy: contact counts in its coarser samples.
+        let f = decimate::factor(blow.period_s);
+        let coarse = decimate::decimate(blow, f);
         let problem = fit::FitProblem {
             machine: &self.machine,
             process,
             blow_index: self.billet_blows + 1,
             h_start_m: h0_m,
-            blow,
+            blow: &coarse,
             approach,
         };
-        fit::fit_blow(&problem, self.cfg.encoder_resolution_m, scale0, delta0, search_contact).ok()
+        let mut m =
+            fit::fit_blow(&problem, self.cfg.encoder_resolution_m, scale0, delta0 / f as f64, search_contact).ok()?;
+        m.contact_samples *= f as f64;
+        Some(m)
     }
 
     /// The energies and the end height from the fitted simulated blow. Returns the height.
@@ -486,7 +510,7 @@ impl Estimator {
             Machine::ScrewPress(_) => (-delta0).max(0.0) * blow.period_s * v0,
             Machine::Hammer(_) => 0.0,
         };
-        let max_comp = o.compression_m.iter().copied().fold(0.0, f64::max) + before_m;
+        let max_comp = o.set_m.max(0.0) + before_m;
         let (plastic_j, friction_j, h_end_m) = match (&self.process, h_start_m) {
             (Some(p), Some(h0)) => {
                 let law =
@@ -568,7 +592,7 @@ impl Estimator {
             tolerance_m,
             agree: (sheet_m - encoder_m).abs() <= tolerance_m,
         });
-        let h = if self.process.is_some() { self.h_m.or(chained) } else { None };
+        let h = if self.process.is_some() { chained.or(self.h_m) } else { None };
         (h, check)
     }
 }
@@ -576,45 +600,6 @@ impl Estimator {
 /// A fit whose start height differs from the billet's by more than this is run again, m:
 /// a tenth of the encoder's resolution.
 pub const REFIT_HEIGHT_M: f64 = 1e-6;
-
-/// Most samples of the load's rise that `contact_between_samples` fits a line through.
-pub const CONTACT_RISE_SAMPLES: usize = 4;
-/// The located contact lies at most this many samples before the segmenter's contact
-/// sample (which walks back to where the load left its noise band), and at most
-/// `CONTACT_AFTER_SAMPLES` after it.
-pub const CONTACT_BEFORE_SAMPLES: f64 = 3.0;
-pub const CONTACT_AFTER_SAMPLES: f64 = 0.5;
-
-/// First contact, in samples after the segmenter's contact sample (negative: before it):
-/// a line through the load's rise from the contact sample on (at most
-/// `CONTACT_RISE_SAMPLES`, while it keeps rising), extrapolated back to zero.
-pub fn contact_between_samples(blow: &Blow) -> f64 {
-    let z = |k: usize| blow.samples.get(k).map(|s| s.load_n - blow.load_zero_n);
-    let i = blow.i_contact;
-    let mut pts: Vec<(f64, f64)> = Vec::with_capacity(CONTACT_RISE_SAMPLES);
-    let mut last = f64::MIN;
-    for k in i..(i + CONTACT_RISE_SAMPLES).min(blow.i_end + 1) {
-        match z(k) {
-            Some(v) if v > last => {
-                pts.push(((k - i) as f64, v));
-                last = v;
-            }
-            _ => break,
-        }
-    }
-    if pts.len() < 2 {
-        return 0.0;
-    }
-    let nf = pts.len() as f64;
-    let (st, sy) = pts.iter().fold((0.0, 0.0), |(a, b), (t, y)| (a + t, b + y));
-    let (stt, sty) = pts.iter().fold((0.0, 0.0), |(a, b), (t, y)| (a + t * t, b + t * y));
-    let slope = (nf * sty - st * sy) / (nf * stt - st * st);
-    let intercept = (sy - slope * st) / nf;
-    if !(slope.is_finite() && slope > 0.0) {
-        return 0.0;
-    }
-    (-intercept / slope).clamp(-CONTACT_BEFORE_SAMPLES, CONTACT_AFTER_SAMPLES)
-}
 
 /// Fraction of the second-mode period that a hole inside a blow may last and still be
 /// bridged by interpolation (`Estimator::max_bridged_s`).
