@@ -3,6 +3,8 @@
 //! go through the live pipeline. Faults: the server stopped and restarted, slow replies
 //! beyond the timeout, exception replies; and the PLC coil write.
 
+mod common;
+
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -14,7 +16,6 @@ use forgemon::acquire::modbus::{
     Transport, WordOrder, detail_count, run, serve_rtu, shared_bank, write_coil,
 };
 use forgemon::acquire::{ChannelSpec, SourceEvent};
-use forgemon::config::{parse_machine, parse_process};
 use forgemon::physics::{EffectSet, Machine, Process};
 use forgemon::pipeline::{Pipeline, PipelineConfig, PipelineEvent};
 use forgemon::record::Status;
@@ -46,12 +47,7 @@ const GAINS: [(Role, f64); 3] = [(Role::Load, 10.0), (Role::Disp, 1e-6), (Role::
 const RING: u16 = 8192;
 
 fn machine_and_process() -> (Machine, Process) {
-    let root = env!("CARGO_MANIFEST_DIR");
-    let m = "config/hammer-lg1000.machine.toml";
-    let p = "config/steel-16NiCrMo13.process.toml";
-    let mtext = std::fs::read_to_string(format!("{root}/{m}")).unwrap();
-    let ptext = std::fs::read_to_string(format!("{root}/{p}")).unwrap();
-    (parse_machine(m, &mtext).unwrap().machine, parse_process(p, &ptext).unwrap())
+    (common::machine("hammer-lg1000.machine.toml"), common::process("steel-16NiCrMo13.process.toml"))
 }
 
 /// A continuous stream: `idle_s[i]` of machine at rest before blow i, and 0.1 s after the
@@ -183,14 +179,7 @@ fn efficiencies(found: &[PipelineEvent]) -> Vec<f64> {
 }
 
 fn assert_blows_match(found: &[PipelineEvent], truth: &[SynthBlow]) {
-    let blows: Vec<_> = found
-        .iter()
-        .filter_map(|e| match e {
-            PipelineEvent::Blow { estimate, .. } => Some(estimate),
-            PipelineEvent::Billet(_) => None,
-            PipelineEvent::Rejected { cut, error } => panic!("blow at {} rejected: {error}", cut.t_contact_s),
-        })
-        .collect();
+    let blows: Vec<_> = found.iter().filter_map(common::estimate_of).collect();
     assert_eq!(blows.len(), truth.len(), "every blow found, none extra");
     for (b, t) in blows.iter().zip(truth) {
         let e = t.truth.efficiency();
