@@ -3,6 +3,8 @@
 //! go through the live pipeline. Faults: the server stopped and restarted, slow replies
 //! beyond the timeout, exception replies; and the PLC coil write.
 
+mod common;
+
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -14,7 +16,6 @@ use forgemon::acquire::modbus::{
     Transport, WordOrder, detail_count, run, serve_rtu, shared_bank, write_coil,
 };
 use forgemon::acquire::{ChannelSpec, SourceEvent};
-use forgemon::config::{parse_machine, parse_process};
 use forgemon::physics::{EffectSet, Machine, Process};
 use forgemon::pipeline::{Pipeline, PipelineConfig, PipelineEvent};
 use forgemon::record::Status;
@@ -46,12 +47,7 @@ const GAINS: [(Role, f64); 3] = [(Role::Load, 10.0), (Role::Disp, 1e-6), (Role::
 const RING: u16 = 8192;
 
 fn machine_and_process() -> (Machine, Process) {
-    let root = env!("CARGO_MANIFEST_DIR");
-    let m = "config/hammer-lg1000.machine.toml";
-    let p = "config/steel-16NiCrMo13.process.toml";
-    let mtext = std::fs::read_to_string(format!("{root}/{m}")).unwrap();
-    let ptext = std::fs::read_to_string(format!("{root}/{p}")).unwrap();
-    (parse_machine(m, &mtext).unwrap().machine, parse_process(p, &ptext).unwrap())
+    (common::machine("hammer-lg1000.machine.toml"), common::process("steel-16NiCrMo13.process.toml"))
 }
 
 /// A continuous stream: `idle_s[i]` of machine at rest before blow i, and 0.1 s after the
@@ -106,6 +102,30 @@ fn produce(bank: SharedBank, rows: Vec<CaptureRow>, ring_len: u16) -> JoinHandle
             done = due;
         }
     })
+}
+
+/// The Modbus driver running on a config, its events collected into a log.
+struct Running {
+    switch: watch::Sender<bool>,
+    log: Log,
+    collector: JoinHandle<()>,
+    driver: JoinHandle<()>,
+}
+
+impl Running {
+    fn start(cfg: ModbusConfig) -> Running {
+        let (tx, rx) = mpsc::channel(4096);
+        let (stop, shutdown) = watch::channel(false);
+        let (log, collector) = collect(rx);
+        Running { switch: stop, log, collector, driver: tokio::spawn(run(cfg, tx, shutdown)) }
+    }
+
+    /// Stop the driver; every event it sent is in the log after this.
+    async fn stop(self) {
+        self.switch.send(true).unwrap();
+        self.driver.await.unwrap();
+        self.collector.await.unwrap();
+    }
 }
 
 /// Events as they arrive, stamped with the time they arrived.
@@ -183,14 +203,7 @@ fn efficiencies(found: &[PipelineEvent]) -> Vec<f64> {
 }
 
 fn assert_blows_match(found: &[PipelineEvent], truth: &[SynthBlow]) {
-    let blows: Vec<_> = found
-        .iter()
-        .filter_map(|e| match e {
-            PipelineEvent::Blow { estimate, .. } => Some(estimate),
-            PipelineEvent::Billet(_) => None,
-            PipelineEvent::Rejected { cut, error } => panic!("blow at {} rejected: {error}", cut.t_contact_s),
-        })
-        .collect();
+    let blows: Vec<_> = found.iter().filter_map(common::estimate_of).collect();
     assert_eq!(blows.len(), truth.len(), "every blow found, none extra");
     for (b, t) in blows.iter().zip(truth) {
         let e = t.truth.efficiency();
@@ -218,15 +231,11 @@ async fn block_mode_over_tcp_finds_every_blow_of_a_simulated_hammer() {
     let bank = shared_bank();
     let service = BankService { bank: bank.clone(), faults: Arc::new(Faults::default()), unit: None };
     let server = TcpServer::start("127.0.0.1:0".parse().unwrap(), service).await.unwrap();
-    let (tx, rx) = mpsc::channel(4096);
-    let (stop, shutdown) = watch::channel(false);
-    let (log, collector) = collect(rx);
-    let driver = tokio::spawn(run(block_config(&server), tx, shutdown));
+    let driver = Running::start(block_config(&server));
+    let log = driver.log.clone();
     produce(bank, rows.clone(), RING).await.unwrap();
     tokio::time::sleep(Duration::from_millis(200)).await;
-    stop.send(true).unwrap();
-    driver.await.unwrap();
-    collector.await.unwrap();
+    driver.stop().await;
 
     let samples: usize =
         log.lock().unwrap().iter().map(|(_, e)| if let SourceEvent::Batch(b) = e { b.len() } else { 0 }).sum();
@@ -266,15 +275,11 @@ async fn block_mode_over_rtu_on_a_pty_finds_every_blow() {
         map: vec![],
         mode: Mode::Block { base: 0, channels: channels() },
     };
-    let (tx, rx) = mpsc::channel(4096);
-    let (stop, shutdown) = watch::channel(false);
-    let (log, collector) = collect(rx);
-    let driver = tokio::spawn(run(cfg, tx, shutdown));
+    let driver = Running::start(cfg);
+    let log = driver.log.clone();
     produce(bank, rows.clone(), RING).await.unwrap();
     tokio::time::sleep(Duration::from_millis(200)).await;
-    stop.send(true).unwrap();
-    driver.await.unwrap();
-    collector.await.unwrap();
+    driver.stop().await;
     server.abort();
     drop(slave);
 
@@ -297,23 +302,19 @@ async fn server_stopped_and_restarted_is_reconnected_with_a_gap_and_the_driver_k
     let bank = shared_bank();
     let service = BankService { bank: bank.clone(), faults: Arc::new(Faults::default()), unit: None };
     let mut server = TcpServer::start("127.0.0.1:0".parse().unwrap(), service).await.unwrap();
-    let (tx, rx) = mpsc::channel(4096);
-    let (stop, shutdown) = watch::channel(false);
-    let (log, collector) = collect(rx);
-    let driver = tokio::spawn(run(block_config(&server), tx, shutdown));
+    let driver = Running::start(block_config(&server));
+    let log = driver.log.clone();
     let producer = produce(bank, rows, 2048);
     tokio::time::sleep(Duration::from_secs_f64(blow1_end_wall_s + 0.3)).await;
     server.stop();
     tokio::time::sleep(Duration::from_millis(1000)).await;
-    assert!(!driver.is_finished(), "the driver never exits on a lost link");
+    assert!(!driver.driver.is_finished(), "the driver never exits on a lost link");
     server.restart().await.unwrap();
     let restarted = Instant::now();
     producer.await.unwrap();
     tokio::time::sleep(Duration::from_millis(200)).await;
-    assert!(!driver.is_finished());
-    stop.send(true).unwrap();
-    driver.await.unwrap();
-    collector.await.unwrap();
+    assert!(!driver.driver.is_finished());
+    driver.stop().await;
 
     let st = statuses(&log);
     assert!(st.iter().any(|(_, s)| s.state == "reconnecting"), "the outage was reported");
@@ -395,10 +396,8 @@ async fn slow_replies_and_exceptions_are_counted_and_not_fatal() {
         map: poll_map(),
         mode: Mode::Poll,
     };
-    let (tx, rx) = mpsc::channel(4096);
-    let (stop, shutdown) = watch::channel(false);
-    let (log, collector) = collect(rx);
-    let driver = tokio::spawn(run(cfg, tx, shutdown));
+    let driver = Running::start(cfg);
+    let log = driver.log.clone();
     tokio::time::sleep(Duration::from_millis(300)).await;
     // Every 3rd request is an exception (two reads per poll: holding, input).
     faults.set_exception_every(3);
@@ -410,10 +409,8 @@ async fn slow_replies_and_exceptions_are_counted_and_not_fatal() {
     faults.set_delay(Duration::ZERO);
     let healed = Instant::now();
     tokio::time::sleep(Duration::from_millis(1300)).await;
-    assert!(!driver.is_finished(), "faults are not fatal");
-    stop.send(true).unwrap();
-    driver.await.unwrap();
-    collector.await.unwrap();
+    assert!(!driver.driver.is_finished(), "faults are not fatal");
+    driver.stop().await;
 
     let b = batches(&log);
     assert!(b.len() > 20, "{} polls", b.len());
@@ -450,16 +447,12 @@ async fn rtu_polling_over_a_pty_pair() {
         map: poll_map(),
         mode: Mode::Poll,
     };
-    let (tx, rx) = mpsc::channel(4096);
-    let (stop, shutdown) = watch::channel(false);
-    let (log, collector) = collect(rx);
-    let driver = tokio::spawn(run(cfg, tx, shutdown));
+    let driver = Running::start(cfg);
+    let log = driver.log.clone();
     tokio::time::sleep(Duration::from_millis(400)).await;
     fill_poll_bank(&bank, -7_500.0);
     tokio::time::sleep(Duration::from_millis(400)).await;
-    stop.send(true).unwrap();
-    driver.await.unwrap();
-    collector.await.unwrap();
+    driver.stop().await;
     server.abort();
     drop(slave);
 
@@ -501,15 +494,11 @@ async fn a_ring_unlike_the_config_is_counted_not_fatal() {
     let server = TcpServer::start("127.0.0.1:0".parse().unwrap(), service).await.unwrap();
     let mut cfg = block_config(&server);
     cfg.mode = Mode::Block { base: 0, channels: channels()[..2].to_vec() };
-    let (tx, rx) = mpsc::channel(4096);
-    let (stop, shutdown) = watch::channel(false);
-    let (log, collector) = collect(rx);
-    let driver = tokio::spawn(run(cfg, tx, shutdown));
+    let driver = Running::start(cfg);
+    let log = driver.log.clone();
     tokio::time::sleep(Duration::from_millis(300)).await;
-    assert!(!driver.is_finished());
-    stop.send(true).unwrap();
-    driver.await.unwrap();
-    collector.await.unwrap();
+    assert!(!driver.driver.is_finished());
+    driver.stop().await;
     assert!(batches(&log).is_empty());
     let last = statuses(&log).last().unwrap().1.clone();
     assert!(last.decode_errors >= 10, "every poll counted: {last:?}");

@@ -183,6 +183,10 @@ async fn binary_frames_over_a_pty_with_garbage_corrupt_crcs_and_a_dropped_frame(
     let (truth, rows) = session(41);
     let frames = frames(&rows);
     let dropped = idle_frame(5);
+    // Noise glued to the front of these frames (no delimiter between): CONTRACTS.md §7
+    // drops the failed segment, so each frame is lost with its noise, a gap like a
+    // dropped frame. In the idle stretch, so that no blow is cut.
+    let glued = [idle_frame(4), idle_frame(6)];
     let mut wire = Vec::new();
     let (mut garbage, mut corrupt) = (0, 0);
     for (k, f) in frames.iter().enumerate() {
@@ -195,8 +199,7 @@ async fn binary_frames_over_a_pty_with_garbage_corrupt_crcs_and_a_dropped_frame(
             wire.extend_from_slice(&[0x7E, 0x13, 0x00, 0xC3, 0x55, 0x00]);
             garbage += 2;
         }
-        if k % 97 == 50 {
-            // Noise glued to the front of a frame (no delimiter): anywhere, even mid-blow.
+        if glued.contains(&k) {
             wire.extend_from_slice(&[0xA5, 0x5A, 0x01, 0xFF]);
             garbage += 1;
         }
@@ -218,7 +221,8 @@ async fn binary_frames_over_a_pty_with_garbage_corrupt_crcs_and_a_dropped_frame(
         }
         master
     });
-    let expected = (rows.len() - FRAME_SAMPLES) as u64;
+    let lost_frames = [glued[0], dropped, glued[1]];
+    let expected = (rows.len() - lost_frames.len() * FRAME_SAMPLES) as u64;
     wait_for_samples(&mut samples, expected).await;
     let _master = writer.await.unwrap();
     stop_tx.send(true).unwrap();
@@ -226,20 +230,22 @@ async fn binary_frames_over_a_pty_with_garbage_corrupt_crcs_and_a_dropped_frame(
     let c = collector.await.unwrap();
 
     assert_eq!(counters.samples, expected);
-    assert_eq!(counters.frames, frames.len() as u64 - 1);
+    assert_eq!(counters.frames, (frames.len() - lost_frames.len()) as u64);
     assert_eq!(counters.crc_errors, corrupt);
     assert_eq!(counters.decode_errors, garbage);
     assert_eq!(counters.drops, 0);
-    // The dropped frame is one gap of one frame's samples, where it was lost.
-    assert_eq!(c.gaps.len(), 1);
-    assert_eq!(c.gaps[0].samples_lost, FRAME_SAMPLES as u64);
-    assert_eq!(c.gaps[0].reason, "sequence_jump");
-    let t_lost = rows[dropped * FRAME_SAMPLES].t_s;
-    assert!((c.gaps[0].t_s - t_lost).abs() < 1e-6, "gap at {} vs {t_lost}", c.gaps[0].t_s);
-    assert_eq!(counters.gaps, 1);
+    // Each lost frame (dropped, or lost with its noise) is one gap of one frame's samples,
+    // where it was lost.
+    assert_eq!(c.gaps.len(), lost_frames.len());
+    for (gap, k) in c.gaps.iter().zip(lost_frames) {
+        assert_eq!((gap.samples_lost, gap.reason.as_str()), (FRAME_SAMPLES as u64, "sequence_jump"));
+        let t_lost = rows[k * FRAME_SAMPLES].t_s;
+        assert!((gap.t_s - t_lost).abs() < 1e-6, "gap at {} vs {t_lost}", gap.t_s);
+    }
+    assert_eq!(counters.gaps, lost_frames.len() as u64);
     // The counters reach the status messages; the sequence crossed the u32 wrap unbroken.
     let s = last_status(&c);
-    assert_eq!((s.state.as_str(), s.crc_errors, s.decode_errors, s.gaps), ("stopped", corrupt, garbage, 1));
+    assert_eq!((s.state.as_str(), s.crc_errors, s.decode_errors, s.gaps), ("stopped", corrupt, garbage, 3));
     assert!(c.batches.windows(2).all(|w| w[1].seq > w[0].seq));
     assert!(c.batches.iter().all(|b| b.host_time_ns == fixed_clock()));
     assert_every_blow(&c.order, &truth);

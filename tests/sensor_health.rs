@@ -6,11 +6,12 @@
 //! samples as a DAQ would show them: a load gain 10 % high, a charge amplifier whose offset
 //! drifts faster and faster.
 
+mod common;
+
 use forgemon::alert::AlertKind;
-use forgemon::config::{parse_machine, parse_process};
 use forgemon::estimate::BlowEstimate;
 use forgemon::physics::{EffectSet, Machine, Process};
-use forgemon::pipeline::{Feeder, Pipeline, PipelineConfig, PipelineEvent};
+use forgemon::pipeline::{Feeder, Pipeline, PipelineConfig};
 use forgemon::signal::capture::CaptureRow;
 use forgemon::simdevice::{BilletPlan, SimMachine};
 use forgemon::synth::{CaptureSpec, rows_batch};
@@ -23,16 +24,16 @@ const TUNING_SEEDS: [u64; 3] = [101, 102, 103];
 const RATES_HZ: [f64; 3] = [5e3, 20e3, 100e3];
 
 fn hammer() -> Machine {
-    parse_machine("m", include_str!("../config/hammer-lg1000.machine.toml")).expect("machine").machine
+    common::machine("hammer-lg1000.machine.toml")
 }
 fn press() -> Machine {
-    parse_machine("m", include_str!("../config/screw-press-spr400.machine.toml")).expect("machine").machine
+    common::machine("screw-press-spr400.machine.toml")
 }
 fn steel() -> Process {
-    parse_process("p", include_str!("../config/steel-16NiCrMo13.process.toml")).expect("process")
+    common::process("steel-16NiCrMo13.process.toml")
 }
 fn copper() -> Process {
-    parse_process("p", include_str!("../config/copper-cu99.process.toml")).expect("process")
+    common::process("copper-cu99.process.toml")
 }
 
 /// A session and its machine: the hammer forges four steel billets with two blows each
@@ -83,14 +84,7 @@ fn run(machine: &Machine, process: &Process, rate_hz: f64, rows: &[CaptureRow]) 
         feeder.push(&rows_batch("daq", i as u64, t0_ns, period_ns, chunk), &mut events);
     }
     feeder.pipeline_mut().end_of_stream(&mut events);
-    events
-        .into_iter()
-        .filter_map(|e| match e {
-            PipelineEvent::Blow { estimate, .. } => Some(*estimate),
-            PipelineEvent::Billet(_) => None,
-            PipelineEvent::Rejected { cut, error } => panic!("blow at {} rejected: {error}", cut.t_contact_s),
-        })
-        .collect()
+    common::estimates(&events)
 }
 
 fn checks(blows: &[BlowEstimate]) -> Vec<f64> {

@@ -151,42 +151,19 @@ struct RawPlcCoil {
 pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceConfig, ConfigError> {
     let doc = Document::parse(origin, text)?;
     let raw: RawService = doc.read()?;
-    let path = |s: &str| {
-        let p = PathBuf::from(s);
-        if p.is_absolute() { p } else { base.join(p) }
-    };
-    let rec = &raw.recording;
-    let rotate_bytes = match rec.rotate_bytes {
-        Some(b) => doc.in_whole_range("recording.rotate_bytes", b, &ROTATE_BYTES)?,
-        None => DEFAULT_ROTATE_BYTES,
-    };
-    let rotate_seconds = match rec.rotate_seconds {
-        Some(s) => doc.in_whole_range("recording.rotate_seconds", s, &ROTATE_SECONDS)?,
-        None => DEFAULT_ROTATE_SECONDS,
-    };
-    let http_listen = match &raw.http {
-        None => DEFAULT_HTTP_LISTEN.parse().expect("a valid default address"),
-        Some(h) => address(&doc, "http.listen", &h.listen)?,
-    };
+    let path = |s: &str| relative_to(base, s);
+    let (rotate_bytes, rotate_seconds) = parse_rotation(&doc, &raw.recording)?;
+    let http_listen = parse_http(&doc, raw.http.as_ref())?;
     let (alerts, webhook, plc_coil) = match &raw.alerts {
         Some(a) => parse_alerts(&doc, a)?,
         None => (AlertConfig::default(), None, None),
     };
     let (new_billet_rise_m, idle_new_billet_s) = parse_billets(&doc, raw.billets.as_ref())?;
-    if raw.sources.is_empty() {
-        return Err(doc.invalid("sources", "must be a non-empty array of tables ([[sources]])"));
-    }
-    let sources =
-        (1..=raw.sources.len()).map(|i| source::parse_source(&doc, i, base)).collect::<Result<Vec<_>, _>>()?;
-    let mut names: Vec<&str> = sources.iter().map(SourceSpec::name).collect();
-    names.sort();
-    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
-        return Err(doc.invalid("sources", format!("two sources are named '{}'", w[0])));
-    }
+    let sources = parse_sources(&doc, raw.sources.len(), base)?;
     Ok(ServiceConfig {
         machine_path: path(&raw.machine),
         process_path: raw.process.as_deref().map(path),
-        recording_dir: path(&rec.dir),
+        recording_dir: path(&raw.recording.dir),
         rotate_bytes,
         rotate_seconds,
         http_listen,
@@ -197,6 +174,47 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         idle_new_billet_s,
         sources,
     })
+}
+
+/// `s` as a path: absolute as given, relative from the configuration's directory `base`.
+fn relative_to(base: &Path, s: &str) -> PathBuf {
+    let p = PathBuf::from(s);
+    if p.is_absolute() { p } else { base.join(p) }
+}
+
+/// `[recording]`'s rotation: bytes and seconds, each within its range or the default.
+fn parse_rotation(doc: &Document<'_>, rec: &RawRecording) -> Result<(u64, u64), ConfigError> {
+    let rotate_bytes = match rec.rotate_bytes {
+        Some(b) => doc.in_whole_range("recording.rotate_bytes", b, &ROTATE_BYTES)?,
+        None => DEFAULT_ROTATE_BYTES,
+    };
+    let rotate_seconds = match rec.rotate_seconds {
+        Some(s) => doc.in_whole_range("recording.rotate_seconds", s, &ROTATE_SECONDS)?,
+        None => DEFAULT_ROTATE_SECONDS,
+    };
+    Ok((rotate_bytes, rotate_seconds))
+}
+
+/// `[http] listen`, or the loopback default.
+fn parse_http(doc: &Document<'_>, http: Option<&RawHttp>) -> Result<SocketAddr, ConfigError> {
+    match http {
+        Some(h) => address(doc, "http.listen", &h.listen),
+        None => Ok(DEFAULT_HTTP_LISTEN.parse().expect("a valid default address")),
+    }
+}
+
+/// The `count` `[[sources]]` tables: at least one, each read by its kind, names unique.
+fn parse_sources(doc: &Document<'_>, count: usize, base: &Path) -> Result<Vec<SourceSpec>, ConfigError> {
+    if count == 0 {
+        return Err(doc.invalid("sources", "must be a non-empty array of tables ([[sources]])"));
+    }
+    let sources = (1..=count).map(|i| source::parse_source(doc, i, base)).collect::<Result<Vec<_>, _>>()?;
+    let mut names: Vec<&str> = sources.iter().map(SourceSpec::name).collect();
+    names.sort();
+    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+        return Err(doc.invalid("sources", format!("two sources are named '{}'", w[0])));
+    }
+    Ok(sources)
 }
 
 /// What a service file sets of the pipeline's own thresholds: what a replay needs to judge
@@ -259,6 +277,22 @@ fn parse_alerts(
     a: &RawAlerts,
 ) -> Result<(AlertConfig, Option<String>, Option<PlcCoil>), ConfigError> {
     let mut alerts = AlertConfig::default();
+    efficiency_rule(doc, a, &mut alerts)?;
+    if let Some(r) = a.residual_limit {
+        alerts.residual_limit = doc.in_range("alerts.residual_limit", r, &RESIDUAL_LIMIT)?;
+    }
+    sensor_rule(doc, a, &mut alerts)?;
+    if let Some(d) = a.debounce_blows {
+        alerts.debounce_blows = doc.in_whole_range("alerts.debounce_blows", d, &DEBOUNCE_BLOWS)? as u32;
+    }
+    if let Some(b) = a.hard_blow {
+        alerts.on_hard_blow = b;
+    }
+    Ok((alerts, webhook(doc, a.webhook.as_deref())?, plc_coil(doc, a.plc_coil.as_ref())?))
+}
+
+/// The low-efficiency rule: `k_low` of the last `n_window` blows below `low_efficiency`.
+fn efficiency_rule(doc: &Document<'_>, a: &RawAlerts, alerts: &mut AlertConfig) -> Result<(), ConfigError> {
     if let Some(x) = a.low_efficiency {
         alerts.low_efficiency = doc.in_range("alerts.low_efficiency", x, &EFFICIENCY)?;
     }
@@ -271,9 +305,11 @@ fn parse_alerts(
     if alerts.k_low > alerts.n_window {
         return Err(doc.invalid("alerts.k_low", format!("{} exceeds n_window {}", alerts.k_low, alerts.n_window)));
     }
-    if let Some(r) = a.residual_limit {
-        alerts.residual_limit = doc.in_range("alerts.residual_limit", r, &RESIDUAL_LIMIT)?;
-    }
+    Ok(())
+}
+
+/// The sensor-health rule: `sensor_k` of the last `sensor_n` blows beyond `sensor_limit`.
+fn sensor_rule(doc: &Document<'_>, a: &RawAlerts, alerts: &mut AlertConfig) -> Result<(), ConfigError> {
     if let Some(x) = a.sensor_limit {
         alerts.sensor_limit = doc.in_range("alerts.sensor_limit", x, &SENSOR_LIMIT)?;
     }
@@ -286,28 +322,26 @@ fn parse_alerts(
     if alerts.sensor_k > alerts.sensor_n {
         return Err(doc.invalid("alerts.sensor_k", format!("{} exceeds sensor_n {}", alerts.sensor_k, alerts.sensor_n)));
     }
-    if let Some(d) = a.debounce_blows {
-        alerts.debounce_blows = doc.in_whole_range("alerts.debounce_blows", d, &DEBOUNCE_BLOWS)? as u32;
-    }
-    if let Some(b) = a.hard_blow {
-        alerts.on_hard_blow = b;
-    }
-    let webhook = match &a.webhook {
+    Ok(())
+}
+
+/// `alerts.webhook`: an http(s) URL.
+fn webhook(doc: &Document<'_>, url: Option<&str>) -> Result<Option<String>, ConfigError> {
+    match url {
         Some(url) if !(url.starts_with("http://") || url.starts_with("https://")) => {
-            return Err(doc.invalid("alerts.webhook", format!("'{url}' is not an http(s) URL")));
+            Err(doc.invalid("alerts.webhook", format!("'{url}' is not an http(s) URL")))
         }
-        other => other.clone(),
-    };
-    let plc_coil = match &a.plc_coil {
-        Some(c) => {
-            if c.unit > 247 {
-                return Err(doc.invalid("alerts.plc_coil.unit", "must be 0..=247"));
-            }
-            Some(PlcCoil { address: address(doc, "alerts.plc_coil.address", &c.address)?, unit: c.unit, coil: c.coil })
-        }
-        None => None,
-    };
-    Ok((alerts, webhook, plc_coil))
+        other => Ok(other.map(str::to_string)),
+    }
+}
+
+/// `[alerts.plc_coil]`: the PLC's address:port, a Modbus unit id and the coil.
+fn plc_coil(doc: &Document<'_>, c: Option<&RawPlcCoil>) -> Result<Option<PlcCoil>, ConfigError> {
+    let Some(c) = c else { return Ok(None) };
+    if c.unit > 247 {
+        return Err(doc.invalid("alerts.plc_coil.unit", "must be 0..=247"));
+    }
+    Ok(Some(PlcCoil { address: address(doc, "alerts.plc_coil.address", &c.address)?, unit: c.unit, coil: c.coil }))
 }
 
 /// `s`, the value of `key`, as an address:port.
@@ -527,6 +561,38 @@ gain = 0.01
         assert!(e.contains("key 'alerts.hard_blow' must be true or false"), "{e}");
         let e = error(&GOOD.replace("low_efficiency = 0.55", "k_low = 2.5"));
         assert!(e.contains("key 'alerts.k_low' must be a whole number"), "{e}");
+    }
+
+    /// The source checks no other test reaches: names, a missing address, path, ring
+    /// channels or register map, unit ids the Modbus spec reserves (248..=255), and named
+    /// registers whose `name=value` would not be one word of the status detail.
+    #[test]
+    fn source_and_modbus_errors_name_their_key() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+        let press = std::fs::read_to_string(dir.join("press-modbus-serial.service.toml")).unwrap();
+        let e = |text: &str| parse_service("p", &dir, text).unwrap_err().to_string();
+        let no_address = press.replace("address = \"192.168.0.10:502\"\nunit = 1\nmode", "unit = 1\nmode");
+        assert!(e(&no_address).ends_with("missing key 'sources[2].address'"), "{}", e(&no_address));
+        let rtu = press.replace("transport = \"tcp\"", "transport = \"rtu\"");
+        assert!(e(&rtu).ends_with("missing key 'sources[2].path'"), "{}", e(&rtu));
+        let unit = e(&press.replace("unit = 1\nmode", "unit = 248\nmode"));
+        assert!(unit.contains("key 'sources[2].unit' must be 0..=247"), "{unit}");
+        let block = e(&press.replace("mode = \"poll\"", "mode = \"block\""));
+        assert!(block.ends_with("missing key 'sources[2].channels'"), "{block}");
+        let no_map = press.split("[[sources.registers]]").next().unwrap().to_string();
+        assert!(e(&no_map).ends_with("missing key 'sources[2].registers'"), "{}", e(&no_map));
+        let twice = e(&press.replace("name = \"plc\"", "name = \"daq\""));
+        assert!(twice.contains("key 'sources' ") && twice.contains("two sources are named 'daq'"), "{twice}");
+        let bad_name = e(&press.replace("name = \"plc\"", "name = \"p l c\""));
+        assert!(bad_name.contains("key 'sources[2].name' must be letters, digits, '_' or '-'"), "{bad_name}");
+        let coil = e(&press.replace("unit = 1\ncoil = 12", "unit = 250\ncoil = 12"));
+        assert!(coil.contains("key 'alerts.plc_coil.unit' must be 0..=247"), "{coil}");
+        let spaced = e(&press.replace("name = \"setpoint_J\"", "name = \"setpoint J\""));
+        assert!(spaced.contains("key 'sources[2].registers[1].name' must be a non-empty word"), "{spaced}");
+        let own = e(&press.replace("name = \"setpoint_J\"", "name = \"timeouts\""));
+        assert!(own.contains("must not be 'timeouts', a key the status detail already uses"), "{own}");
+        let none = e(&format!("sources = []\n{}", GOOD.split("[[sources]]").next().unwrap()));
+        assert!(none.contains("key 'sources' must be a non-empty array of tables ([[sources]])"), "{none}");
     }
 
     #[test]

@@ -3,6 +3,7 @@
 //! `acquire::can::parse_can_source`, after its key names are checked here.
 
 use std::path::Path;
+use std::time::Duration;
 
 use serde::Deserialize;
 use serde::de::IgnoredAny;
@@ -169,47 +170,65 @@ pub(super) fn parse_source(doc: &Document<'_>, index: usize, base: &Path) -> Res
     if value.get_ref().as_table().is_none() {
         return Err(doc.invalid(&prefix, "must be a table ([[sources]])"));
     }
-    let key = |k: &str| format!("{prefix}.{k}");
-    let name = match doc.get(&key("name")).map(|v| v.get_ref().as_str()) {
-        None => return Err(doc.missing(&key("name"))),
-        Some(None) => return Err(doc.invalid(&key("name"), "must be a string")),
-        Some(Some(n)) => n.to_string(),
-    };
-    if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
-        return Err(doc.invalid(&key("name"), "must be letters, digits, '_' or '-'"));
-    }
-    match doc.choice(&key("kind"), &["serial", "modbus", "can"])? {
+    let name = source_name(doc, &format!("{prefix}.name"))?;
+    match doc.choice(&format!("{prefix}.kind"), &["serial", "modbus", "can"])? {
         "serial" => {
             let raw: RawSerial = doc.read_value(value, &prefix)?;
-            let baud = match raw.baud {
-                Some(b) => doc.in_whole_range(&key("baud"), b, &BAUD)? as u32,
-                None => DEFAULT_BAUD,
-            };
-            let format = match raw.format {
-                None | Some(RawFormat::Binary) => SerialFormat::Binary,
-                Some(RawFormat::Ascii) => SerialFormat::Ascii,
-            };
-            let channels = channels(doc, &key("channels"), &raw.channels)?;
-            // CONTRACTS.md §7: 1..=16 channels per frame.
-            if !(1..=16).contains(&channels.len()) {
-                return Err(
-                    doc.invalid(&key("channels"), format!("has {} entries; a frame carries 1 to 16", channels.len()))
-                );
-            }
-            Ok(SourceSpec::Serial { name, path: raw.path, baud, format, channels })
+            serial(doc, &prefix, name, raw)
         }
         "modbus" => {
             let raw: RawModbus = doc.read_value(value, &prefix)?;
             Ok(SourceSpec::Modbus(modbus(doc, &prefix, name, raw)?))
         }
-        _ => {
-            let _: CanKeys = doc.read_value(value.clone(), &prefix)?;
-            let table: toml::Table = doc.read_value(value, &prefix)?;
-            crate::acquire::can::parse_can_source(doc.origin(), &prefix, &table, base)
-                .map(SourceSpec::Can)
-                .map_err(|e| doc.locate(e))
-        }
+        _ => can(doc, &prefix, value, base),
     }
+}
+
+/// A source's `name` at `key`: a string of letters, digits, '_' or '-'.
+fn source_name(doc: &Document<'_>, key: &str) -> Result<String, ConfigError> {
+    let name = match doc.get(key).map(|v| v.get_ref().as_str()) {
+        None => return Err(doc.missing(key)),
+        Some(None) => return Err(doc.invalid(key, "must be a string")),
+        Some(Some(n)) => n.to_string(),
+    };
+    if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
+        return Err(doc.invalid(key, "must be letters, digits, '_' or '-'"));
+    }
+    Ok(name)
+}
+
+/// `kind = "can"`: the key names are checked here, the values by `parse_can_source`.
+fn can(
+    doc: &Document<'_>,
+    prefix: &str,
+    value: toml::Spanned<toml::de::DeValue<'_>>,
+    base: &Path,
+) -> Result<SourceSpec, ConfigError> {
+    let _: CanKeys = doc.read_value(value.clone(), prefix)?;
+    let table: toml::Table = doc.read_value(value, prefix)?;
+    crate::acquire::can::parse_can_source(doc.origin(), prefix, &table, base)
+        .map(SourceSpec::Can)
+        .map_err(|e| doc.locate(e))
+}
+
+/// `kind = "serial"`: `path`, `baud`, `format` "binary"|"ascii" and 1 to 16
+/// `[[sources.channels]]`.
+fn serial(doc: &Document<'_>, prefix: &str, name: String, raw: RawSerial) -> Result<SourceSpec, ConfigError> {
+    let key = |k: &str| format!("{prefix}.{k}");
+    let baud = match raw.baud {
+        Some(b) => doc.in_whole_range(&key("baud"), b, &BAUD)? as u32,
+        None => DEFAULT_BAUD,
+    };
+    let format = match raw.format {
+        None | Some(RawFormat::Binary) => SerialFormat::Binary,
+        Some(RawFormat::Ascii) => SerialFormat::Ascii,
+    };
+    let channels = channels(doc, &key("channels"), &raw.channels)?;
+    // CONTRACTS.md §7: 1..=16 channels per frame.
+    if !(1..=16).contains(&channels.len()) {
+        return Err(doc.invalid(&key("channels"), format!("has {} entries; a frame carries 1 to 16", channels.len())));
+    }
+    Ok(SourceSpec::Serial { name, path: raw.path, baud, format, channels })
 }
 
 /// `kind = "modbus"`: `transport` "tcp" (`address`) or "rtu" (`path`, `baud`), `unit`,
@@ -218,40 +237,71 @@ pub(super) fn parse_source(doc: &Document<'_>, index: usize, base: &Path) -> Res
 /// "big"|"little", `scale`, `offset`) or "block" with `block_base` and `[[sources.channels]]`.
 fn modbus(doc: &Document<'_>, prefix: &str, name: String, raw: RawModbus) -> Result<ModbusConfig, ConfigError> {
     use crate::acquire::modbus::client;
-    use std::time::Duration;
+    let transport = transport(doc, prefix, &raw)?;
+    let unit_id = unit(doc, prefix, raw.unit)?;
+    let (poll_ms, timeout_ms) = (raw.poll_ms, raw.timeout_ms);
+    let (mode, map, default_poll) = mode(doc, prefix, raw)?;
+    Ok(ModbusConfig {
+        source: name,
+        transport,
+        unit_id,
+        poll_interval: millis(doc, &format!("{prefix}.poll_ms"), poll_ms, default_poll)?,
+        timeout: millis(doc, &format!("{prefix}.timeout_ms"), timeout_ms, client::DEFAULT_TIMEOUT)?,
+        map,
+        mode,
+    })
+}
+
+/// A Modbus source's `transport`: "tcp" needs `address`, "rtu" needs `path` (and `baud`).
+fn transport(doc: &Document<'_>, prefix: &str, raw: &RawModbus) -> Result<Transport, ConfigError> {
     let key = |k: &str| format!("{prefix}.{k}");
-    let transport = match raw.transport {
+    Ok(match raw.transport {
         RawTransport::Tcp => {
             let a = raw.address.as_deref().ok_or_else(|| doc.missing(&key("address")))?;
             Transport::Tcp { addr: address(doc, &key("address"), a)? }
         }
         RawTransport::Rtu => Transport::Rtu {
-            path: raw.path.ok_or_else(|| doc.missing(&key("path")))?,
+            path: raw.path.clone().ok_or_else(|| doc.missing(&key("path")))?,
             baud: match raw.baud {
                 Some(b) => doc.in_whole_range(&key("baud"), b, &BAUD)? as u32,
                 None => DEFAULT_RTU_BAUD,
             },
         },
-    };
-    let unit = raw.unit.unwrap_or(1);
+    })
+}
+
+/// A Modbus unit id, 1 when not given; 248..=255 are reserved by the Modbus spec.
+fn unit(doc: &Document<'_>, prefix: &str, unit: Option<u8>) -> Result<u8, ConfigError> {
+    let unit = unit.unwrap_or(1);
     if unit > 247 {
-        return Err(doc.invalid(&key("unit"), "must be 0..=247"));
+        return Err(doc.invalid(&format!("{prefix}.unit"), "must be 0..=247"));
     }
-    let ms = |k: &str, given: Option<f64>, default: Duration| -> Result<Duration, ConfigError> {
-        Ok(match given {
-            Some(x) => Duration::from_secs_f64(doc.in_range(&key(k), x, &MODBUS_MS)? / 1e3),
-            None => default,
-        })
-    };
-    let (mode, map, default_poll) = match raw.mode.unwrap_or(RawMode::Poll) {
+    Ok(unit)
+}
+
+/// A duration given in ms at `key`, within `MODBUS_MS`, or `default`.
+fn millis(doc: &Document<'_>, key: &str, given: Option<f64>, default: Duration) -> Result<Duration, ConfigError> {
+    Ok(match given {
+        Some(x) => Duration::from_secs_f64(doc.in_range(key, x, &MODBUS_MS)? / 1e3),
+        None => default,
+    })
+}
+
+/// A Modbus source's `mode`: "block" reads `[[sources.channels]]` from the ring at
+/// `block_base`, "poll" (the default) reads `[[sources.registers]]`. Returns the mode, the
+/// register map (empty in block mode) and the mode's default poll interval.
+fn mode(doc: &Document<'_>, prefix: &str, raw: RawModbus) -> Result<(Mode, Vec<RegisterSpec>, Duration), ConfigError> {
+    use crate::acquire::modbus::client;
+    let key = |k: &str| format!("{prefix}.{k}");
+    match raw.mode.unwrap_or(RawMode::Poll) {
         RawMode::Block => {
-            let list = raw.channels.as_deref().ok_or_else(|| doc.missing(&key("channels")))?;
-            let channels = channels(doc, &key("channels"), list)?;
-            (
+            let list = raw.channels.ok_or_else(|| doc.missing(&key("channels")))?;
+            let channels = channels(doc, &key("channels"), &list)?;
+            Ok((
                 Mode::Block { base: raw.block_base.unwrap_or(0), channels },
                 Vec::new(),
                 client::DEFAULT_BLOCK_POLL_INTERVAL,
-            )
+            ))
         }
         RawMode::Poll => {
             let list = raw.registers.ok_or_else(|| doc.missing(&key("registers")))?;
@@ -259,18 +309,9 @@ fn modbus(doc: &Document<'_>, prefix: &str, name: String, raw: RawModbus) -> Res
             for (i, r) in list.into_iter().enumerate() {
                 map.push(register(doc, &key(&format!("registers[{}]", i + 1)), r)?);
             }
-            (Mode::Poll, map, client::DEFAULT_POLL_INTERVAL)
+            Ok((Mode::Poll, map, client::DEFAULT_POLL_INTERVAL))
         }
-    };
-    Ok(ModbusConfig {
-        source: name,
-        transport,
-        unit_id: unit,
-        poll_interval: ms("poll_ms", raw.poll_ms, default_poll)?,
-        timeout: ms("timeout_ms", raw.timeout_ms, client::DEFAULT_TIMEOUT)?,
-        map,
-        mode,
-    })
+    }
 }
 
 /// One `[[sources.registers]]` entry at the dotted key `at`.
@@ -278,7 +319,7 @@ fn register(doc: &Document<'_>, at: &str, r: RawRegister) -> Result<RegisterSpec
     let key = |k: &str| format!("{at}.{k}");
     let signal = match (r.role, r.name) {
         (Some(n), _) => Signal::Role(role(doc, &key("role"), &n)?),
-        (None, Some(n)) => Signal::Named(n),
+        (None, Some(n)) => Signal::Named(signal_name(doc, &key("name"), n)?),
         (None, None) => return Err(doc.missing(&key("name"))),
     };
     let finite = |k: &str, x: Option<f64>, default: f64| match x {
@@ -307,6 +348,21 @@ fn register(doc: &Document<'_>, at: &str, r: RawRegister) -> Result<RegisterSpec
         scale: finite("scale", r.scale, 1.0)?,
         offset: finite("offset", r.offset, 0.0)?,
     })
+}
+
+/// Words the Modbus driver writes into its status detail itself (`acquire::modbus::client`).
+const DETAIL_KEYS: [&str; 5] = ["exceptions", "timeouts", "tcp", "rtu", "last_error"];
+
+/// A named register's `name`, which the status detail shows as one `name=value` word: not
+/// empty, no space or `=`, and none of the driver's own keys.
+fn signal_name(doc: &Document<'_>, at: &str, name: String) -> Result<String, ConfigError> {
+    if name.is_empty() || name.chars().any(|c| c.is_whitespace() || c == '=') {
+        return Err(doc.invalid(at, format!("must be a non-empty word without spaces or '=', not '{name}'")));
+    }
+    if DETAIL_KEYS.contains(&name.as_str()) {
+        return Err(doc.invalid(at, format!("must not be '{name}', a key the status detail already uses")));
+    }
+    Ok(name)
 }
 
 /// A sample role by its column name.

@@ -134,62 +134,76 @@ impl RecordReader {
                     self.report.bytes_recovered = self.report.total_bytes;
                     return Ok(false);
                 };
-                let mut topics: Vec<String> =
-                    index.message_index_offsets.keys().map(|&id| self.channels.topic_or_id(id)).collect();
-                topics.sort();
                 let (start, length) = (index.chunk_start_offset, index.chunk_length);
-                let end = start.saturating_add(length);
-                if end > self.report.total_bytes {
-                    let error = ChunkError::OutsideFile { start, end, total: self.report.total_bytes };
-                    self.corrupt(start, length, topics, error);
-                } else if length > MAX_RECORD_BYTES as u64 {
-                    let error = ChunkError::TooLarge { bytes: length, limit: MAX_RECORD_BYTES as u64 };
-                    self.corrupt(start, length, topics, error);
-                } else {
-                    let mut record = vec![0u8; length as usize];
-                    file.seek(SeekFrom::Start(start)).map_err(io_err)?;
-                    file.read_exact(&mut record).map_err(io_err)?;
-                    self.take_chunk(start, &record, topics);
-                }
+                let record = match chunk_bounds(start, length, self.report.total_bytes) {
+                    Ok(()) => Ok(read_at(file, start, length as usize).map_err(io_err)?),
+                    Err(error) => Err(error),
+                };
+                self.take_indexed(&index, record);
             }
             Source::Linear(linear) => match linear.next_step().map_err(io_err)? {
+                Some(step) => self.take_step(step),
                 None => return Ok(false),
-                Some(Step::Chunk { offset, record }) => {
-                    self.naming = None;
-                    if !self.take_chunk(offset, &record, Vec::new()) {
-                        self.naming = self.report.corrupt_chunks.len().checked_sub(1);
-                    }
-                }
-                Some(Step::MessageIndex { channel_id }) => {
-                    let topic = self.channels.topic_or_id(channel_id);
-                    if let Some(c) = self.naming.and_then(|i| self.report.corrupt_chunks.get_mut(i))
-                        && !c.topics.contains(&topic)
-                    {
-                        c.topics.push(topic);
-                        c.topics.sort();
-                    }
-                }
-                Some(Step::Loose { offset, length, record }) => {
-                    self.naming = None;
-                    match self.decode(vec![record]) {
-                        Ok(messages) => self.queue.extend(messages),
-                        Err(error) => self.corrupt(offset, length, Vec::new(), error),
-                    }
-                }
-                Some(Step::Damaged { offset, length, error }) => {
-                    self.naming = None;
-                    self.corrupt(offset, length, Vec::new(), error);
-                }
-                Some(Step::End { complete, stopped_by }) => {
-                    self.report.complete = complete;
-                    self.report.stopped_by = stopped_by;
-                    if complete {
-                        self.report.bytes_recovered = self.report.total_bytes;
-                    }
-                }
             },
         }
         Ok(true)
+    }
+
+    /// The chunk `index` points at (through the summary), read or refused by its bounds.
+    fn take_indexed(&mut self, index: &ChunkIndex, record: Result<Vec<u8>, ChunkError>) {
+        let mut topics: Vec<String> =
+            index.message_index_offsets.keys().map(|&id| self.channels.topic_or_id(id)).collect();
+        topics.sort();
+        let start = index.chunk_start_offset;
+        match record {
+            Ok(record) => {
+                self.take_chunk(start, &record, topics);
+            }
+            Err(error) => self.corrupt(start, index.chunk_length, topics, error),
+        }
+    }
+
+    /// One step of reading front to back: a chunk, a message index naming a corrupt
+    /// chunk's topics, a record outside any chunk, damaged bytes, or the end.
+    fn take_step(&mut self, step: Step) {
+        match step {
+            Step::Chunk { offset, record } => {
+                self.naming = None;
+                if !self.take_chunk(offset, &record, Vec::new()) {
+                    self.naming = self.report.corrupt_chunks.len().checked_sub(1);
+                }
+            }
+            Step::MessageIndex { channel_id } => self.name_topic(channel_id),
+            Step::Loose { offset, length, record } => {
+                self.naming = None;
+                match self.decode(vec![record]) {
+                    Ok(messages) => self.queue.extend(messages),
+                    Err(error) => self.corrupt(offset, length, Vec::new(), error),
+                }
+            }
+            Step::Damaged { offset, length, error } => {
+                self.naming = None;
+                self.corrupt(offset, length, Vec::new(), error);
+            }
+            Step::End { complete, stopped_by } => {
+                self.report.complete = complete;
+                self.report.stopped_by = stopped_by;
+                if complete {
+                    self.report.bytes_recovered = self.report.total_bytes;
+                }
+            }
+        }
+    }
+
+    /// A message index after a corrupt chunk names one of the chunk's topics.
+    fn name_topic(&mut self, channel_id: u16) {
+        let topic = self.channels.topic_or_id(channel_id);
+        if let Some(c) = self.naming.and_then(|i| self.report.corrupt_chunks.get_mut(i))
+            && !c.topics.contains(&topic)
+        {
+            c.topics.push(topic);
+            c.topics.sort();
+        }
     }
 
     /// Check, unpack and decode one chunk record at `offset` into the queue; `false` when it
@@ -274,6 +288,27 @@ impl Iterator for RecordReader {
         }
         item
     }
+}
+
+/// A chunk the index places at `start`, `length` bytes long, must lie inside the file of
+/// `total` bytes and within [`MAX_RECORD_BYTES`].
+fn chunk_bounds(start: u64, length: u64, total: u64) -> Result<(), ChunkError> {
+    let end = start.saturating_add(length);
+    if end > total {
+        return Err(ChunkError::OutsideFile { start, end, total });
+    }
+    if length > MAX_RECORD_BYTES as u64 {
+        return Err(ChunkError::TooLarge { bytes: length, limit: MAX_RECORD_BYTES as u64 });
+    }
+    Ok(())
+}
+
+/// `length` bytes of `file` from `start`.
+fn read_at(file: &mut File, start: u64, length: usize) -> std::io::Result<Vec<u8>> {
+    let mut record = vec![0u8; length];
+    file.seek(SeekFrom::Start(start))?;
+    file.read_exact(&mut record)?;
+    Ok(record)
 }
 
 /// The first bytes must be the MCAP magic; anything else is not a recording.

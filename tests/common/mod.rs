@@ -3,7 +3,9 @@
 #![allow(dead_code)]
 
 use forgemon::acquire::SourceEvent;
+use forgemon::config::{parse_machine, parse_process};
 use forgemon::estimate::BlowEstimate;
+use forgemon::physics::{Machine, Process};
 use forgemon::pipeline::{Pipeline, PipelineEvent};
 
 /// Decoded source events through `p`, a gap ending the stream (the service instead bridges
@@ -19,13 +21,32 @@ pub fn blows_through(mut p: Pipeline, events: &[SourceEvent]) -> Vec<BlowEstimat
         }
     }
     p.end_of_stream(&mut out);
-    out.into_iter()
-        .filter_map(|e| match e {
-            PipelineEvent::Blow { estimate, .. } => Some(*estimate),
-            PipelineEvent::Billet(_) => None,
-            PipelineEvent::Rejected { cut, error } => panic!("blow at {} rejected: {error}", cut.t_contact_s),
-        })
-        .collect()
+    estimates(&out)
+}
+
+/// The blow of a pipeline event, `None` for a billet summary; a blow the estimator
+/// rejected fails the test.
+pub fn estimate_of(e: &PipelineEvent) -> Option<&BlowEstimate> {
+    match e {
+        PipelineEvent::Blow { estimate, .. } => Some(estimate),
+        PipelineEvent::Billet(_) => None,
+        PipelineEvent::Rejected { cut, error } => panic!("blow at {} rejected: {error}", cut.t_contact_s),
+    }
+}
+
+/// The blows of `events`, in order (`estimate_of`).
+pub fn estimates(events: &[PipelineEvent]) -> Vec<BlowEstimate> {
+    events.iter().filter_map(estimate_of).cloned().collect()
+}
+
+/// The example machine `config/FILE`.
+pub fn machine(file: &str) -> Machine {
+    parse_machine(file, &read(&format!("config/{file}"))).unwrap_or_else(|e| panic!("{file}: {e}")).machine
+}
+
+/// The example process sheet `config/FILE`.
+pub fn process(file: &str) -> Process {
+    parse_process(file, &read(&format!("config/{file}"))).unwrap_or_else(|e| panic!("{file}: {e}"))
 }
 
 /// A free TCP port on loopback.

@@ -155,9 +155,10 @@ impl BlockTracker {
             }
         };
         let ring = header.ring_len as u64;
-        let readable = (ring - ring / RING_MARGIN_DIVISOR as u64).min(newest - next.min(newest));
+        let margin = ring / RING_MARGIN_DIVISOR as u64;
+        let readable = (ring - margin).min(newest - next.min(newest));
         let oldest = newest - readable;
-        let first = next.max(oldest);
+        let first = next.max(oldest).max(after_wrap_overwrites(&header, newest, oldest, margin));
         if first > next {
             lost = Some((next, first - next, "ring_overflow"));
         }
@@ -185,6 +186,27 @@ impl BlockTracker {
     pub fn commit(&mut self, plan: &BlockPlan) {
         self.state = Some((plan.first + plan.count, plan.header.counter));
     }
+}
+
+/// The first sample index from which no sample in `oldest..newest` is overwritten early by
+/// the counter's wrap (`oldest` when none is). The sample of counter `c` sits in slot
+/// `c mod N`; when N does not divide 2^32 the slot sequence jumps back to 0 at the wrap, so
+/// the last `r = 2^32 mod N` samples before it are overwritten by counters `0..r` after it:
+/// `r` samples later instead of N. Such a sample `i` counts as readable only while
+/// `i + r >= newest + margin`, the rule every other sample meets with N in place of `r`.
+fn after_wrap_overwrites(header: &BlockHeader, newest: u64, oldest: u64, margin: u64) -> u64 {
+    let r = (1u64 << 32) % header.ring_len as u64;
+    if r == 0 || oldest >= newest {
+        return oldest;
+    }
+    // The first wrap after the oldest sample, as a sample index.
+    let oldest_counter = header.counter.wrapping_sub((newest - oldest) as u32);
+    let wrap = oldest + ((1u64 << 32) - oldest_counter as u64);
+    // The samples it shortens: `wrap - r..wrap`, those present in `oldest..newest`.
+    let (from, to) = (oldest.max(wrap.saturating_sub(r)), newest.min(wrap));
+    // Overwritten (or within the margin of it): `i + r < newest + margin`.
+    let bad_end = to.min((newest + margin).saturating_sub(r));
+    if bad_end > from { bad_end } else { oldest }
 }
 
 /// Physical values of the slots read by one plan, interleaved sample by sample.
@@ -332,7 +354,8 @@ mod tests {
     fn the_counter_wraps_past_u32() {
         let mut regs = vec![0u16; 0x1_0000];
         let mut w = RingWriter::new(0, 16, 1, 1, 1000).unwrap();
-        // Just before the wrap: 2^32 - 3, a multiple of... not of 16, so slots jump at the wrap.
+        // Just before the wrap: 2^32 - 3. 16 divides 2^32, so slot 15 is followed by slot 0
+        // there as everywhere else (other ring lengths: the test below).
         w.header.counter = u32::MAX - 2;
         w.write_header(&mut regs);
         let mut t = BlockTracker::new(0);
@@ -346,6 +369,49 @@ mod tests {
         assert_eq!(read(&regs, &p, &channels(1)), vec![1.0, 2.0, 3.0, 4.0, 5.0]);
         t.commit(&p);
         assert_eq!(t.next_index(), Some(u32::MAX as u64 + 3));
+    }
+
+    /// A ring whose length does not divide 2^32 restarts at slot 0 when the counter wraps,
+    /// so the last `2^32 mod N` samples before the wrap are overwritten early. Every ring
+    /// length from 1 to 40 and powers of two, every start up to 2N before the wrap, and
+    /// batches of 1 to N samples: what is read is exactly what was written at those sample
+    /// indexes, and the rest is reported lost, never read from a slot rewritten since.
+    #[test]
+    fn near_the_counter_wrap_no_rewritten_slot_is_read_whatever_the_ring_length() {
+        let mut regs = vec![0u16; 0x1_0000];
+        let mut early_losses = 0;
+        for ring in (1..=40u16).chain([64, 1000]) {
+            for before in 1..=2 * ring as u32 {
+                for batch in [1, ring as usize / 2 + 1, ring as usize] {
+                    let mut w = RingWriter::new(0, ring, 1, 2, 1000).unwrap();
+                    w.header.counter = 0u32.wrapping_sub(before);
+                    w.write_header(&mut regs);
+                    let mut t = BlockTracker::new(0);
+                    let p = t.plan(BlockHeader::parse(&regs[..8]).unwrap(), 1).unwrap();
+                    t.commit(&p);
+                    // Two batches, so the wrap falls inside or between them; values are
+                    // the sample's own index from the start.
+                    let mut next_value = 0;
+                    for _ in 0..2 {
+                        let values: Vec<i32> = (next_value..next_value + batch as i32).collect();
+                        next_value += batch as i32;
+                        w.push(&mut regs, &values);
+                        let p = t.plan(BlockHeader::parse(&regs[..8]).unwrap(), 1).unwrap();
+                        let lost = p.lost.map_or(0, |(_, n, _)| n);
+                        assert_eq!(lost + p.count, batch as u64, "ring {ring}, {before} before the wrap");
+                        let want: Vec<f64> = (next_value - p.count as i32..next_value).map(f64::from).collect();
+                        assert_eq!(read(&regs, &p, &channels(1)), want, "ring {ring}, {before} before the wrap");
+                        let margin_only = (ring - ring / 8) as u64;
+                        if lost > 0 && p.count + lost <= margin_only {
+                            early_losses += 1;
+                        }
+                        t.commit(&p);
+                    }
+                }
+            }
+        }
+        // Rings that do not divide 2^32 lost samples the margin alone would have kept.
+        assert!(early_losses > 0);
     }
 
     #[test]

@@ -31,7 +31,10 @@
 //! `N − N/8` samples count as readable: a counter jump beyond that is a `Gap`
 //! (`ring_overflow`) of the samples skipped. A counter that goes backwards means the
 //! device restarted (`device_reset`). The sample index (the counter extended past its
-//! wrap) times the period is the device time.
+//! wrap) times the period is the device time. When N does not divide 2^32 the slots jump
+//! back to 0 at the counter's wrap, so the last `2^32 mod N` samples before it are
+//! overwritten that many samples later instead of N: they are read only while they keep
+//! the same margin, and are otherwise part of the `ring_overflow` gap (`block.rs`).
 //!
 //! # Plain polling
 //!

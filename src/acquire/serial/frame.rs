@@ -1,6 +1,7 @@
 //! The binary serial DAQ framing of CONTRACTS.md §7, sans-IO: `FrameDecoder` is fed byte
 //! chunks of any size and hands back whole frames, resyncing after garbage at the next
-//! `0x00`; `encode_frame` builds the wire bytes (the simulated device uses it). The
+//! `0x00` (a frame glued to garbage with no `0x00` between them is lost with it, as §7
+//! says); `encode_frame` builds the wire bytes (the simulated device uses it). The
 //! frames become samples in `tracker.rs`. No IO, no clock.
 //!
 //! ```text
@@ -31,11 +32,6 @@ pub const MAX_ENCODED_LEN: usize = cobs::max_encoding_length(MAX_PAYLOAD_LEN + C
 /// CRC-32C (Castagnoli), the iSCSI polynomial; slice-by-16 tables (16 KiB, built at compile time).
 pub static CRC32C: Crc<u32, Table<16>> = Crc::<u32, Table<16>>::new(&CRC_32_ISCSI);
 
-/// How many bytes of a failed segment the decoder searches for a frame that follows
-/// garbage (a frame whose start was glued to line noise). Bounded so a long burst of
-/// garbage costs a bounded amount of work.
-pub const RESYNC_SEARCH_BYTES: usize = 4096;
-
 /// One decoded frame (CONTRACTS.md §7).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Frame {
@@ -55,8 +51,6 @@ pub struct Frame {
 pub enum FrameError {
     #[error("invalid COBS encoding ({len} bytes)")]
     Cobs { len: usize },
-    #[error("{len} bytes of garbage in front of a frame")]
-    Garbage { len: usize },
     #[error("frame of {len} bytes is shorter than header and CRC ({min} bytes)")]
     TooShort { len: usize, min: usize },
     #[error("no delimiter within {len} bytes (longest frame is {max}): discarded as garbage")]
@@ -156,10 +150,11 @@ fn parse_decoded(bytes: &[u8]) -> Result<Frame, FrameError> {
 /// [`next_frame`](Self::next_frame) until it returns `None` ("need more bytes").
 ///
 /// - Every `0x00` ends a segment; a segment that fails COBS, the limits, its length or its
-///   CRC is returned as an error, counted, and decoding resumes after that `0x00`.
-/// - Garbage glued in front of a valid frame (no delimiter between them) is cut off: the
-///   last `RESYNC_SEARCH_BYTES` of a failed segment are searched for a valid frame that
-///   ends it; the garbage counts as one decode error and the frame is still delivered.
+///   CRC is returned as an error, counted, and decoding resumes after that `0x00`
+///   (CONTRACTS.md §7). Garbage glued in front of a frame, with no `0x00` between them,
+///   makes one failed segment with the frame: the frame is dropped with it, and the
+///   tracker reports the sequence jump as a gap. The decoder does not search a failed
+///   segment for a frame inside it.
 /// - The buffer is bounded: a run of more than `MAX_ENCODED_LEN` bytes without a delimiter
 ///   is discarded (one decode error) and bytes are dropped until the next `0x00`.
 #[derive(Debug, Default)]
@@ -172,8 +167,6 @@ pub struct FrameDecoder {
     /// Dropping bytes until the next delimiter (after an overlong run).
     skipping: bool,
     scratch: Vec<u8>,
-    /// A frame found behind garbage, returned on the next call.
-    pending: Option<Frame>,
     stats: DecoderStats,
 }
 
@@ -211,7 +204,6 @@ impl FrameDecoder {
         self.start = 0;
         self.scanned = 0;
         self.skipping = false;
-        self.pending = None;
     }
 
     pub fn stats(&self) -> DecoderStats {
@@ -226,10 +218,6 @@ impl FrameDecoder {
     /// The next frame, or the next dropped segment's error, or `None` when more bytes are
     /// needed.
     pub fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
-        if let Some(frame) = self.pending.take() {
-            self.stats.frames += 1;
-            return Some(Ok(frame));
-        }
         loop {
             let rest = &self.buf[self.start + self.scanned..];
             let Some(i) = rest.iter().position(|b| *b == 0) else {
@@ -282,32 +270,8 @@ impl FrameDecoder {
         }
     }
 
-    /// A segment failed: look for a valid frame at its end (garbage glued in front of a
-    /// frame); otherwise count the failure.
+    /// A segment failed: count it and drop it with its delimiter.
     fn failed(&mut self, seg_start: usize, seg_end: usize, err: FrameError) -> Result<Frame, FrameError> {
-        let from = seg_start + 1;
-        let search_from = from.max(seg_end.saturating_sub(RESYNC_SEARCH_BYTES));
-        let seg = &self.buf[..seg_end];
-        // valid[p]: the COBS code chain starting at p lands exactly on seg_end.
-        let mut valid = vec![false; seg_end - search_from];
-        for p in (search_from..seg_end).rev() {
-            let next = p + seg[p] as usize;
-            valid[p - search_from] = next == seg_end || (next < seg_end && valid[next - search_from]);
-        }
-        for p in search_from..seg_end {
-            if !valid[p - search_from] || seg_end - p < HEADER_LEN + CRC_LEN {
-                continue;
-            }
-            if decode_cobs(&seg[p..seg_end], &mut self.scratch).is_ok()
-                && let Ok(frame) = parse_decoded(&self.scratch)
-            {
-                // The garbage in front is the error; the frame comes on the next call.
-                self.stats.decode_errors += 1;
-                self.stats.bytes_discarded += (p - seg_start) as u64;
-                self.pending = Some(frame);
-                return Err(FrameError::Garbage { len: p - seg_start });
-            }
-        }
         if err.is_crc() {
             self.stats.crc_errors += 1;
         } else {
@@ -464,21 +428,27 @@ mod tests {
         assert_eq!(dec.stats().crc_errors, 0);
     }
 
+    /// CONTRACTS.md §7: a segment that fails to decode is dropped and decoding resumes
+    /// after the next `0x00`, so a frame glued to garbage (no `0x00` between them) is lost
+    /// with it; the frame after the next delimiter decodes.
     #[test]
-    fn garbage_glued_in_front_of_a_frame_is_cut_off() {
-        // No delimiter between the noise and the frame: the resync search finds the frame.
+    fn a_frame_glued_to_garbage_is_lost_with_it_and_decoding_resumes_at_the_next_delimiter() {
         let mut wire = encode_frame(&big_frame(1));
-        wire.extend_from_slice(&[0xAA, 0x03, 0x55, 0x10, 0xFE, 0x07, 0x99]); // noise
-        wire.extend(encode_frame(&big_frame(2)));
-        wire.extend([0x31, 0x32, 0x33]); // noise between frames
+        let noise = [0xAA, 0x03, 0x55, 0x10, 0xFE, 0x07, 0x99];
+        wire.extend_from_slice(&noise);
+        let glued = encode_frame(&big_frame(2));
+        wire.extend(&glued);
+        wire.extend([0x31, 0x32, 0x33, 0x00]); // noise ended by a delimiter
         wire.extend(encode_frame(&big_frame(3)));
         let mut dec = FrameDecoder::new();
         dec.push(&wire);
         let got = decode_all(&mut dec);
         let frames: Vec<u32> = got.iter().filter_map(|r| r.as_ref().ok()).map(|f| f.sequence).collect();
-        assert_eq!(frames, vec![1, 2, 3]);
-        assert_eq!(dec.stats().decode_errors, 2);
-        assert_eq!(dec.stats().bytes_discarded, 10);
+        assert_eq!(frames, vec![1, 3]);
+        assert_eq!(got.iter().filter(|r| r.is_err()).count(), 2);
+        assert_eq!((dec.stats().frames, dec.stats().decode_errors, dec.stats().crc_errors), (2, 2, 0));
+        // Noise and frame 2 with its delimiter, then the delimited noise.
+        assert_eq!(dec.stats().bytes_discarded, (noise.len() + glued.len() + 4) as u64);
     }
 
     #[test]

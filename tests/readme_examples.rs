@@ -1,0 +1,146 @@
+//! The README's example commands, run: every fenced block that follows the line
+//! `<!-- readme_examples: checked -->` in README.md holds `$ forgemon ...` commands, each
+//! followed by the output the README shows for it. This test runs each command with the
+//! built binary from the repository's root, in README order, and compares what it prints
+//! (stdout, then stderr) with the README, line by line (trailing spaces ignored), so the
+//! examples cannot go stale. Paths under `/tmp/` are moved into a temporary directory and
+//! shown back as `/tmp/`. The examples checked are those that run offline in seconds on the
+//! repository's configs; the demo (real time, a port that changes) is not.
+//!
+//! When an output changes on purpose (the physics or the estimator moved), run
+//! `cargo nextest run --release --test readme_examples --no-capture`: the failure prints
+//! each command's whole output, to paste into README.md.
+
+use std::path::Path;
+use std::process::Command;
+
+/// The line that marks the next fenced block as checked.
+const MARKER: &str = "<!-- readme_examples: checked -->";
+
+/// One command of a checked block and the output the README shows for it.
+struct Example {
+    /// The README line the command starts on (from 1).
+    line: usize,
+    /// The arguments after `forgemon`.
+    args: Vec<String>,
+    expected: Vec<String>,
+}
+
+/// The checked examples of `readme`, in order. A marker not followed by a fenced block, or
+/// a block without a `$ forgemon` command, fails the test.
+fn examples(readme: &str) -> Vec<Example> {
+    let lines: Vec<&str> = readme.lines().collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < lines.len() {
+        if lines[i].trim() != MARKER {
+            i += 1;
+            continue;
+        }
+        assert!(
+            lines.get(i + 1).is_some_and(|l| l.starts_with("```")),
+            "README.md:{}: no block after the marker",
+            i + 1
+        );
+        let body_start = i + 2;
+        let len = lines[body_start..].iter().position(|l| l.starts_with("```")).expect("the block is closed");
+        let before = out.len();
+        out.extend(block_examples(&lines[body_start..body_start + len], body_start + 1));
+        assert!(out.len() > before, "README.md:{}: a checked block without a command", i + 1);
+        i = body_start + len + 1;
+    }
+    out
+}
+
+/// The commands of one block whose first line is README line `first_line`: `$ ` starts a
+/// command (a trailing `\` continues it), the lines up to the next command are its output.
+fn block_examples(body: &[&str], first_line: usize) -> Vec<Example> {
+    let mut out: Vec<Example> = Vec::new();
+    let mut k = 0;
+    while k < body.len() {
+        let Some(start) = body[k].strip_prefix("$ ") else {
+            let current =
+                out.last_mut().unwrap_or_else(|| panic!("README.md:{}: output before a command", first_line + k));
+            current.expected.push(body[k].trim_end().to_string());
+            k += 1;
+            continue;
+        };
+        let line = first_line + k;
+        let mut command = start.trim_end().to_string();
+        while command.ends_with('\\') {
+            command.pop();
+            k += 1;
+            command.push(' ');
+            command.push_str(body.get(k).unwrap_or_else(|| panic!("README.md:{line}: unfinished command")).trim());
+        }
+        let mut words = command.split_whitespace().map(str::to_string);
+        assert_eq!(words.next().as_deref(), Some("forgemon"), "README.md:{line}: only forgemon commands are run");
+        out.push(Example { line, args: words.collect(), expected: Vec::new() });
+        k += 1;
+    }
+    for e in &mut out {
+        while e.expected.last().is_some_and(|l| l.is_empty()) {
+            e.expected.pop();
+        }
+    }
+    out
+}
+
+/// Run one example from `root`, `/tmp/` moved to `tmp`; its output as the README shows it.
+fn run(root: &Path, tmp: &Path, e: &Example) -> Vec<String> {
+    let tmp = format!("{}/", tmp.display());
+    let args: Vec<String> = e.args.iter().map(|a| a.replace("/tmp/", &tmp)).collect();
+    let out = Command::new(env!("CARGO_BIN_EXE_forgemon")).args(&args).current_dir(root).output().expect("runs");
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "README.md:{}: forgemon {} failed ({}):\n{text}",
+        e.line,
+        e.args.join(" "),
+        out.status
+    );
+    text.replace(&tmp, "/tmp/").lines().map(|l| l.trim_end().to_string()).collect()
+}
+
+#[test]
+fn the_readme_examples_print_what_the_readme_shows() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let readme = std::fs::read_to_string(root.join("README.md")).expect("README.md");
+    let all = examples(&readme);
+    // The simulate, replay and inspect sections each mark their examples.
+    for verb in ["simulate", "replay", "inspect"] {
+        assert!(all.iter().any(|e| e.args[0] == verb), "no checked `forgemon {verb}` example in README.md");
+    }
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let mut stale = Vec::new();
+    for e in &all {
+        let got = run(root, tmp.path(), e);
+        if got != e.expected {
+            let first =
+                got.iter().zip(&e.expected).position(|(a, b)| a != b).unwrap_or(got.len().min(e.expected.len()));
+            stale.push(format!(
+                "README.md:{}: `forgemon {}` differs from its output line {} on:\n  README: {:?}\n  output: {:?}\nits whole output:\n{}",
+                e.line,
+                e.args.join(" "),
+                first + 1,
+                e.expected.get(first),
+                got.get(first),
+                got.join("\n")
+            ));
+        }
+    }
+    assert!(stale.is_empty(), "{} of {} README examples are stale:\n\n{}", stale.len(), all.len(), stale.join("\n\n"));
+}
+
+/// The parser: commands, continuations, outputs and the README line numbers.
+#[test]
+fn a_checked_block_is_cut_into_commands_and_their_outputs() {
+    let text = format!(
+        "intro\n{MARKER}\n```\n$ forgemon a --x 1 \\\n      --y 2\nout 1  \nout 2\n\n$ forgemon b\n```\n\n```\n$ forgemon unchecked\n```\n"
+    );
+    let got = examples(&text);
+    assert_eq!(got.len(), 2);
+    assert_eq!((got[0].line, got[0].args.join(" ")), (4, "a --x 1 --y 2".to_string()));
+    assert_eq!(got[0].expected, vec!["out 1", "out 2"]);
+    assert_eq!((got[1].line, got[1].args.join(" "), got[1].expected.len()), (9, "b".to_string(), 0));
+}
