@@ -1,6 +1,9 @@
-//! Speed of a full diagnosis (issue #6 target: 8 effects and pairs, 5 calibration and 5
-//! holdout blows, in ≤ 60 s on the 2-core machine), on the withheld-effect suite's hammer and
-//! press with a hidden `friction_rise`, as `forgemon diagnose` runs it less the file I/O.
+//! Speed of a full diagnosis (issue #17 target: 8 effects and 7 pairs, 5 calibration and 5
+//! holdout blows, a press billet pair in ≤ 30 s on the 2-core machine), on the
+//! withheld-effect suite's hammer and press with a hidden `friction_rise`, as `forgemon
+//! diagnose` runs it less the file I/O; and one hammer blow as the fits simulate it
+//! (issue #17 target ≤ 50 µs): one measured blow through `Objective::simulate`, window,
+//! trace and spectrum included.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use forgemon::config::{parse_machine, parse_process};
@@ -41,6 +44,19 @@ fn billet(m: &Machine, sheet: &str, height_factor: f64, v0s: &[f64], seed: u64) 
     (refs, Setting::Billet(p))
 }
 
+/// One hammer blow as each fit's cost function simulates it, per blow of the suite's first
+/// calibration billet.
+fn blow(c: &mut Criterion) {
+    use forgemon::identify::objective::Objective;
+    let m = parse_machine("m", HAMMER).unwrap().machine;
+    let (refs, setting) =
+        billet(&m, include_str!("../config/steel-16NiCrMo13.process.toml"), 1.0, &[4.0, 4.5, 5.0, 5.3, 5.3], 3);
+    let one = Objective::new(refs[..1].to_vec(), vec![true], setting, MachineKind::Hammer);
+    let mut g = c.benchmark_group("diagnose_blow");
+    g.bench_function("hammer_blow_as_fitted", |b| b.iter(|| one.simulate(&m).unwrap()));
+    g.finish();
+}
+
 fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("diagnose");
     g.sample_size(10);
@@ -73,5 +89,5 @@ fn bench(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench);
+criterion_group!(benches, blow, bench);
 criterion_main!(benches);

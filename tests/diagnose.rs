@@ -91,6 +91,13 @@ fn diagnose(dir: &Path, machine: &Path) -> Value {
     // Issue #17: the effects the verdict's test cannot tell from it, never the verdict itself.
     let equivalent = r["verdict"]["equivalent"].as_array().expect("verdict.equivalent is a list");
     assert!(equivalent.iter().all(|e| e.as_str().is_some_and(|e| e != verdict)), "{r:#}");
+    // Issue #17: the location phase with phase, its shares adding up to 1.
+    let loc = &r["baseline"]["location"];
+    let share = |p: &str| loc["share"][p].as_f64().unwrap();
+    let sum: f64 = ["impact", "forming", "spring_back", "post"].iter().map(|p| share(p)).sum();
+    assert!((sum - 1.0).abs() < 1e-9, "{r:#}");
+    assert!(share(loc["phase"].as_str().unwrap()) >= 0.25, "{r:#}");
+    assert!(loc["method"].as_str().is_some_and(|m| m.starts_with("phase_aligned")), "{r:#}");
     let after = html.matches(&format!(", with {verdict} ")).count();
     assert_eq!(after, if verdict == "none" { 0 } else { 5 }, "{verdict}");
     // Localisation by indicator (issue #6): every one named, with a value for every blow
@@ -191,9 +198,16 @@ const NO_EFFECT_REL_ERROR: f64 = 0.01;
 /// to 4.2 % over capture seeds 3/4, 11/12 and 21/22).
 fn located_in_the_forming(r: &Value, forming_time_times: f64) {
     assert_eq!(r["baseline"]["dominant_phase"], "forming", "{r:#}");
+    located_phase_with_phase(r, "forming");
     let ind = |n: &str| r["baseline"]["indicators"][n]["mean_rel_error"].as_f64().unwrap();
     assert!(ind("forming_time") > forming_time_times * NO_EFFECT_REL_ERROR, "{r:#}");
     assert!(ind("final_height") < -5.0 * NO_EFFECT_REL_ERROR, "{r:#}");
+}
+
+/// Issue #17: `baseline.location`, phase with phase, names `phase` (src/diagnose/mod.rs's
+/// tests chose the method on capture seed 5; these cases are seeds 3/4).
+fn located_phase_with_phase(r: &Value, phase: &str) {
+    assert_eq!(r["baseline"]["location"]["phase"], phase, "{r:#}");
 }
 
 #[test]
@@ -203,7 +217,7 @@ fn friction_rise_is_named_and_located_in_the_forming() {
 
 #[test]
 fn strain_rate_is_named() {
-    single("rate", "strain_rate:m=0.1");
+    located_phase_with_phase(&single("rate", "strain_rate:m=0.1"), "forming");
 }
 
 #[test]
@@ -251,6 +265,28 @@ fn press_clearance_is_named_and_located_at_impact() {
     assert_eq!(r["baseline"]["dominant_phase"], "impact", "{r:#}");
 }
 
+/// Issue #17's basin case: at the press's 20 kHz a clearance of a few tenths of a mm under a
+/// light lower die (50 kg: struck at about twice the tool's 0.3 m/s it crosses 0.3 mm in
+/// about 0.5 ms, ten samples) closes within a few samples. Before the fine scan of the gap
+/// (src/diagnose/attribute.rs) it was fitted at 52 µm under the right die (capture seeds
+/// 3/4, shrink 0.76 all the same).
+///
+/// The gap within 10 %: one sample of closure time (50 µs) at the die's ~0.6 m/s is 30 µm,
+/// a tenth of the gap; the cost is flat below that (316 µm was fitted here). The die's mass
+/// within `recovers`' 3 %.
+#[test]
+fn press_short_closure_finds_its_gap() {
+    let (dir, machine) = make(Kind::Press, "p-short-closure", &["clearance:gap_m=0.0003,m_lower_kg=50"]);
+    let r = diagnose(&dir, &machine);
+    assert_eq!(r["verdict"]["effect"], "clearance", "{r:#}");
+    assert!(r["verdict"]["holdout_shrink"].as_f64().unwrap() >= 0.5, "{r:#}");
+    let params = &r["verdict"]["params"];
+    let (gap, die) = (params["gap_m"].as_f64().unwrap(), params["m_lower_kg"].as_f64().unwrap());
+    assert!((gap / 3e-4 - 1.0).abs() <= 0.10, "gap {gap}\n{r:#}");
+    assert!((die / 50.0 - 1.0).abs() <= 0.03, "die {die}\n{r:#}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Without the die (`m_lower_kg` left out) a press's gap is dead travel in a massless sensor
 /// path: the tool reaches the billet later, nothing else. At a constant-speed approach that
 /// is a pure delay, which the alignment at 10 % of the peak removes, and a constant gap is
@@ -275,6 +311,7 @@ fn press_dead_travel_leaves_no_trace_in_the_load() {
 fn press_elastic_recovery_is_named_and_located_in_the_spring_back() {
     let r = single_on(Kind::Press, "p-elastic", "elastic_recovery:k_contact_N_per_m=5e9");
     assert_eq!(r["baseline"]["dominant_phase"], "spring_back", "{r:#}");
+    located_phase_with_phase(&r, "spring_back");
 }
 
 #[test]
@@ -284,7 +321,7 @@ fn press_friction_rise_is_named_and_located_in_the_forming() {
 
 #[test]
 fn press_strain_rate_is_named() {
-    single_on(Kind::Press, "p-rate", "strain_rate:m=0.1");
+    located_phase_with_phase(&single_on(Kind::Press, "p-rate", "strain_rate:m=0.1"), "forming");
 }
 
 #[test]

@@ -1,9 +1,10 @@
 //! Attribution: each effect of the library (CONTRACTS.md §6) with its one or two
 //! parameters fitted on the calibration blows, then scored on the holdout blows.
 //!
-//! A fit is a coarse log-grid over the parameter bounds (the cost is far from convex in
-//! a gap or a time constant) followed by Levenberg–Marquardt (`identify::fit`) from the
-//! best grid point. The residuals are the load errors over each blow's baseline window,
+//! A fit is a global stage, a coarse log-grid over the parameter bounds (the cost is far
+//! from convex in a gap or a time constant) and a fine scan of a clearance's gap from the
+//! best grid points (its valley can be narrower than the grid's step), followed by
+//! Levenberg–Marquardt (`identify::fit`) from the best points found. The residuals are the load errors over each blow's baseline window,
 //! over the peak, so the cost is the mean nrmse² the contract scores.
 
 use crate::identify::fit::bounded_fit;
@@ -25,6 +26,14 @@ pub struct Candidate {
 impl Candidate {
     pub fn effect(&self, values: &[f64]) -> Effect {
         (self.build)(values)
+    }
+
+    /// Whether the first parameter's valleys can be narrower than the coarse grid's step,
+    /// so that it is scanned finely (`FINE`) before the local search: a clearance's gap,
+    /// whose closure may last a few samples (issue #17: a 0.3 mm gap under a 50 kg die on a
+    /// 20 kHz press was fitted at 52 µm from the coarse grid).
+    fn fine_first(&self) -> bool {
+        self.name == "clearance"
     }
 }
 
@@ -144,6 +153,9 @@ pub struct Fitted {
 const GRID: usize = 17;
 /// Local searches from the best grid points.
 const GRID_STARTS: usize = 3;
+/// Points of the fine scan of a `fine_first` parameter over its bounds: a gap within a
+/// factor 1.15 (5000^(1/60)) of any in 1 µm..5 mm.
+const FINE: usize = 60;
 
 /// Fit `cands` jointly (one effect, or a pair) on `calib` and score on `holdout`. The
 /// first `held.len()` parameters start at `held` (a single effect's fit, when a second is
@@ -194,20 +206,43 @@ pub fn fit_candidates(
         points = points.into_iter().flat_map(|pt| axis.iter().map(move |v| [pt.clone(), vec![*v]].concat())).collect();
     }
     use rayon::prelude::*;
-    let costs: Vec<f64> = points.par_iter().map(|v| cost(v)).collect();
-    let mut order: Vec<usize> = (0..points.len()).collect();
-    order.sort_by(|a, b| costs[*a].total_cmp(&costs[*b]));
-    // Levenberg–Marquardt from the best few grid points (the costs have several valleys),
+    let mut costs: Vec<f64> = points.par_iter().map(|v| cost(v)).collect();
+    // The global stage's second step: each fine-scanned parameter over its whole range,
+    // the others at each of the best grid points.
+    let fine = fine_points(
+        cands,
+        &params,
+        held.len(),
+        &best(&costs, GRID_STARTS).map(|i| points[i].clone()).collect::<Vec<_>>(),
+    );
+    costs.extend(fine.par_iter().map(|v| cost(v)).collect::<Vec<_>>());
+    points.extend(fine);
+    // Levenberg–Marquardt from the best few points (the costs have several valleys),
     // keeping the best.
-    let start = order
-        .iter()
-        .take(GRID_STARTS)
-        .map(|&i| {
-            let r = bounded_fit(&params, calib.len(), &f, &points[i]);
-            if r.cost <= costs[i] { (r.cost, r.values) } else { (costs[i], points[i].clone()) }
-        })
-        .min_by(|a, b| a.0.total_cmp(&b.0))?
-        .1;
+    let local = |from: &[f64], c: f64| {
+        let r = bounded_fit(&params, calib.len(), &f, from);
+        if r.cost <= c { (r.cost, r.values) } else { (c, from.to_vec()) }
+    };
+    let mut start =
+        best(&costs, GRID_STARTS).map(|i| local(&points[i], costs[i])).min_by(|a, b| a.0.total_cmp(&b.0))?;
+    // The fine scan again, the other parameters as fitted: a clearance's gap is a shallow
+    // valley along which the local search stalls once the die's mass (a sharp one) is
+    // right (issue #17's 20 kHz press: a 0.3 mm gap under 50 kg fitted at 52 µm, its
+    // calibration error 8 % above the true gap's).
+    let again = fine_points(cands, &params, held.len(), std::slice::from_ref(&start.1));
+    if !again.is_empty() {
+        let k = points.len();
+        costs.extend(again.par_iter().map(|v| cost(v)).collect::<Vec<_>>());
+        points.extend(again);
+        let i = best(&costs[k..], 1).next().map_or(k, |i| i + k);
+        if costs[i] < start.0 {
+            let polished = local(&points[i], costs[i]);
+            if polished.0 < start.0 {
+                start = polished;
+            }
+        }
+    }
+    let start = start.1;
     let values = start;
     let set = set_of(&values);
     let calib_n = calib.nrmse(machine, &set)?;
@@ -220,6 +255,34 @@ pub fn fit_candidates(
         holdout: mean(&hold_n),
         holdout_per_blow: hold_n,
     })
+}
+
+/// The indices of the `k` lowest costs, lowest first.
+fn best(costs: &[f64], k: usize) -> impl Iterator<Item = usize> {
+    let mut order: Vec<usize> = (0..costs.len()).collect();
+    order.sort_by(|a, b| costs[*a].total_cmp(&costs[*b]));
+    order.into_iter().take(k)
+}
+
+/// For each free parameter of a `fine_first` candidate (its first, past the `held` ones),
+/// `FINE` log-spaced values over its bounds, the other parameters as at each of `around`.
+fn fine_points(cands: &[&Candidate], params: &[Param], held: usize, around: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let mut first = 0;
+    let mut out = Vec::new();
+    for c in cands {
+        if c.fine_first() && first >= held {
+            let p = params[first];
+            for pt in around {
+                out.extend((0..FINE).map(|i| {
+                    let mut v = pt.clone();
+                    v[first] = (p.lo.ln() + (p.hi.ln() - p.lo.ln()) * (i as f64 + 0.5) / FINE as f64).exp();
+                    v
+                }));
+            }
+        }
+        first += c.params.len();
+    }
+    out
 }
 
 pub fn mean(v: &[f64]) -> f64 {

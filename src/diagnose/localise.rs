@@ -21,6 +21,8 @@ use crate::identify::objective::{MeasuredInstants, Reference, ReferenceError, Si
 use crate::physics::machine::Machine;
 use crate::signal::segment::Blow;
 
+use super::location::Location;
+
 /// Kept after the load returns to zero, s (CONTRACTS.md §6).
 pub const POST_S: f64 = 5e-3;
 /// The load has returned to zero when it falls below this fraction of the peak.
@@ -93,6 +95,8 @@ pub struct Localised {
     pub measured: Phases,
     /// The model's.
     pub model: Phases,
+    /// The error phase with phase, each on its own time (`location`).
+    pub location: Location,
 }
 
 /// A blow's phase boundaries, sample indices: first contact, end of impact, end of forming,
@@ -229,7 +233,8 @@ pub fn localise(r: &Reference, model: &Simulated, mode2_hz: f64) -> Localised {
     let phase = |k: usize| (sum[k] / length[k] as f64).sqrt() / r.peak_n;
     let by_phase = ByPhase { impact: phase(0), forming: phase(1), spring_back: phase(2), post: phase(3) };
     let by_band = bands(&resid[start..end.max(start)], dt, mode2_hz, nrmse);
-    Localised { nrmse, by_phase, by_band, window: (start, end), measured, model: modelled }
+    let location = Location::of(&r.load_n, &model_load, &measured, &modelled, r.peak_n);
+    Localised { nrmse, by_phase, by_band, window: (start, end), measured, model: modelled, location }
 }
 
 /// The nrmse alone (`localise`'s, without the phase and band split), for the fits.
@@ -269,75 +274,126 @@ fn charge_by_phase(
     measured: &Phases,
     model: &Phases,
 ) -> ([f64; 4], [usize; 4]) {
-    let n = measured_load.len().min(model_load.len());
-    // How much longer each phase lasts in the model than in the measurement, samples; a late
-    // model contact counts to impact.
-    let len = |p: &Phases, k: usize| p.0[k + 1] as f64 - p.0[k] as f64;
-    let mut longer = [0.0; 4];
-    for (k, d) in longer.iter_mut().enumerate() {
-        *d = len(model, k) - len(measured, k);
+    let c = Charging::new(measured_load, model_load, measured, model);
+    let mut sum = c.charge_samples();
+    for (k, to) in c.shift_to.iter().enumerate().filter_map(|(k, to)| to.map(|to| (k, to))) {
+        let (own, lagged) = c.split_lag(k);
+        sum[to] += lagged;
+        sum[k] += own;
     }
-    longer[0] += model.contact() as f64 - measured.contact() as f64;
-    // Of phases 0..first, the one that contributed most to the model's lag at boundary
-    // `first` (the sum of their excess lengths), if any did in the lag's direction.
-    let culprit = |first: usize| {
-        let lag: f64 = longer[..first].iter().sum();
+    (sum, std::array::from_fn(|k| (measured.0[k + 1] - measured.0[k]).max(1)))
+}
+
+/// What `charge_by_phase` decides once per blow.
+struct Charging<'a> {
+    measured_load: &'a [f64],
+    model_load: &'a [f64],
+    measured: &'a Phases,
+    model: &'a Phases,
+    /// How much longer each phase lasts in the model than in the measurement, samples; a
+    /// late model contact counts to impact.
+    longer: [f64; 4],
+    /// Each phase's culprit where the lag it inherited may explain its residual.
+    shift_to: [Option<usize>; 4],
+    /// The samples compared: [from, to).
+    from: usize,
+    to: usize,
+}
+
+impl<'a> Charging<'a> {
+    fn new(measured_load: &'a [f64], model_load: &'a [f64], measured: &'a Phases, model: &'a Phases) -> Self {
+        let n = measured_load.len().min(model_load.len());
+        let len = |p: &Phases, k: usize| p.0[k + 1] as f64 - p.0[k] as f64;
+        let mut longer: [f64; 4] = std::array::from_fn(|k| len(model, k) - len(measured, k));
+        longer[0] += model.contact() as f64 - measured.contact() as f64;
+        let mut c = Charging {
+            measured_load,
+            model_load,
+            measured,
+            model,
+            longer,
+            shift_to: [None; 4],
+            from: measured.contact().min(model.contact()),
+            to: measured.0[4].max(model.0[4]).min(n),
+        };
+        c.shift_to = std::array::from_fn(|k| c.lag_target(k));
+        c
+    }
+
+    /// Of phases 0..first, the one that contributed most to the model's lag at boundary
+    /// `first` (the sum of their excess lengths), if any did in the lag's direction.
+    fn culprit(&self, first: usize) -> Option<usize> {
+        let sign = self.longer[..first].iter().sum::<f64>().signum();
         (0..first)
-            .max_by(|x, y| (longer[*x] * lag.signum()).total_cmp(&(longer[*y] * lag.signum())))
-            .filter(|&j| longer[j] * lag.signum() > 0.0)
-    };
-    let mut sum = [0.0; 4];
-    // After the end of forming the model may still be late (or early) by the lag it
-    // inherited: `lag[k]` samples at the start of phase k, `lag[k] + longer[k]` at its end.
-    // Where that lag is larger than the phase's own error in length, the lag may explain the
-    // residual where both blows are in the phase (weighed below).
-    let lag = |k: usize| model.0[k] as i64 - measured.0[k] as i64;
-    // Each phase's culprit where its lag may explain it (decided once, not per sample).
-    let shift_to: [Option<usize>; 4] =
-        std::array::from_fn(|k| culprit(k).filter(|_| (2..4).contains(&k) && longer[k].abs() < lag(k).abs() as f64));
-    let from = measured.contact().min(model.contact());
-    let to = measured.0[4].max(model.0[4]).min(n);
-    for i in from..to {
-        let e2 = (measured_load[i] - model_load[i]).powi(2);
-        let (a, b) = (measured.of(i), model.of(i));
-        let k = if a == b {
-            if a >= 0 && shift_to[a as usize].is_some() {
-                continue;
+            .max_by(|x, y| (self.longer[*x] * sign).total_cmp(&(self.longer[*y] * sign)))
+            .filter(|&j| self.longer[j] * sign > 0.0)
+    }
+
+    /// The model's lag at the start of phase `k`, samples (it ends the phase `longer[k]`
+    /// later still).
+    fn lag(&self, k: usize) -> i64 {
+        self.model.0[k] as i64 - self.measured.0[k] as i64
+    }
+
+    /// After the end of forming, where the lag phase `k` inherited is larger than its own
+    /// error in length, the lag may explain the residual where both blows are in the phase:
+    /// the phase that caused it.
+    fn lag_target(&self, k: usize) -> Option<usize> {
+        self.culprit(k).filter(|_| (2..4).contains(&k) && self.longer[k].abs() < self.lag(k).unsigned_abs() as f64)
+    }
+
+    /// Sample by sample: in step, the phase's (unless its lag is weighed by `split_lag`);
+    /// out of step, the phase that put them out of step.
+    fn charge_samples(&self) -> [f64; 4] {
+        let mut sum = [0.0; 4];
+        for i in self.from..self.to {
+            let (a, b) = (self.measured.of(i), self.model.of(i));
+            let k = if a == b {
+                if a >= 0 && self.shift_to[a as usize].is_some() {
+                    continue;
+                }
+                a
+            } else {
+                self.out_of_step(a, b)
+            };
+            if (0..4).contains(&k) {
+                sum[k as usize] += (self.measured_load[i] - self.model_load[i]).powi(2);
             }
-            a
-        } else {
-            // Out of step: the blows are on either side of boundaries min(a, b) + 1 ..=
-            // max(a, b); the phase that contributed most to the lag at the first of them put
-            // them out of step.
-            let first = (a.min(b) + 1).clamp(1, 4) as usize;
-            culprit(first).map_or(a.min(b).max(0), |j| j as i32)
-        };
-        if (0..4).contains(&k) {
-            sum[k as usize] += e2;
         }
+        sum
     }
-    // What shifting the model removes over the phase, at the shift between the lags at its
-    // start and its end that removes most, is the phase's that caused the lag; what is left
-    // is this phase's own. Weighed over the phase, not sample by sample: per sample, the
-    // nearer of two curves that straddle the measurement would credit the lag with noise.
-    for (k, c) in shift_to.iter().enumerate().filter_map(|(k, c)| c.map(|c| (k, c))) {
-        let (lo, hi) = (measured.0[k].max(model.0[k]).max(from), measured.0[k + 1].min(model.0[k + 1]).min(to));
-        let squared = |shift: i64| -> Option<f64> {
-            let (first, last) = (lo as i64 + shift, hi as i64 - 1 + shift);
-            (lo < hi && first >= 0 && last < n as i64)
-                .then(|| (lo..hi).map(|i| (measured_load[i] - model_load[(i as i64 + shift) as usize]).powi(2)).sum())
-        };
-        let as_is = squared(0).unwrap_or(0.0);
-        let (start, end) = (lag(k), lag(k) + longer[k] as i64);
-        let shifted = (start.min(end)..=start.max(end)).filter_map(squared).fold(as_is, f64::min);
-        sum[c] += as_is - shifted;
-        sum[k] += shifted;
+
+    /// The blows are on either side of boundaries min(a, b) + 1 ..= max(a, b): the phase
+    /// that contributed most to the lag at the first of them put them out of step.
+    fn out_of_step(&self, a: i32, b: i32) -> i32 {
+        let first = (a.min(b) + 1).clamp(1, 4) as usize;
+        self.culprit(first).map_or(a.min(b).max(0), |j| j as i32)
     }
-    let mut length = [1usize; 4];
-    for (k, l) in length.iter_mut().enumerate() {
-        *l = (measured.0[k + 1] - measured.0[k]).max(1);
+
+    /// Phase `k`'s in-step residual split into its own and the lag's: what shifting the
+    /// model removes over the phase, at the shift between the lags at its start and end
+    /// that removes most, is the lag's. Weighed over the phase, not sample by sample: per
+    /// sample, the nearer of two curves that straddle the measurement would credit the lag
+    /// with noise.
+    fn split_lag(&self, k: usize) -> (f64, f64) {
+        let as_is = self.shifted_squares(k, 0).unwrap_or(0.0);
+        let (start, end) = (self.lag(k), self.lag(k) + self.longer[k] as i64);
+        let shifted =
+            (start.min(end)..=start.max(end)).filter_map(|s| self.shifted_squares(k, s)).fold(as_is, f64::min);
+        (shifted, as_is - shifted)
     }
-    (sum, length)
+
+    /// Σ of the squared residual where both blows are in phase `k`, the model read `shift`
+    /// samples on; `None` where the shift leaves the record.
+    fn shifted_squares(&self, k: usize, shift: i64) -> Option<f64> {
+        let n = self.measured_load.len().min(self.model_load.len()) as i64;
+        let lo = self.measured.0[k].max(self.model.0[k]).max(self.from);
+        let hi = self.measured.0[k + 1].min(self.model.0[k + 1]).min(self.to);
+        let (first, last) = (lo as i64 + shift, hi as i64 - 1 + shift);
+        (lo < hi && first >= 0 && last < n).then(|| {
+            (lo..hi).map(|i| (self.measured_load[i] - self.model_load[(i as i64 + shift) as usize]).powi(2)).sum()
+        })
+    }
 }
 
 /// Split `nrmse` of the residual `x` by band, in proportion to the energy in each.

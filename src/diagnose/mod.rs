@@ -9,6 +9,7 @@ pub mod attribute;
 pub mod evidence;
 pub mod indicators;
 pub mod localise;
+pub mod location;
 #[cfg(test)]
 mod rates;
 pub mod verdict;
@@ -22,6 +23,7 @@ use crate::physics::machine::Machine;
 use attribute::{BlowSet, Candidate, Fitted, library, mean};
 use indicators::{Indicators, Summary, indicators, summarise};
 use localise::{ByBand, ByPhase, Localised, localise};
+use location::Location;
 
 pub use verdict::{MIN_PAIR_SHRINK, MIN_SHRINK, NOISE_FACTOR};
 
@@ -33,6 +35,8 @@ pub struct Diagnosis {
     pub baseline_holdout_per_blow: Vec<f64>,
     pub by_phase: ByPhase,
     pub by_band: ByBand,
+    /// The error phase with phase, mean over the calibration blows (`location`).
+    pub location: Location,
     /// The calibration blows' indicators, and over the blows.
     pub indicators: Vec<Indicators>,
     pub indicator_summary: Vec<Summary>,
@@ -83,6 +87,13 @@ fn noise(set: &BlowSet, loc: &[Localised]) -> f64 {
     mean(&v)
 }
 
+/// How many fits `diagnose` runs (and tells `progress` of) on a machine of `kind`: every
+/// library effect alone, then the best one paired with each other.
+pub fn fit_count(kind: crate::physics::machine::MachineKind) -> usize {
+    let n = library(kind).len();
+    n + n.saturating_sub(1)
+}
+
 /// Diagnose `machine` (with its own `effects`) on calibration and holdout blows.
 /// `progress` is told of each fitted candidate.
 pub fn diagnose(
@@ -96,6 +107,7 @@ pub fn diagnose(
     let (holdout, hold_loc, _) = blow_set(holdout.0, holdout.1, machine, effects)?;
     let by_phase = ByPhase::mean(&calib_loc.iter().map(|l| l.by_phase).collect::<Vec<_>>());
     let by_band = ByBand::mean(&calib_loc.iter().map(|l| l.by_band).collect::<Vec<_>>());
+    let location = Location::mean(&calib_loc.iter().map(|l| l.location).collect::<Vec<_>>());
     let base_hold: Vec<f64> = hold_loc.iter().map(|l| l.nrmse).collect();
     let base_calib = mean(&calib_loc.iter().map(|l| l.nrmse).collect::<Vec<_>>());
     let lib = library(machine.kind());
@@ -143,6 +155,7 @@ pub fn diagnose(
         baseline_holdout_per_blow: base_hold,
         by_phase,
         by_band,
+        location,
         indicator_summary: summarise(&calib_ind),
         indicators: calib_ind,
         candidates,
@@ -181,6 +194,7 @@ impl Diagnosis {
                 "by_phase": self.by_phase,
                 "dominant_phase": self.by_phase.dominant(),
                 "by_band": self.by_band,
+                "location": {"phase": self.location.phase(), "share": self.location.share(), "method": location::METHOD},
                 "indicators": self.indicator_summary.iter().map(|s| (s.name.to_string(), json!({
                     "mean_rel_error": finite(s.mean_rel_error), "blows": s.blows,
                     "per_blow_rel_error": s.per_blow_rel_error.iter().map(|x| x.map(finite)).collect::<Vec<_>>(),
@@ -223,6 +237,13 @@ mod tests {
 
     use super::indicators::{Summary, indicators, summarise};
     use super::localise::{ByPhase, localise};
+    use super::location::Location;
+
+    /// The withheld-effect suite's machines (tests/diagnose.rs): a hammer unlike the
+    /// paper's Table 1, a press unlike the press paper's Table 3.
+    const HAMMER: &str = "kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n";
+    const PRESS: &str = "kind = \"screw_press\"\nm_tool_kg = 2500\nm_ram_kg = 90000\nk_link_N_per_m = 2.1e9\n\
+        c_link_Ns_per_m = 2.8e5\nk_frame_N_per_m = 8.0e9\nc_frame_Ns_per_m = 5.0e4\nk_sensor_N_per_m = 3.39e10\n";
 
     /// Blows made with a hidden effect, seen through the base model as `diagnose` sees them
     /// (phases located on the measured signals): the residual by phase over the blows, and
@@ -230,39 +251,59 @@ mod tests {
     /// The hammer is the withheld-effect suite's (not the paper's), the billet the steel
     /// sheet's without its measured heights, so the model carries its own heights.
     fn baseline(effect: &str) -> (ByPhase, Vec<Summary>) {
-        let m =
-            parse_machine("m", "kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n")
-                .unwrap()
-                .machine;
-        let mut p = parse_process("p", include_str!("../../config/steel-16NiCrMo13.process.toml")).unwrap();
+        let (phase, _, summary) = baseline_on(MachineKind::Hammer, effect);
+        (phase, summary)
+    }
+
+    /// `baseline` on either machine (the press on the copper sheet at the paper's speeds),
+    /// with the location phase with phase.
+    fn baseline_on(kind: MachineKind, effect: &str) -> (ByPhase, Location, Vec<Summary>) {
+        let (text, sheet, v0s, spec) = match kind {
+            MachineKind::Hammer => (
+                HAMMER,
+                include_str!("../../config/steel-16NiCrMo13.process.toml"),
+                vec![4.0, 4.5, 5.0, 5.3, 5.3],
+                CaptureSpec::hammer(5),
+            ),
+            MachineKind::ScrewPress => (
+                PRESS,
+                include_str!("../../config/copper-cu99.process.toml"),
+                vec![0.30, 0.33, 0.36, 0.36, 0.36],
+                CaptureSpec::press(5),
+            ),
+        };
+        let m = parse_machine("m", text).unwrap().machine;
+        let mut p = parse_process("p", sheet).unwrap();
         p.measured_final_heights_m.clear();
         let hidden = match effect {
             "none" => EffectSet::NONE,
             e => EffectSet::from_effects(&[Effect::parse_spec(e).unwrap()]),
         };
-        let v0s = [4.0, 4.5, 5.0, 5.3, 5.3];
-        let blows = synth_blows(&m, &hidden, &p, &v0s, &CaptureSpec::hammer(5)).unwrap();
+        let blows = synth_blows(&m, &hidden, &p, &v0s, &spec).unwrap();
+        let fit_s = crate::estimate::EstimatorConfig::for_kind(kind).fit_s;
         let refs: Vec<Reference> = blows
             .iter()
             .enumerate()
             .map(|(i, b)| {
-                let cut = Segmenter::cut_all(SegmentConfig::HAMMER, [&rows_batch("c", 0, 0, 1e4, &b.rows)]);
-                super::localise::reference("b", &cut[0], Some(i + 1), 0.01, &m).unwrap()
+                let batch = rows_batch("c", 0, 0, 1e9 / spec.sample_rate_hz, &b.rows);
+                let cut = Segmenter::cut_all(SegmentConfig::for_kind(kind), [&batch]);
+                super::localise::reference("b", &cut[0], Some(i + 1), fit_s, &m).unwrap()
             })
             .collect();
-        let obj = Objective::new(refs, vec![true; v0s.len()], Setting::Billet(p), MachineKind::Hammer);
+        let obj = Objective::new(refs, vec![true; v0s.len()], Setting::Billet(p), kind);
         let sims = obj.simulate(&m).unwrap();
         let loc: Vec<_> = obj.refs.iter().zip(&sims).map(|(r, s)| localise(r, s, m.second_mode_hz())).collect();
         let ind: Vec<_> =
             obj.refs.iter().zip(&sims).zip(&loc).map(|((r, s), l)| indicators(r, s, l, m.second_mode_hz())).collect();
         // Over the blows, as the report's baseline gives them.
         let mean = ByPhase::mean(&loc.iter().map(|l| l.by_phase).collect::<Vec<_>>());
+        let location = Location::mean(&loc.iter().map(|l| l.location).collect::<Vec<_>>());
         let summary = summarise(&ind);
-        eprintln!("{effect}: {mean:?}");
+        eprintln!("{effect}: {mean:?}\n  location {} {:?}", location.phase(), location.share());
         for s in &summary {
             eprintln!("  {}: {:+.3}", s.name, s.mean_rel_error);
         }
-        (mean, summary)
+        (mean, location, summary)
     }
 
     fn rel(summary: &[Summary], name: &str) -> f64 {
@@ -304,6 +345,42 @@ mod tests {
             assert!(rel(&ind, "forming_time") > 0.05, "{effect}");
             assert!(rel(&ind, "final_load") < -0.02, "{effect}");
             assert!(rel(&ind, "final_height") < -0.05, "{effect}");
+        }
+    }
+
+    /// Issue #17: located phase with phase (`location`), an effect that changes only the
+    /// billet's flow lands in the forming on both machines, the press's compliant contact in
+    /// the spring-back. Each by a clear margin: the named phase holds over half the error.
+    ///
+    /// Tuning: the method (a phase's share of the blow's squared error, not its density as
+    /// `by_phase` has it) was chosen over the density on these capture seeds (5); the
+    /// withheld-effect suite (tests/diagnose.rs, seeds 3/4) reports on others.
+    ///
+    /// Not achieved (issue #17, left open): the hammer's compliant contact falls in the
+    /// forming (0.47 against the spring-back's 0.42 here), and a clearance on either machine
+    /// in the forming (0.71): its lower mass bounces through the whole forming, and without
+    /// the encoder's own contact the measured impact does not start before the load does.
+    #[test]
+    fn location_names_the_phase_the_effect_acts_in() {
+        for (kind, effect, phase) in [
+            (MachineKind::Hammer, "friction_rise:exponent=1.0", "forming"),
+            (MachineKind::Hammer, "strain_rate:m=0.1", "forming"),
+            (MachineKind::Hammer, "strain_hardening:n=0.2", "forming"),
+            (MachineKind::ScrewPress, "friction_rise:exponent=1.0", "forming"),
+            (MachineKind::ScrewPress, "strain_rate:m=0.1", "forming"),
+            (MachineKind::ScrewPress, "strain_hardening:n=0.2", "forming"),
+            (MachineKind::ScrewPress, "elastic_recovery:k_contact_N_per_m=5e9", "spring_back"),
+        ] {
+            let (_, location, _) = baseline_on(kind, effect);
+            let share = location.share();
+            assert_eq!(location.phase(), phase, "{kind:?} {effect}: {share:?}");
+            let named = match phase {
+                "forming" => share.forming,
+                _ => share.spring_back,
+            };
+            assert!(named > 0.5, "{kind:?} {effect}: {share:?}");
+            let sum = share.impact + share.forming + share.spring_back + share.post;
+            assert!((sum - 1.0).abs() < 1e-12, "{share:?}");
         }
     }
 
