@@ -199,37 +199,25 @@ where
             };
         }
         let h_try = h.min(t_stop - t);
-        // One trial step.
-        let (y1, dy1) = match method {
-            Method::Dopri5 { rtol } => {
-                let err = dopri5_step(sys, mode, &y, &dy, h_try, &mut ws, scale, rtol);
-                stats.rhs_evals += 6;
-                if !err.is_finite() || err > 1.0 {
-                    stats.rejected += 1;
-                    let shrink = if err.is_finite() { (SAFETY * err.powf(-0.2)).max(MIN_SHRINK) } else { MIN_SHRINK };
-                    h = h_try * shrink;
-                    if h < min_step {
-                        return Err(IntegrationError::StepTooSmall {
-                            t_s: t,
-                            min_step_s: min_step,
-                            mode: format!("{mode:?}"),
-                        });
-                    }
-                    continue;
+        // One trial step; only Dormand–Prince's is checked and its next length chosen.
+        let (y1, dy1, err) = take_step(sys, method, mode, &y, &dy, h_try, &mut ws, scale, &mut stats);
+        if let Method::Dopri5 { .. } = method {
+            if !err.is_finite() || err > 1.0 {
+                stats.rejected += 1;
+                let shrink = if err.is_finite() { (SAFETY * err.powf(-0.2)).max(MIN_SHRINK) } else { MIN_SHRINK };
+                h = h_try * shrink;
+                if h < min_step {
+                    return Err(IntegrationError::StepTooSmall {
+                        t_s: t,
+                        min_step_s: min_step,
+                        mode: format!("{mode:?}"),
+                    });
                 }
-                let grow = if err > 0.0 { (SAFETY * err.powf(-0.2)).min(MAX_GROWTH) } else { MAX_GROWTH };
-                h = (h_try * grow).min(h_max);
-                (ws.y_new, ws.k[6])
+                continue;
             }
-            Method::Rk4 { .. } => {
-                rk4_step(sys, mode, &y, &dy, h_try, &mut ws);
-                stats.rhs_evals += 4;
-                let mut dy1 = [0.0; N];
-                sys.rhs(&ws.y_new, mode, &mut dy1);
-                stats.rhs_evals += 1;
-                (ws.y_new, dy1)
-            }
-        };
+            let grow = if err > 0.0 { (SAFETY * err.powf(-0.2)).min(MAX_GROWTH) } else { MAX_GROWTH };
+            h = (h_try * grow).min(h_max);
+        }
         if y1.iter().any(|v| !v.is_finite()) {
             return Err(IntegrationError::NonFinite { t_s: t + h_try, mode: format!("{mode:?}") });
         }
@@ -261,20 +249,8 @@ where
                 // Reach the event exactly with one RK step of the located length.
                 let h_ev = theta * h_try;
                 let (ye, dye) = if h_ev > 0.0 {
-                    match method {
-                        Method::Dopri5 { rtol } => {
-                            dopri5_step(sys, mode, &y, &dy, h_ev, &mut ws, scale, rtol);
-                            stats.rhs_evals += 6;
-                            (ws.y_new, ws.k[6])
-                        }
-                        Method::Rk4 { .. } => {
-                            rk4_step(sys, mode, &y, &dy, h_ev, &mut ws);
-                            let mut d = [0.0; N];
-                            sys.rhs(&ws.y_new, mode, &mut d);
-                            stats.rhs_evals += 5;
-                            (ws.y_new, d)
-                        }
-                    }
+                    let (ye, dye, _) = take_step(sys, method, mode, &y, &dy, h_ev, &mut ws, scale, &mut stats);
+                    (ye, dye)
                 } else {
                     (y, dy)
                 };
@@ -299,6 +275,36 @@ where
                 guards = Guards::new();
                 sys.guards(&y, &dy, mode, &mut guards);
             }
+        }
+    }
+}
+
+/// One step of `method` of length `h` from `(y, dy)`: the new state, its derivative, and
+/// Dormand–Prince's error norm (0 for the fixed-step RK4, which has none).
+#[allow(clippy::too_many_arguments)]
+fn take_step<const N: usize, S: Hybrid<N>>(
+    sys: &S,
+    method: Method,
+    mode: S::Mode,
+    y: &[f64; N],
+    dy: &[f64; N],
+    h: f64,
+    ws: &mut Workspace<N>,
+    scale: &[f64; N],
+    stats: &mut Stats,
+) -> ([f64; N], [f64; N], f64) {
+    match method {
+        Method::Dopri5 { rtol } => {
+            let err = dopri5_step(sys, mode, y, dy, h, ws, scale, rtol);
+            stats.rhs_evals += 6;
+            (ws.y_new, ws.k[6], err)
+        }
+        Method::Rk4 { .. } => {
+            rk4_step(sys, mode, y, dy, h, ws);
+            let mut dy1 = [0.0; N];
+            sys.rhs(&ws.y_new, mode, &mut dy1);
+            stats.rhs_evals += 5;
+            (ws.y_new, dy1, 0.0)
         }
     }
 }
