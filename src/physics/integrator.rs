@@ -15,6 +15,11 @@ pub const MAX_GUARDS: usize = 6;
 
 /// Root-finding stops when the bracket is this fraction of the step.
 const ROOT_REL_TOL: f64 = 1e-10;
+/// Most root-finding iterations: bisection alone reaches `ROOT_REL_TOL` in 34, and at
+/// worst every third iteration bisects.
+const ROOT_MAX_ITERATIONS: usize = 120;
+/// Regula falsi keeping the same end of the bracket this many times running bisects next.
+const ROOT_STALL: u8 = 3;
 /// Step-size controller: safety factor and growth limits (Hairer, Nørsett, Wanner §II.4).
 const SAFETY: f64 = 0.9;
 const MAX_GROWTH: f64 = 5.0;
@@ -479,33 +484,41 @@ fn locate<const N: usize, S: Hybrid<N>>(
     let (mut a, mut fa) = (0.0, g_start);
     let (mut b, mut fb) = (1.0, g_end);
     let mut side = 0i8;
-    for _ in 0..60 {
+    let mut run = 0u8;
+    for _ in 0..ROOT_MAX_ITERATIONS {
         if b - a <= ROOT_REL_TOL {
             break;
         }
         let mut c = (a * fb - b * fa) / (fb - fa);
-        if !(c > a && c < b) {
+        // A guard flat on one side of its root (a contact force held at zero until a gap
+        // closes, then rising at the contact stiffness) keeps the secant on the flat side,
+        // and the Illinois halving needs ~100 rounds to undo a 1e40 ratio of the ends:
+        // bisect when the same end has been kept `ROOT_STALL` times running.
+        if !(c > a && c < b) || run >= ROOT_STALL {
             c = 0.5 * (a + b);
+            run = 0;
         }
         let fc = eval(c, stats);
         if fc == 0.0 {
             return c;
         }
-        if (fc > 0.0) == (fb > 0.0) {
+        let kept_a = (fc > 0.0) == (fb > 0.0);
+        let now = if kept_a { 1 } else { -1 };
+        run = if now == side { run + 1 } else { 1 };
+        if kept_a {
             b = c;
             fb = fc;
             if side == 1 {
                 fa *= 0.5;
             }
-            side = 1;
         } else {
             a = c;
             fa = fc;
             if side == -1 {
                 fb *= 0.5;
             }
-            side = -1;
         }
+        side = now;
     }
     // The far end of the bracket, so that the guard has crossed when the mode switches.
     b
@@ -584,6 +597,59 @@ mod tests {
     fn rk4_locates_the_event_of_a_harmonic_oscillator() {
         let t = run(Method::Rk4 { dt_s: 1e-3 });
         assert!((t - std::f64::consts::FRAC_PI_2).abs() < 1e-10, "{t}");
+    }
+
+    /// x' = 1 with a guard flat until x = 0.3, then steep: a contact force that switches on
+    /// when a gap closes, less a flow load of 1e-30 (a fresh billet's). Regula falsi alone
+    /// stays on the flat side; the located instant must be the closure.
+    struct Closure;
+
+    impl Hybrid<1> for Closure {
+        type Mode = M;
+        fn rhs(&self, _y: &[f64; 1], mode: M, dy: &mut [f64; 1]) {
+            dy[0] = if mode == M::Swing { 1.0 } else { 0.0 };
+        }
+        fn guards(&self, y: &[f64; 1], _dy: &[f64; 1], mode: M, out: &mut Guards) {
+            if mode == M::Swing {
+                out.push(0, 1e9 * (y[0] - 0.3).max(0.0) - 1e-30, Crossing::Rising);
+            }
+        }
+        fn on_event(&self, _y: &mut [f64; 1], _mode: M, _id: u8) -> M {
+            M::Done
+        }
+        fn max_step(&self) -> f64 {
+            1.0
+        }
+    }
+
+    struct At(Option<f64>);
+    impl Observer<1, M> for At {
+        fn on_step(
+            &mut self,
+            _: f64,
+            _: &[f64; 1],
+            _: &[f64; 1],
+            _: f64,
+            _: &[f64; 1],
+            _: &[f64; 1],
+            _: M,
+        ) -> Option<f64> {
+            self.0.map(|te| te + 0.1)
+        }
+        fn on_event(&mut self, t: f64, _: &[f64; 1], _: M, _: M, _: u8) {
+            self.0 = Some(t);
+        }
+    }
+
+    #[test]
+    fn a_guard_flat_on_one_side_is_located_at_its_kink() {
+        // One step of 1 s covers the closure at t = 0.3.
+        let limits = Limits { t_max_s: 10.0, max_events: 10, initial_step_s: 1.0, max_steps: 1000 };
+        let mut at = At(None);
+        integrate(&Closure, Method::Dopri5 { rtol: 1e-6 }, &[1.0], [0.0], M::Swing, limits, &mut at).unwrap();
+        let t = at.0.unwrap();
+        // ROOT_REL_TOL of the 1 s step, and the 1e-30 / 1e9 offset of the root, far below it.
+        assert!((t - 0.3).abs() < 1e-9, "{t}");
     }
 
     #[test]

@@ -481,3 +481,31 @@ fn press_clearance_with_its_die_starts_it_at_rest_and_it_bounces() {
         assert!(c.abs() < 0.01, "run {i}: ledger closes to {c:e} ({:?})", blow.energy);
     }
 }
+
+/// A press's dead travel (clearance without its die) closing onto a fresh copper billet,
+/// whose flow load rises from near zero: at the default tolerance the closure used to be
+/// missed inside a long step and the billet loaded elastically to a 680 kN spike before it
+/// flowed. The closure is now an event (the touch guard) where the step restarts, so the
+/// default run follows the converged one (rtol 1e-8) from the closure to the peak within the
+/// press captures' 5 kN load noise (`synth::CaptureSpec::press`), and the billet flows from
+/// the closure on.
+#[test]
+fn press_dead_travel_closure_is_located_at_the_default_tolerance() {
+    let gap_m = 3e-4;
+    let set = EffectSet::from_effects([&Effect::parse_spec("clearance:gap_m=3e-4").unwrap()]);
+    let run = |rtol: f64| {
+        let opts = SimOptions { method: Method::Dopri5 { rtol }, trace_dt_s: Some(1e-5), ..SimOptions::default() };
+        simulate_sequence(&press(), &set, &copper(), &[V_COPPER], &opts).unwrap().remove(0)
+    };
+    let (dflt, conv) = (run(super::blow::DEFAULT_RTOL), run(1e-8));
+    let i_peak =
+        (0..conv.trace.len()).max_by(|&a, &b| conv.trace[a].out.sensor_n.total_cmp(&conv.trace[b].out.sensor_n));
+    let i_peak = i_peak.unwrap();
+    let worst =
+        (0..=i_peak).map(|i| (dflt.trace[i].out.sensor_n - conv.trace[i].out.sensor_n).abs()).fold(0.0, f64::max);
+    assert!(worst < 5e3, "default vs converged sensor load up to the peak: {worst} N apart");
+    // The tool crosses the gap at v0: the billet is flowing two samples after that.
+    let t_close = gap_m / V_COPPER;
+    let after = dflt.trace.iter().find(|p| p.t_s >= t_close + 2e-5).unwrap();
+    assert!(after.out.h_m < dflt.h_start_m, "not flowing {} s after the closure", after.t_s - t_close);
+}
