@@ -120,20 +120,74 @@ fn a_press_is_identified_from_three_bare_strikes() {
     let (stdout, fitted) = identify(&caps, &out, &["--kind", "screw_press", "--bare"]);
     eprintln!("{stdout}");
     let truth: toml::Table = PRESS.parse().unwrap();
-    let mut n_determined = 0;
-    for key in ["m_tool_kg", "m_ram_kg", "k_link_N_per_m", "c_link_Ns_per_m", "k_frame_N_per_m", "c_frame_Ns_per_m"] {
+    // Both masses, both springs and the link damper are determined: the three strikes' peaks
+    // and the ~300 Hz ring's frequency, share and decay each depend on them, and the press
+    // paper identifies all of them from bare strikes. Each must be within the 5 %.
+    for key in ["m_tool_kg", "m_ram_kg", "k_link_N_per_m", "c_link_Ns_per_m", "k_frame_N_per_m"] {
         let t = truth[key].as_float().or_else(|| truth[key].as_integer().map(|i| i as f64)).unwrap();
         let v = value(&fitted, key);
-        if determined(&fitted, key) {
-            n_determined += 1;
-            assert!((v / t - 1.0).abs() < 0.05, "{key}: {v} vs {t}\n{fitted}");
-        }
+        assert!(determined(&fitted, key), "{key} should be determined\n{fitted}");
+        assert!((v / t - 1.0).abs() < 0.05, "{key}: {v} vs {t}\n{fitted}");
     }
-    // Both masses and both springs at least (the press paper identifies all four).
-    assert!(n_determined >= 4, "{fitted}");
+    // The frame damper is built not to be: its time constant c / (k_frame + k_sensor) is
+    // 1.2 µs, under the 3 µs below which the plant folds the frame node into the series
+    // springs (`physics::plant::NODE_MIN_TAU_S`), so no load the model makes depends on it.
+    // The tool must say so, and the verdict must be right: the load is independent of it.
+    assert!(!determined(&fitted, "c_frame_Ns_per_m"), "c_frame cannot be determined\n{fitted}");
+    not_determined_is_flat(&dir, &fitted, "c_frame_Ns_per_m", &[0.0, 1e5], "c_link_Ns_per_m");
     // The sensor stiffness is held at its data-sheet value (press paper §2.3).
     assert_eq!(value(&fitted, "k_sensor_N_per_m"), 3.39e10);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The fitted press's bare strikes with one key replaced, as `simulate --trace` samples them.
+/// Each sample: (whether it belongs to the first strike, load in N).
+fn bare_trace(dir: &Path, fitted: &str, key: &str, v: f64) -> Vec<(bool, f64)> {
+    let machine = dir.join(format!("{key}-{v}.machine.toml"));
+    let text: String = fitted
+        .lines()
+        .take_while(|l| !l.starts_with("[identify"))
+        .map(|l| if l.starts_with(&format!("{key} =")) { format!("{key} = {v:e}\n") } else { format!("{l}\n") })
+        .collect();
+    std::fs::write(&machine, text).unwrap();
+    let csv = dir.join(format!("{key}-{v}.csv"));
+    let (m, c) = (machine.to_str().unwrap(), csv.to_str().unwrap());
+    ok(&forgemon(&[
+        "simulate",
+        "--machine",
+        m,
+        "--bare",
+        "--v0",
+        "0.30,0.36,0.42",
+        "--trace",
+        c,
+        "--trace-dt",
+        "5e-5",
+    ]));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    let col = lines.next().unwrap().split(',').position(|h| h == "load_N").unwrap();
+    lines.map(|l| (l.starts_with("1,"), l.split(',').nth(col).unwrap().parse().unwrap())).collect()
+}
+
+/// The check of a "not determined" verdict from another path than identify's Jacobian:
+/// the simulator's load with `key` at each of `values` is the same as with the fitted value
+/// to 1 N, far below the captures' 5 kN noise, so no data of this kind could determine it;
+/// whereas `control`, a determined parameter, moved by the 5 % that separates the verdicts,
+/// moves the load by more than the noise.
+fn not_determined_is_flat(dir: &Path, fitted: &str, key: &str, values: &[f64], control: &str) {
+    let base = bare_trace(dir, fitted, key, value(fitted, key));
+    for &v in values {
+        let other = bare_trace(dir, fitted, key, v);
+        assert_eq!(other.len(), base.len(), "{key} = {v} changes the strikes' length");
+        let worst = base.iter().zip(&other).map(|(a, b)| (a.1 - b.1).abs()).fold(0.0, f64::max);
+        assert!(worst < 1.0, "{key} = {v} moves the load by {worst} N: the data could see it");
+    }
+    // The first strike only: the control may change the strikes' lengths.
+    let moved = bare_trace(dir, fitted, control, value(fitted, control) * 1.05);
+    let first = |t: &[(bool, f64)]| t.iter().take_while(|p| p.0).map(|p| p.1).collect::<Vec<f64>>();
+    let worst = first(&base).iter().zip(&first(&moved)).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    assert!(worst > 5e3, "{control} × 1.05 moves the load by only {worst} N");
 }
 
 #[test]
@@ -236,4 +290,97 @@ fn bad_reference_data_gives_a_clear_error() {
     let e = err(&["identify", "--kind", "hammer", "--reference", clipped.to_str().unwrap(), "-o", o]);
     assert!(e.contains("blow_01.csv") && e.contains("clipped at 600"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Refits of the hammer (`hammer_captures`' machine and blows, blow 1 fitted, one local
+/// search from the default prior) on captures differing only in their noise `seed`s: for
+/// each parameter, z = ln(fitted / truth) / (the reported relative standard error), since
+/// the fit's parameters and covariance are in ln p (`identify::fit::uncertainty`).
+fn refit_z(seeds: std::ops::RangeInclusive<u64>) -> Vec<[f64; 4]> {
+    let dir = scratch(&format!("se-{}", seeds.start()));
+    std::fs::write(dir.join("truth.machine.toml"), HAMMER).unwrap();
+    let steel = std::fs::read_to_string(STEEL).unwrap();
+    std::fs::write(dir.join("steel.process.toml"), &steel[..steel.find("[[blows]]").unwrap_or(steel.len())]).unwrap();
+    let truth: toml::Table = HAMMER.parse().unwrap();
+    let keys = ["m1_kg", "m2_kg", "k_N_per_m", "c_Ns_per_m"];
+    let mut out = Vec::new();
+    for seed in seeds {
+        let caps = dir.join(format!("captures-{seed}"));
+        let (m, p, c) = (dir.join("truth.machine.toml"), dir.join("steel.process.toml"), caps.to_str().unwrap());
+        let (m, p, s) = (m.to_str().unwrap(), p.to_str().unwrap(), seed.to_string());
+        ok(&forgemon(&[
+            "simulate",
+            "--machine",
+            m,
+            "--process",
+            p,
+            "--v0",
+            "4.2,5.0,5.3",
+            "--captures",
+            c,
+            "--capture-seed",
+            &s,
+        ]));
+        let out_file = dir.join(format!("fit-{seed}.machine.toml"));
+        let (_, fitted) = identify(
+            &caps,
+            &out_file,
+            &["--kind", "hammer", "--fit-blows", "1", "--starts", "1", "--monte-carlo", "0"],
+        );
+        let t: toml::Table = fitted.parse().unwrap();
+        out.push(keys.map(|k| {
+            let v = value(&fitted, k);
+            let se = t["identify"]["std_error"][k].as_float().unwrap() / v;
+            let truth_v = truth[k].as_float().or_else(|| truth[k].as_integer().map(|i| i as f64)).unwrap();
+            (v / truth_v).ln() / se
+        }));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    out
+}
+
+/// The fast CI version: 8 refits (seeds 201–208, not looked at before the bound was set).
+/// With standard errors that are right, z is standard normal and Σz² over 8 refits is χ²
+/// with 8 degrees of freedom; its 0.5 % and 99.5 % points (1.34, 21.95) bound the RMS of z
+/// to 0.41–1.66. A standard error half the true spread (RMS z ≈ 2) fails it.
+///
+/// The ram mass m1 is left out here because it fails: its standard error is about half
+/// the spread (RMS z 2.0, coverage 6 of 24 in the harness below). The likely reason is that
+/// the fit takes each blow's impact speed, fitted from the encoder's approach, as exact,
+/// while m1 follows the momentum, impulse over impact speed; the spread 0.008 % in m1 needs
+/// a 0.3 mm/s error in a 4.2 m/s speed, what a parabola through 10 µm steps gives. Open.
+#[test]
+fn standard_errors_match_the_spread_over_noise_seeds() {
+    let z = refit_z(201..=208);
+    for (j, key) in ["m2_kg", "k_N_per_m", "c_Ns_per_m"].iter().enumerate() {
+        let col: Vec<f64> = z.iter().map(|r| r[j + 1]).collect();
+        let rms = (col.iter().map(|z| z * z).sum::<f64>() / col.len() as f64).sqrt();
+        eprintln!("{key}: RMS z {rms:.2} over {} refits: {col:.2?}", col.len());
+        assert!((0.41..=1.66).contains(&rms), "{key}: RMS z {rms:.2}: {col:?}");
+    }
+}
+
+/// The check: 24 refits (seeds 101–124); the 1-sigma interval should hold 68.3 %
+/// of them. The count is binomial(24, 0.683); 11–21 holds it with 98.6 % (each tail under
+/// 1 %), so a right standard error fails this test for one parameter in 70. Today it fails
+/// on m1 (6 of 24; see the CI version above); the README gives the measured coverage.
+/// `cargo nextest run --release --test identify --run-ignored only -E 'test(/cover/)' --no-capture`
+#[test]
+#[ignore = "harness: 24 refits; run by hand, fails today on m1"]
+fn one_sigma_intervals_cover_68_percent_of_24_refits() {
+    let z = refit_z(101..=124);
+    let mut failed = Vec::new();
+    for (j, key) in ["m1_kg", "m2_kg", "k_N_per_m", "c_Ns_per_m"].iter().enumerate() {
+        let inside = z.iter().filter(|r| r[j].abs() <= 1.0).count();
+        let rms = (z.iter().map(|r| r[j] * r[j]).sum::<f64>() / z.len() as f64).sqrt();
+        eprintln!(
+            "{key}: {inside} of {} inside 1 sigma ({:.0} %), RMS z {rms:.2}",
+            z.len(),
+            100.0 * inside as f64 / z.len() as f64
+        );
+        if !(11..=21).contains(&inside) {
+            failed.push(format!("{key}: {inside} of {}", z.len()));
+        }
+    }
+    assert!(failed.is_empty(), "coverage outside 11-21 of 24: {failed:?}");
 }

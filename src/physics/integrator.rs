@@ -15,6 +15,11 @@ pub const MAX_GUARDS: usize = 6;
 
 /// Root-finding stops when the bracket is this fraction of the step.
 const ROOT_REL_TOL: f64 = 1e-10;
+/// Most root-finding iterations: bisection alone reaches `ROOT_REL_TOL` in 34, and at
+/// worst every third iteration bisects.
+const ROOT_MAX_ITERATIONS: usize = 120;
+/// Regula falsi keeping the same end of the bracket this many times running bisects next.
+const ROOT_STALL: u8 = 3;
 /// Step-size controller: safety factor and growth limits (Hairer, Nørsett, Wanner §II.4).
 const SAFETY: f64 = 0.9;
 const MAX_GROWTH: f64 = 5.0;
@@ -199,37 +204,25 @@ where
             };
         }
         let h_try = h.min(t_stop - t);
-        // One trial step.
-        let (y1, dy1) = match method {
-            Method::Dopri5 { rtol } => {
-                let err = dopri5_step(sys, mode, &y, &dy, h_try, &mut ws, scale, rtol);
-                stats.rhs_evals += 6;
-                if !err.is_finite() || err > 1.0 {
-                    stats.rejected += 1;
-                    let shrink = if err.is_finite() { (SAFETY * err.powf(-0.2)).max(MIN_SHRINK) } else { MIN_SHRINK };
-                    h = h_try * shrink;
-                    if h < min_step {
-                        return Err(IntegrationError::StepTooSmall {
-                            t_s: t,
-                            min_step_s: min_step,
-                            mode: format!("{mode:?}"),
-                        });
-                    }
-                    continue;
+        // One trial step; only Dormand–Prince's is checked and its next length chosen.
+        let (y1, dy1, err) = take_step(sys, method, mode, &y, &dy, h_try, &mut ws, scale, &mut stats);
+        if let Method::Dopri5 { .. } = method {
+            if !err.is_finite() || err > 1.0 {
+                stats.rejected += 1;
+                let shrink = if err.is_finite() { (SAFETY * err.powf(-0.2)).max(MIN_SHRINK) } else { MIN_SHRINK };
+                h = h_try * shrink;
+                if h < min_step {
+                    return Err(IntegrationError::StepTooSmall {
+                        t_s: t,
+                        min_step_s: min_step,
+                        mode: format!("{mode:?}"),
+                    });
                 }
-                let grow = if err > 0.0 { (SAFETY * err.powf(-0.2)).min(MAX_GROWTH) } else { MAX_GROWTH };
-                h = (h_try * grow).min(h_max);
-                (ws.y_new, ws.k[6])
+                continue;
             }
-            Method::Rk4 { .. } => {
-                rk4_step(sys, mode, &y, &dy, h_try, &mut ws);
-                stats.rhs_evals += 4;
-                let mut dy1 = [0.0; N];
-                sys.rhs(&ws.y_new, mode, &mut dy1);
-                stats.rhs_evals += 1;
-                (ws.y_new, dy1)
-            }
-        };
+            let grow = if err > 0.0 { (SAFETY * err.powf(-0.2)).min(MAX_GROWTH) } else { MAX_GROWTH };
+            h = (h_try * grow).min(h_max);
+        }
         if y1.iter().any(|v| !v.is_finite()) {
             return Err(IntegrationError::NonFinite { t_s: t + h_try, mode: format!("{mode:?}") });
         }
@@ -261,20 +254,8 @@ where
                 // Reach the event exactly with one RK step of the located length.
                 let h_ev = theta * h_try;
                 let (ye, dye) = if h_ev > 0.0 {
-                    match method {
-                        Method::Dopri5 { rtol } => {
-                            dopri5_step(sys, mode, &y, &dy, h_ev, &mut ws, scale, rtol);
-                            stats.rhs_evals += 6;
-                            (ws.y_new, ws.k[6])
-                        }
-                        Method::Rk4 { .. } => {
-                            rk4_step(sys, mode, &y, &dy, h_ev, &mut ws);
-                            let mut d = [0.0; N];
-                            sys.rhs(&ws.y_new, mode, &mut d);
-                            stats.rhs_evals += 5;
-                            (ws.y_new, d)
-                        }
-                    }
+                    let (ye, dye, _) = take_step(sys, method, mode, &y, &dy, h_ev, &mut ws, scale, &mut stats);
+                    (ye, dye)
                 } else {
                     (y, dy)
                 };
@@ -299,6 +280,36 @@ where
                 guards = Guards::new();
                 sys.guards(&y, &dy, mode, &mut guards);
             }
+        }
+    }
+}
+
+/// One step of `method` of length `h` from `(y, dy)`: the new state, its derivative, and
+/// Dormand–Prince's error norm (0 for the fixed-step RK4, which has none).
+#[allow(clippy::too_many_arguments)]
+fn take_step<const N: usize, S: Hybrid<N>>(
+    sys: &S,
+    method: Method,
+    mode: S::Mode,
+    y: &[f64; N],
+    dy: &[f64; N],
+    h: f64,
+    ws: &mut Workspace<N>,
+    scale: &[f64; N],
+    stats: &mut Stats,
+) -> ([f64; N], [f64; N], f64) {
+    match method {
+        Method::Dopri5 { rtol } => {
+            let err = dopri5_step(sys, mode, y, dy, h, ws, scale, rtol);
+            stats.rhs_evals += 6;
+            (ws.y_new, ws.k[6], err)
+        }
+        Method::Rk4 { .. } => {
+            rk4_step(sys, mode, y, dy, h, ws);
+            let mut dy1 = [0.0; N];
+            sys.rhs(&ws.y_new, mode, &mut dy1);
+            stats.rhs_evals += 5;
+            (ws.y_new, dy1, 0.0)
         }
     }
 }
@@ -473,33 +484,41 @@ fn locate<const N: usize, S: Hybrid<N>>(
     let (mut a, mut fa) = (0.0, g_start);
     let (mut b, mut fb) = (1.0, g_end);
     let mut side = 0i8;
-    for _ in 0..60 {
+    let mut run = 0u8;
+    for _ in 0..ROOT_MAX_ITERATIONS {
         if b - a <= ROOT_REL_TOL {
             break;
         }
         let mut c = (a * fb - b * fa) / (fb - fa);
-        if !(c > a && c < b) {
+        // A guard flat on one side of its root (a contact force held at zero until a gap
+        // closes, then rising at the contact stiffness) keeps the secant on the flat side,
+        // and the Illinois halving needs ~100 rounds to undo a 1e40 ratio of the ends:
+        // bisect when the same end has been kept `ROOT_STALL` times running.
+        if !(c > a && c < b) || run >= ROOT_STALL {
             c = 0.5 * (a + b);
+            run = 0;
         }
         let fc = eval(c, stats);
         if fc == 0.0 {
             return c;
         }
-        if (fc > 0.0) == (fb > 0.0) {
+        let kept_a = (fc > 0.0) == (fb > 0.0);
+        let now = if kept_a { 1 } else { -1 };
+        run = if now == side { run + 1 } else { 1 };
+        if kept_a {
             b = c;
             fb = fc;
             if side == 1 {
                 fa *= 0.5;
             }
-            side = 1;
         } else {
             a = c;
             fa = fc;
             if side == -1 {
                 fb *= 0.5;
             }
-            side = -1;
         }
+        side = now;
     }
     // The far end of the bracket, so that the guard has crossed when the mode switches.
     b
@@ -578,6 +597,59 @@ mod tests {
     fn rk4_locates_the_event_of_a_harmonic_oscillator() {
         let t = run(Method::Rk4 { dt_s: 1e-3 });
         assert!((t - std::f64::consts::FRAC_PI_2).abs() < 1e-10, "{t}");
+    }
+
+    /// x' = 1 with a guard flat until x = 0.3, then steep: a contact force that switches on
+    /// when a gap closes, less a flow load of 1e-30 (a fresh billet's). Regula falsi alone
+    /// stays on the flat side; the located instant must be the closure.
+    struct Closure;
+
+    impl Hybrid<1> for Closure {
+        type Mode = M;
+        fn rhs(&self, _y: &[f64; 1], mode: M, dy: &mut [f64; 1]) {
+            dy[0] = if mode == M::Swing { 1.0 } else { 0.0 };
+        }
+        fn guards(&self, y: &[f64; 1], _dy: &[f64; 1], mode: M, out: &mut Guards) {
+            if mode == M::Swing {
+                out.push(0, 1e9 * (y[0] - 0.3).max(0.0) - 1e-30, Crossing::Rising);
+            }
+        }
+        fn on_event(&self, _y: &mut [f64; 1], _mode: M, _id: u8) -> M {
+            M::Done
+        }
+        fn max_step(&self) -> f64 {
+            1.0
+        }
+    }
+
+    struct At(Option<f64>);
+    impl Observer<1, M> for At {
+        fn on_step(
+            &mut self,
+            _: f64,
+            _: &[f64; 1],
+            _: &[f64; 1],
+            _: f64,
+            _: &[f64; 1],
+            _: &[f64; 1],
+            _: M,
+        ) -> Option<f64> {
+            self.0.map(|te| te + 0.1)
+        }
+        fn on_event(&mut self, t: f64, _: &[f64; 1], _: M, _: M, _: u8) {
+            self.0 = Some(t);
+        }
+    }
+
+    #[test]
+    fn a_guard_flat_on_one_side_is_located_at_its_kink() {
+        // One step of 1 s covers the closure at t = 0.3.
+        let limits = Limits { t_max_s: 10.0, max_events: 10, initial_step_s: 1.0, max_steps: 1000 };
+        let mut at = At(None);
+        integrate(&Closure, Method::Dopri5 { rtol: 1e-6 }, &[1.0], [0.0], M::Swing, limits, &mut at).unwrap();
+        let t = at.0.unwrap();
+        // ROOT_REL_TOL of the 1 s step, and the 1e-30 / 1e9 offset of the root, far below it.
+        assert!((t - 0.3).abs() < 1e-9, "{t}");
     }
 
     #[test]

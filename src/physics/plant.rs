@@ -394,6 +394,12 @@ impl Plant {
         }
         let engaged = self.gap_support_m == 0.0;
         let mut mode = Mode { contact: Contact::Elastic, engaged };
+        // Dead travel in the press's sensor path: the tool first crosses the gap, and the
+        // touch guard locates the closure, where the step restarts (the force switching on
+        // inside a step is a kink that step control would only see through its error).
+        if !self.rigid() && self.gap_contact_m > 0.0 {
+            mode.contact = Contact::Free;
+        }
         if self.rigid() {
             mode.contact = Contact::Free;
             mode = self.on_event(&mut y, mode, hybrid::G_TOUCH);

@@ -63,6 +63,35 @@ fn hammer_paper_table3_blow1() {
     assert!(rel(b.energy.damped_j, ke_m2) < 0.10, "damped {} J vs ½ m2 v0² = {ke_m2} J ±10 %", b.energy.damped_j);
 }
 
+/// Seed 000 §3.1.3 defines the final load as "the load when the billet reaches its minimum
+/// height", and §3.1.2 compares "the simulated load for the spring k" with the sensor. So
+/// Table 3's simulated 333 kN is the spring's force k·x2 at the first instant of minimum
+/// height. Here: that instant is our end of forming, and the spring's force there is within
+/// issue #2's ±5 % of 333 kN. The model gives 317.1 kN (−4.8 %; the sensor, spring plus
+/// damper, reads 316.5 kN): its billet ends 0.07 mm lower than the paper's (92.93 mm against
+/// 93 mm) on an analytical flow law the paper replaced by a constant flow stress at the
+/// final load (§4.4), so the margin is small and known, not a timing error.
+#[test]
+fn hammer_paper_table3_final_load_is_the_spring_at_minimum_height() {
+    let b = steel_blow1(&EffectSet::NONE, &with_trace());
+    let f = b.forming.unwrap();
+    let Machine::Hammer(h) = hammer() else { unreachable!() };
+    // The billet creeps its last 0.1 µm over the 16 µs before the end of forming; the spring's
+    // force over every 1 µs trace sample within 0.1 µm of the minimum height (a hundredth of
+    // the encoder's 10 µm step: an instant no measurement tells apart) stays in the bound.
+    let near_min: Vec<_> =
+        b.trace.iter().filter(|p| p.t_s <= f.forming_time_s && p.out.h_m <= f.h_end_m + 1e-7).collect();
+    assert!(!near_min.is_empty());
+    for p in &near_min {
+        let spring_n = h.k_n_per_m * p.out.lower_m;
+        assert!(rel(spring_n, 333e3) < 0.05, "spring load {spring_n} N at {} s vs 333 kN ±5 %", p.t_s);
+    }
+    let spring_n = h.k_n_per_m * near_min[near_min.len() - 1].out.lower_m;
+    // The reported final load (the sensor) differs from the spring's by the damper only:
+    // c·v2 at the end of forming, under 1 % of the load here.
+    assert!(rel(f.final_load_n, spring_n) < 0.01, "sensor {} N vs spring {spring_n} N", f.final_load_n);
+}
+
 #[test]
 fn press_paper_bare_strike_peak() {
     let b = simulate_bare(&press(), &EffectSet::NONE, V_BARE, &SimOptions::default()).unwrap();
@@ -480,4 +509,32 @@ fn press_clearance_with_its_die_starts_it_at_rest_and_it_bounces() {
         let c = blow.energy.closure_error();
         assert!(c.abs() < 0.01, "run {i}: ledger closes to {c:e} ({:?})", blow.energy);
     }
+}
+
+/// A press's dead travel (clearance without its die) closing onto a fresh copper billet,
+/// whose flow load rises from near zero: at the default tolerance the closure used to be
+/// missed inside a long step and the billet loaded elastically to a 680 kN spike before it
+/// flowed. The closure is now an event (the touch guard) where the step restarts, so the
+/// default run follows the converged one (rtol 1e-8) from the closure to the peak within the
+/// press captures' 5 kN load noise (`synth::CaptureSpec::press`), and the billet flows from
+/// the closure on.
+#[test]
+fn press_dead_travel_closure_is_located_at_the_default_tolerance() {
+    let gap_m = 3e-4;
+    let set = EffectSet::from_effects([&Effect::parse_spec("clearance:gap_m=3e-4").unwrap()]);
+    let run = |rtol: f64| {
+        let opts = SimOptions { method: Method::Dopri5 { rtol }, trace_dt_s: Some(1e-5), ..SimOptions::default() };
+        simulate_sequence(&press(), &set, &copper(), &[V_COPPER], &opts).unwrap().remove(0)
+    };
+    let (dflt, conv) = (run(super::blow::DEFAULT_RTOL), run(1e-8));
+    let i_peak =
+        (0..conv.trace.len()).max_by(|&a, &b| conv.trace[a].out.sensor_n.total_cmp(&conv.trace[b].out.sensor_n));
+    let i_peak = i_peak.unwrap();
+    let worst =
+        (0..=i_peak).map(|i| (dflt.trace[i].out.sensor_n - conv.trace[i].out.sensor_n).abs()).fold(0.0, f64::max);
+    assert!(worst < 5e3, "default vs converged sensor load up to the peak: {worst} N apart");
+    // The tool crosses the gap at v0: the billet is flowing two samples after that.
+    let t_close = gap_m / V_COPPER;
+    let after = dflt.trace.iter().find(|p| p.t_s >= t_close + 2e-5).unwrap();
+    assert!(after.out.h_m < dflt.h_start_m, "not flowing {} s after the closure", after.t_s - t_close);
 }
