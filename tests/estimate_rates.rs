@@ -169,6 +169,15 @@ fn run(rig: Rig, rate_hz: f64, seed: u64) -> Vec<Row> {
         .collect()
 }
 
+/// The largest errors over a session's blows: efficiency (absolute), impact speed
+/// (relative) and end height (m).
+fn worst(rows: &[Row]) -> (f64, f64, f64) {
+    let de = rows.iter().map(|r| (r.efficiency - r.true_efficiency).abs()).fold(0.0, f64::max);
+    let dv = rows.iter().map(|r| r.v_rel_err.abs()).fold(0.0, f64::max);
+    let dh = rows.iter().filter_map(|r| r.h_err_m.map(f64::abs)).fold(0.0, f64::max);
+    (de, dv, dh)
+}
+
 fn check(rig: Rig, rate_hz: f64) {
     // The stated rule, blow by blow: the observer where a second-mode period spans at least
     // OBSERVER_MIN_SAMPLES_PER_MODE samples, the model fit below (there is a sheet here).
@@ -177,9 +186,7 @@ fn check(rig: Rig, rate_hz: f64) {
     let method = if per_mode >= OBSERVER_MIN_SAMPLES_PER_MODE { Method::Observer } else { Method::ModelFit };
     for seed in ASSERT_SEEDS {
         let rows = run(rig, rate_hz, seed);
-        let de = rows.iter().map(|r| (r.efficiency - r.true_efficiency).abs()).fold(0.0, f64::max);
-        let dv = rows.iter().map(|r| r.v_rel_err.abs()).fold(0.0, f64::max);
-        let dh = rows.iter().filter_map(|r| r.h_err_m.map(f64::abs)).fold(0.0, f64::max);
+        let (de, dv, dh) = worst(&rows);
         eprintln!(
             "{rig:?} {} kHz seed {seed}: max |Δeff| {de:.4}, max |Δv|/v {dv:.4}, max |Δh| {:.1} µm",
             rate_hz / 1e3,
@@ -228,9 +235,7 @@ fn tuning_table() {
         for rate in [5e3, 10e3, 20e3, 50e3, 100e3] {
             for seed in TUNING_SEEDS {
                 let rows = run(rig, rate, seed);
-                let de = rows.iter().map(|r| (r.efficiency - r.true_efficiency).abs()).fold(0.0, f64::max);
-                let dv = rows.iter().map(|r| r.v_rel_err.abs()).fold(0.0, f64::max);
-                let dh = rows.iter().filter_map(|r| r.h_err_m.map(f64::abs)).fold(0.0, f64::max);
+                let (de, dv, dh) = worst(&rows);
                 eprintln!(
                     "{rig:?} {:>5} kHz seed {seed}: max |Δeff| {de:.4}, max |Δv|/v {dv:.4}, max |Δh| {:.1} µm",
                     rate / 1e3,
