@@ -9,6 +9,10 @@
 //!
 //! Each output sample is stamped at its filter's centre tap: the DAQ removes its filter's
 //! group delay from the timestamps, as DAQs that align channels of different filters do.
+//! The DAQ's clock does not know the blow: first contact falls at a random point between
+//! two samples (uniform over the fine steps of a sample period, drawn per blow from its own
+//! stream so that the noise is the same whatever the phase), so a contact locator that
+//! only finds sample instants shows its error.
 //! The truth comes with every blow, as in `synth`.
 
 use rand::SeedableRng;
@@ -28,6 +32,8 @@ use crate::synth::{Approach, CaptureSpec, ENCODER_AT_LOWER_DIE_M, G_MPS2, SynthB
 /// The simulator's fixed step is at most this, s: 1 µs resolves the hammer's 2 kHz mode
 /// with 500 steps a period, and every rate of issue 16 (5–100 kHz) divides 1 MHz.
 pub const MAX_FINE_STEP_S: f64 = 1e-6;
+/// Seeds the contact phases' stream, apart from the noise's.
+const PHASE_STREAM: u64 = 0x9e37_79b9_7f4a_7c15;
 /// The anti-alias filter's -6 dB point, a fraction of the output rate (issue 16).
 pub const ANTI_ALIAS_CUTOFF: f64 = 0.4;
 /// Its transition band, a fraction of the output rate: from 0.3 to 0.5, so that nothing
@@ -77,7 +83,7 @@ pub fn daq_blows(
     // The trace must outlast the last output sample by the filter's half width.
     let opts = SimOptions {
         method: Method::Rk4 { dt_s: dt_f },
-        post_s: c.post_s + (aa.half() + 2) as f64 * dt_f,
+        post_s: c.post_s + (aa.half() + 2) as f64 * dt_f + 1.0 / c.sample_rate_hz,
         trace_dt_s: Some(dt_f),
     };
     let results = simulate_sequence(machine, effects, process, v0s_mps, &opts)?;
@@ -88,17 +94,21 @@ pub fn daq_blows(
     let offset = rand_distr::Uniform::new_inclusive(-s.load_offset_n, s.load_offset_n).expect("finite bounds");
     let r = spec.oversample as i64;
     let dt = 1.0 / c.sample_rate_hz;
+    let mut phase_rng = StdRng::seed_from_u64(c.seed ^ PHASE_STREAM);
+    let phase = rand_distr::Uniform::new(0, r.max(1)).expect("r ≥ 1");
     let mut out = Vec::with_capacity(results.len());
     for (i, mut truth) in results.into_iter().enumerate() {
         let encoder_zero_m = ENCODER_AT_LOWER_DIE_M - truth.h_start_m;
         let t_contact = c.t_origin_s + c.pre_s + i as f64 * c.blow_interval_s;
+        // Sample k sits `p` fine steps after k sample periods from contact.
+        let p = phase.sample(&mut phase_rng);
         let load_offset = offset.sample(&mut rng);
         let v0 = truth.v0_mps;
         let n_pre = (c.pre_s * c.sample_rate_hz).round() as i64;
         let n_post = ((truth.contact_time_s + c.post_s) * c.sample_rate_hz).floor() as i64;
         // The fine grid from j0 (before contact) on: load, ram position, ram acceleration.
         let j0 = -n_pre * r - aa.half() as i64;
-        let j1 = n_post * r + aa.half() as i64;
+        let j1 = n_post * r + p + aa.half() as i64;
         let mut load = Vec::with_capacity((j1 - j0 + 1) as usize);
         let mut x = Vec::with_capacity(load.capacity());
         let mut acc = Vec::with_capacity(load.capacity());
@@ -120,12 +130,12 @@ pub fn daq_blows(
         }
         let mut rows = Vec::with_capacity((n_pre + n_post) as usize);
         for k in -n_pre..n_post {
-            let centre = (k * r - j0) as usize;
+            let centre = (k * r + p - j0) as usize;
             let q = s.encoder_step_m;
             let xk = encoder_zero_m + x[centre];
             let disp = if q > 0.0 { (xk / q).round() * q } else { xk };
             rows.push(CaptureRow {
-                t_s: t_contact + k as f64 * dt,
+                t_s: t_contact + k as f64 * dt + p as f64 * dt_f,
                 load_n: aa.at(&load, centre) + load_offset + load_noise.sample(&mut rng),
                 disp_m: disp,
                 acc_mps2: aa.at(&acc, centre) + acc_noise.sample(&mut rng),
@@ -154,7 +164,9 @@ mod tests {
         assert_eq!(spec.oversample, 200);
         let b = daq_blows(&m, &EffectSet::NONE, &p, &[3.9], &spec).unwrap().remove(0);
         let n_pre = (spec.capture.pre_s * 5e3).round() as usize;
-        assert!((b.rows[n_pre].t_s - b.t_contact_s).abs() < 1e-9);
+        // Contact falls between the sample before and the sample `n_pre`.
+        let after = b.rows[n_pre].t_s - b.t_contact_s;
+        assert!((-1e-9..2e-4).contains(&after), "{after}");
         // Before contact: the load is its offset and noise only.
         let before: f64 = b.rows[..n_pre - 5].iter().map(|r| r.load_n).sum::<f64>() / (n_pre - 5) as f64;
         assert!(before.abs() <= spec.capture.sensors.load_offset_n + 2e3, "{before}");
