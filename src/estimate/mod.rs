@@ -40,12 +40,14 @@ pub const MIN_TRACKED_HEIGHT_FRACTION: f64 = 0.02;
 /// The observer is used when a period of the machine's second mode spans at least this
 /// many samples (see the module's doc). Measured on the DAQ chain of `daq` (issue 16,
 /// tuning seeds of `tests/estimate_rates.rs`): on the hammer (2049 Hz) the observer read
-/// 0.03 low at 50 kHz (24 samples a period) and 0.016 low at 100 kHz (49), the fit 0.013
-/// at every rate; on the press (275 Hz) both stayed within 0.007 from 5 kHz up. Below 40
-/// the fit is needed; above it the observer is within the issue's 0.02 and keeps the
-/// latency of a 100 kHz blow near a millisecond, where the fit took 0.16 s (hammer) to
-/// 0.9 s (press) in `benches/estimate_rates.rs`.
-pub const OBSERVER_MIN_SAMPLES_PER_MODE: f64 = 40.0;
+/// efficiencies 0.03 low at 50 kHz (24 samples a period) and within 0.012 at 100 kHz (49),
+/// but its end heights scattered by up to 24 µm at 100 kHz once first contact fell between
+/// samples, where the fit (on its 10 kHz copy, `decimate`) kept them within 3.6 µm and its
+/// efficiencies within 0.013; on the press (275 Hz, 73 samples a period at 20 kHz) both
+/// stayed within 0.007 from 5 kHz up, and the observer keeps a press blow's latency near a
+/// millisecond where the fit takes tens. So the hammer is fitted up to 100 kHz, the press
+/// observed from 20 kHz.
+pub const OBSERVER_MIN_SAMPLES_PER_MODE: f64 = 50.0;
 
 /// How a blow's energies were estimated (`"method"` in the results).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -320,10 +322,9 @@ impl Estimator {
         let delta0 = self.locate_contact(blow, approach.v_impact_mps, h_guess_m);
         let gap_s = self.gap_s(blow);
         let complete = blow.lost_s == 0.0 && gap_s <= self.max_bridged_s();
+        let wants_fit = complete && self.method_for(blow.period_s) == Method::ModelFit;
         let mut fitted = match h_guess_m {
-            Some(h) if complete && self.method_for(blow.period_s) == Method::ModelFit => {
-                self.fit(blow, approach, h, self.scale, delta0, true)
-            }
+            Some(h) if wants_fit => self.fit(blow, approach, h, self.scale, delta0, true),
             _ => None,
         };
         let delta = fitted.as_ref().map_or(delta0, |f| f.contact_samples);
@@ -381,10 +382,16 @@ impl Estimator {
         }
         // The fit ran on a guess of the start height: again from its optimum if the
         // billet's follow-up says otherwise.
-        if let (Some(f), Some(h0)) = (&fitted, h_start_m)
-            && (f.h_start_m - h0).abs() > REFIT_HEIGHT_M
-        {
-            fitted = self.fit(blow, approach, h0, f.scale, f.contact_samples, false);
+        // A fit that failed on the guess (a new billet the guess did not know) is tried
+        // afresh from the follow-up's height and the locator's contact.
+        match (&fitted, h_start_m) {
+            (Some(f), Some(h0)) if (f.h_start_m - h0).abs() > REFIT_HEIGHT_M => {
+                fitted = self.fit(blow, approach, h0, f.scale, f.contact_samples, false);
+            }
+            (None, Some(h0)) if wants_fit && h_guess_m.is_none_or(|h| (h - h0).abs() > REFIT_HEIGHT_M) => {
+                fitted = self.fit(blow, approach, h0, self.scale, delta0, true);
+            }
+            _ => {}
         }
         if h_start_m.is_none() {
             fitted = None;
@@ -423,8 +430,9 @@ impl Estimator {
         contact_between_samples(blow, rise.as_ref())
     }
 
-    /// The model fitted to `blow` from start height `h0_m` (`None`: it could not be, and
-    /// the observer takes the blow).
+    /// The model fitted to `blow` from start height `h0_m` (`None`: it could not be, or
+    /// its residuals say it did not fit, `fit::MAX_GOOD_RMS`, and the observer takes the
+    /// blow).
     fn fit(
         &self,
         blow: &Blow,
@@ -446,10 +454,12 @@ impl Estimator {
             blow: &coarse,
             approach,
         };
-        let mut m =
-            fit::fit_blow(&problem, self.cfg.encoder_resolution_m, scale0, delta0 / f as f64, search_contact).ok()?;
+        // Above the fit's rate the locator's contact, found in the finer samples, is already
+        // within a fraction of a coarse sample: no second start is needed to find the basin.
+        let search = search_contact;
+        let mut m = fit::fit_blow(&problem, self.cfg.encoder_resolution_m, scale0, delta0 / f as f64, search).ok()?;
         m.contact_samples *= f as f64;
-        Some(m)
+        (m.rms <= fit::MAX_GOOD_RMS).then_some(m)
     }
 
     /// The energies and the end height from the fitted simulated blow. Returns the height.
@@ -457,10 +467,12 @@ impl Estimator {
         self.last_method = Some(Method::ModelFit);
         e.method = self.last_method;
         let l = f.blow.energy;
-        // The model supplies the set; the start is the billet's (the encoder chain's), which
-        // the fit's own start may miss by up to `REFIT_HEIGHT_M`.
+        // The model supplies the set, corrected by what the encoder saw in the spring-back
+        // (`fit::spring_back_set_offset`); the start is the billet's (the encoder chain's),
+        // which the fit's own start may miss by up to `REFIT_HEIGHT_M`.
         let h0 = e.h_start_m.unwrap_or(f.h_start_m);
-        let h_end = f.blow.forming.map(|fm| h0 - (f.h_start_m - fm.h_end_m));
+        let missed_m = f.set_offset_m.unwrap_or(0.0);
+        let h_end = f.blow.forming.map(|fm| h0 - (f.h_start_m - fm.h_end_m) - missed_m);
         let lost = match (&self.process, h_end) {
             (Some(p), Some(h)) => h < MIN_TRACKED_HEIGHT_FRACTION * p.billet.height_m,
             _ => true,
