@@ -8,7 +8,7 @@
 //!
 //! Tolerances (issue 16): efficiency within 0.02 absolute and impact speed within 1 % of
 //! the simulator's ledger, both sides, every blow. The end height, less the sheet's error
-//! in the start height (which nothing measured can reveal), within `HEIGHT_TOL_M` of the
+//! in the start height (which nothing measured can reveal), within `height_tol_m` of the
 //! truth's on every blow; the growth from the first blow to the last within
 //! `HEIGHT_GROWTH_TOL_M` (the bias that grew blow by blow).
 //!
@@ -31,24 +31,44 @@ use forgemon::synth::{CaptureSpec, idle_rows, rows_batch};
 const EFFICIENCY_TOL: f64 = 0.02;
 const SPEED_REL_TOL: f64 = 0.01;
 
-/// Issue 16 asks for the end height within the encoder's 10 µm step. Measured on the
-/// tuning seeds at every rate: the press within 18 µm, the first blow's contact (a convex
-/// rise under 3 kN of noise, located to ±2 samples at 20–100 kHz) setting an offset
-/// the encoder chain carries to every later blow; the hammer within 21 µm, each blow's set
-/// from the model fitted to a billet 1.5 % higher than its sheet. On the assert seed the
-/// hammer's first 5 kHz blow is 43 µm off: its approach gives an impact speed 0.11 % low
-/// (4 mm/s), and the fit, matching the encoder with it, puts contact 0.07 samples (14 µs,
-/// 55 µm of travel at 3.9 m/s) later than on the tuning seeds, with twice their residual.
-/// So 50 µm: the issue's 10 µm is not met, and the note says so.
-const HEIGHT_TOL_M: f64 = 50e-6;
-/// The growth of that error from the first blow to the last: the press's end heights no
-/// longer drift (they grew by 60–100 µm over ten blows before the encoder chain); the
-/// hammer's grow by up to 17 µm over five blows on the tuning seeds (the model's set on a
-/// billet higher than its sheet), so 20 µm.
-const HEIGHT_GROWTH_TOL_M: f64 = 20e-6;
+/// Issue 16 asks for the end height within the encoder's 10 µm step. Where that holds and
+/// where it does not, measured on the tuning seeds (every blow; the DAQ puts first contact
+/// at a random point between samples):
+/// - the hammer at 10–100 kHz: within 3.9 µm, so the issue's 10 µm;
+/// - the hammer at 5 kHz: within 11 µm. A sample is 780–1060 µm of ram travel there, and
+///   the first blow's contact, which the encoder chain carries to every later blow, is
+///   located to about 1 % of a sample;
+/// - the press at 5–10 kHz (the model fit): 11–15 µm, every blow about the same offset. It
+///   is the billet being 1.5 % shorter than its sheet, which the fit does not estimate: the
+///   copper's law is nearly flat for its first tens of µm of strain, and on a shorter
+///   billet that stretch is shorter, so the fit puts contact where the sheet's billet would
+///   have touched. With the billet at its sheet's height the same fit is within 3.8 µm
+///   (`press_fit_on_a_billet_of_its_sheets_height` asserts 10 µm);
+/// - the press at 20–50 kHz (the observer): within 15 µm, the first blow's contact from
+///   the hinge (`estimate::contact`) through 3 kN of noise; at 100 kHz within 5.5 µm.
+///
+/// So 10 µm where the tuning seeds were within it, and 25 µm elsewhere.
+fn height_tol_m(rig: Rig, rate_hz: f64) -> f64 {
+    match rig {
+        Rig::Hammer if rate_hz >= 10e3 => 10e-6,
+        Rig::Hammer => 25e-6,
+        Rig::Press if rate_hz >= 100e3 => 10e-6,
+        Rig::Press => 25e-6,
+    }
+}
+/// The growth of that error from the first blow to the last. Before the encoder chain the
+/// press's end heights grew by 60–100 µm over ten blows, and the hammer's by up to 17 µm
+/// over five before the spring-back's set (`estimate::fit`); on the tuning seeds they now
+/// move by a few µm, within the encoder's step.
+const HEIGHT_GROWTH_TOL_M: f64 = 10e-6;
 
-const TUNING_SEEDS: [u64; 2] = [11, 12];
-const ASSERT_SEEDS: [u64; 1] = [1601];
+/// 1601 was the assert seed until the spring-back's set, the accelerometer's guard and the
+/// contact's random phase were tuned with it in view; it is a tuning seed since, and 2411
+/// asserts. 2411's first run failed the hammer at 5 kHz (34 µm, an accelerometer mean
+/// 0.8 m/s² high); that led to the approach's curvature from both sensors
+/// (`estimate::approach`), which has no constant to tune, and nothing was tuned on 2411.
+const TUNING_SEEDS: [u64; 3] = [11, 12, 1601];
+const ASSERT_SEEDS: [u64; 1] = [2411];
 
 #[derive(Clone, Copy, Debug)]
 enum Rig {
@@ -126,9 +146,14 @@ struct Row {
 
 /// Render the session through the DAQ, run it through the pipeline, compare every blow.
 fn run(rig: Rig, rate_hz: f64, seed: u64) -> Vec<Row> {
+    run_on(rig, rate_hz, seed, &truth_process(rig))
+}
+
+/// `run` with the billet and flow stress of `truth`.
+fn run_on(rig: Rig, rate_hz: f64, seed: u64, truth_p: &Process) -> Vec<Row> {
     let m = machine(rig);
     let spec = DaqSpec::new(capture(rig, rate_hz, seed));
-    let blows = daq_blows(&m, &EffectSet::NONE, &truth_process(rig), &speeds(rig), &spec).expect("simulate");
+    let blows = daq_blows(&m, &EffectSet::NONE, truth_p, &speeds(rig), &spec).expect("simulate");
     let c = spec.capture;
     let idle = (0.15 * rate_hz) as usize;
     let mut rows: Vec<CaptureRow> = Vec::new();
@@ -150,7 +175,7 @@ fn run(rig: Rig, rate_hz: f64, seed: u64) -> Vec<Row> {
     let truth: Vec<&BlowResult> = blows.iter().map(|b| &b.truth).collect();
     // The estimator starts from the sheet's height, which is off the truth's by a height it
     // cannot know; what it must get right is every blow's set after that.
-    let start_off_m = sheet(rig).billet.height_m - truth_process(rig).billet.height_m;
+    let start_off_m = sheet(rig).billet.height_m - truth_p.billet.height_m;
     assert_eq!(events.len(), truth.len(), "{rig:?} at {rate_hz} Hz: one result per blow");
     events
         .iter()
@@ -198,7 +223,7 @@ fn check(rig: Rig, rate_hz: f64) {
             assert!((r.efficiency - r.true_efficiency).abs() <= EFFICIENCY_TOL, "efficiency: {at}");
             assert!(r.v_rel_err.abs() <= SPEED_REL_TOL, "impact speed: {at}");
             assert_eq!(r.method, Some(method), "method: {at}");
-            assert!(r.h_err_m.is_some_and(|h| h.abs() <= HEIGHT_TOL_M), "end height: {at}");
+            assert!(r.h_err_m.is_some_and(|h| h.abs() <= height_tol_m(rig, rate_hz)), "end height: {at}");
         }
         let first = rows.first().and_then(|r| r.h_err_m).unwrap_or(f64::NAN);
         let last = rows.last().and_then(|r| r.h_err_m).unwrap_or(f64::NAN);
@@ -226,6 +251,23 @@ rate_tests! {
     press_at_20_khz: Rig::Press, 20e3;
     press_at_50_khz: Rig::Press, 50e3;
     press_at_100_khz: Rig::Press, 100e3;
+}
+
+/// The press's fit at 5 and 10 kHz with the billet at its sheet's height (the flow stress
+/// still off the sheet's): the end height within the encoder's 10 µm step, every blow.
+/// This is what separates the fit's own error from the unestimated billet height of the
+/// rate tests (see `height_tol_m`).
+#[test]
+fn press_fit_on_a_billet_of_its_sheets_height() {
+    let mut truth = truth_process(Rig::Press);
+    truth.billet.height_m = sheet(Rig::Press).billet.height_m;
+    for rate_hz in [5e3, 10e3] {
+        for seed in ASSERT_SEEDS {
+            for r in run_on(Rig::Press, rate_hz, seed, &truth) {
+                assert!(r.h_err_m.is_some_and(|h| h.abs() <= 10e-6), "{} kHz seed {seed}: {r:?}", rate_hz / 1e3);
+            }
+        }
+    }
 }
 
 /// The tuning table: every rate, both machines, on the tuning seeds.

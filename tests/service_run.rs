@@ -227,7 +227,11 @@ fn alerts_reach_the_webhook_and_the_status_endpoint_tells_the_state() {
     let alert: serde_json::Value =
         serde_json::from_str(&hooks.recv_timeout(Duration::from_secs(5)).expect("the webhook was called")).unwrap();
     assert_eq!(alert["kind"], "elastic_blow");
-    assert_eq!(alert["blow"], 7);
+    // The simulator's efficiencies of blows 7 and 8 are 0.502 and 0.371 (`forgemon simulate`
+    // of this plan): blow 8 is the first hard one, and blow 7 sits within issue 16's 0.02
+    // of the 0.5 line, so either may be the first the estimator calls hard.
+    let first_hard = alert["blow"].as_u64();
+    assert!(matches!(first_hard, Some(7 | 8)), "{alert}");
     assert!(alert["reason"].as_str().unwrap().contains("hard"));
     // The status shows when the webhook answered, counted from the samples that ended the
     // blow (a figure for the note, not a timed assertion; the webhook task runs after the
