@@ -95,7 +95,7 @@ pub fn identify(
         refs.into_iter().map(|r| (r, true)).chain(held_out.into_iter().map(|r| (r, false))).collect();
     all.sort_by_key(|(r, _)| r.blow_index.unwrap_or(0));
     let (all_refs, fitted): (Vec<Reference>, Vec<bool>) = all.into_iter().unzip();
-    let obj = Objective::new(all_refs, fitted.clone(), setting, prior.kind());
+    let obj = Objective::new(all_refs, fitted.clone(), setting, &prior);
     let first = set.values_of(&prior);
     // Global stage: local searches on the ring-free envelope from every start; then the
     // full objective from where each ended (objective::Fidelity explains why).
