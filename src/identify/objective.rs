@@ -69,7 +69,8 @@ impl ModePrior {
             MachineKind::Hammer => PAPER_BAND_HZ_HAMMER,
             MachineKind::ScrewPress => PAPER_BAND_HZ_PRESS,
         };
-        paper * self.mode2_hz / self.paper_mode2_hz
+        // The ratio first: a paper's machine divides its mode by itself, exactly 1.
+        paper * (self.mode2_hz / self.paper_mode2_hz)
     }
 }
 
@@ -501,7 +502,7 @@ mod tests {
         // 1 kHz; derived from the prior's mode, the papers' own machines must get the same.
         for (kind, hz) in [(MachineKind::Hammer, 5000.0), (MachineKind::ScrewPress, 1000.0)] {
             let band = ModePrior::from(kind).band_hz();
-            assert!((band / hz - 1.0).abs() < 1e-12, "{kind:?}: {band} Hz");
+            assert_eq!(band, hz, "{kind:?}");
         }
     }
 
