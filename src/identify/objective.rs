@@ -92,6 +92,14 @@ impl From<MachineKind> for ModePrior {
     }
 }
 
+thread_local! {
+    /// The FFT plans of the simulated spectra, kept per thread across calls: a fit simulates
+    /// the same window lengths thousands of times, and a new planner computes each plan's
+    /// twiddle factors again (a tenth of a hammer blow's time in `benches/diagnose.rs`).
+    /// A plan depends only on the length, so the spectra are the same.
+    static SIM_PLANNER: std::cell::RefCell<SpectrumPlanner> = std::cell::RefCell::new(SpectrumPlanner::new());
+}
+
 /// Why a reference could not be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ReferenceError {
@@ -328,7 +336,6 @@ impl Objective {
 
     /// Simulate the first `n` references.
     fn simulate_to(&self, machine: &Machine, n: usize) -> Option<Vec<Simulated>> {
-        let mut planner = SpectrumPlanner::new();
         let mut h = match &self.setting {
             Setting::Billet(p) => Some(p.billet.height_m),
             Setting::Bare => None,
@@ -365,7 +372,8 @@ impl Objective {
                     interpolate(&trace, t / r.dt_s)
                 })
                 .collect();
-            let spectrum = bins(&planner.spectrum(&load, r.dt_s, PAD_FACTOR, 0), self.f_max_hz);
+            let spectrum =
+                SIM_PLANNER.with_borrow_mut(|p| bins(&p.spectrum(&load, r.dt_s, PAD_FACTOR, 0), self.f_max_hz));
             // The model's instants on the window's clock (model time 0 is first contact).
             let on_window = |t: f64| t - t_cross + r.t_align_s;
             let forming_end = res.forming.map(|f| f.forming_time_s);
