@@ -13,7 +13,8 @@ use super::{parse_process_warn, read_text};
 use crate::config::parse_machine;
 use crate::identify::model::default_prior;
 use crate::identify::objective::{Reference, Setting};
-use crate::identify::{IdentifyConfig, identify};
+use crate::identify::speed::impact_speed_sd_mps;
+use crate::identify::{IdentifyConfig, WithSpeedSd, identify};
 use crate::physics::machine::MachineKind;
 use crate::signal::segment::{SegmentConfig, Segmenter};
 
@@ -88,7 +89,7 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
         }
         Setting::Billet(p)
     };
-    let (fit, held) = read_references(&args.reference, kind, args.bare, &args.fit_blows, None)?;
+    let (fit, held) = read_references_with_speed_sd(&args.reference, kind, args.bare, &args.fit_blows, None)?;
     let cfg = IdentifyConfig { starts: args.starts.max(1), seed: args.seed, monte_carlo: args.monte_carlo };
     let bar = indicatif::ProgressBar::new((cfg.starts + cfg.monte_carlo) as u64);
     bar.set_style(
@@ -157,6 +158,19 @@ pub(crate) fn read_references(
     fit_blows: &[usize],
     locate: Option<&crate::physics::machine::Machine>,
 ) -> anyhow::Result<(Vec<Reference>, Vec<Reference>)> {
+    let (fit, held) = read_references_with_speed_sd(dir, kind, bare, fit_blows, locate)?;
+    Ok((fit.into_iter().map(|r| r.0).collect(), held.into_iter().map(|r| r.0).collect()))
+}
+
+/// `read_references`, each with its impact speed's standard error, m/s
+/// (`identify::speed::impact_speed_sd_mps`; 0 where it cannot be had).
+fn read_references_with_speed_sd(
+    dir: &Path,
+    kind: MachineKind,
+    bare: bool,
+    fit_blows: &[usize],
+    locate: Option<&crate::physics::machine::Machine>,
+) -> anyhow::Result<(Vec<WithSpeedSd>, Vec<WithSpeedSd>)> {
     let files = super::capture_dir_files(dir)?;
     let fit_s = crate::estimate::EstimatorConfig::for_kind(kind).fit_s;
     let (mut fit, mut held) = (Vec::new(), Vec::new());
@@ -178,6 +192,7 @@ pub(crate) fn read_references(
                 Some(m) => crate::diagnose::localise::reference(&label, blow, index, fit_s, m)?,
                 None => Reference::from_blow(&label, blow, index, fit_s)?,
             };
+            let r = (r, impact_speed_sd_mps(blow, fit_s).unwrap_or(0.0));
             if fit_blows.is_empty() || fit_blows.contains(&number) {
                 fit.push(r);
             } else {

@@ -161,8 +161,12 @@ pub struct Uncertainty {
 
 /// Covariance at the optimum `values`: s²·(JᵀJ)⁺ in ln p, with s² = cost/(n − p) and the
 /// variance inflated by (1 + ρ)/(1 − ρ) for residuals correlated in time (ρ the lag-1
-/// autocorrelation): neighbouring load samples are not independent measurements.
-pub fn uncertainty(obj: &Objective, set: &ParamSet, values: &[f64]) -> Uncertainty {
+/// autocorrelation): neighbouring load samples are not independent measurements. Plus the
+/// impact speeds' own errors (`speed_rel_sd[i]`: the relative standard error of reference
+/// i's speed, `speed::impact_speed_sd_mps`; empty or 0: exact), passed through the fit:
+/// the optimum moves by δln p = −(JᵀJ)⁺Jᵀ ∂r/∂ln v0 per unit of ln v0, and each speed is
+/// an independent measurement, so each adds δ δᵀ·sd² (`speed_shift`).
+pub fn uncertainty(obj: &Objective, set: &ParamSet, values: &[f64], speed_rel_sd: &[f64]) -> Uncertainty {
     let u = set.to_u(values);
     let f = machine_residuals(obj, set);
     let r0 = eval(&set.params, &f, obj.len(), &u);
@@ -193,6 +197,26 @@ pub fn uncertainty(obj: &Objective, set: &ParamSet, values: &[f64]) -> Uncertain
                 *flag |= v[i].abs() > 0.05;
             }
         }
+    }
+    let pinv_jt = {
+        let mut pinv = DMatrix::zeros(np_, np_);
+        for (e, lambda) in eig.eigenvalues.iter().enumerate() {
+            let v = eig.eigenvectors.column(e);
+            if *lambda > 1e-12 * lmax && lambda.is_finite() {
+                pinv += v * v.transpose() / *lambda;
+            }
+        }
+        pinv * j.transpose()
+    };
+    let shifts: Vec<(DVector<f64>, f64)> = (0..obj.refs.len())
+        .into_par_iter()
+        .filter_map(|i| {
+            let sd = speed_rel_sd.get(i).copied().filter(|sd| *sd > 0.0 && sd.is_finite())?;
+            Some((speed_shift(obj, set, values, i, &r0, &pinv_jt)?, sd))
+        })
+        .collect();
+    for (d, sd) in &shifts {
+        cov_ln += d * d.transpose() * (sd * sd);
     }
     for (i, flag) in unconstrained.iter().enumerate() {
         if *flag {
@@ -228,6 +252,29 @@ pub fn uncertainty(obj: &Objective, set: &ParamSet, values: &[f64]) -> Uncertain
         notes.push(note.join("; "));
     }
     Uncertainty { cov_ln, rel_se, correlations, residual_lag1: rho, inflation, determined, notes }
+}
+
+/// Step in ln v0 of the speed's finite difference: 1e-4, as `FD_STEP` in u.
+const SPEED_FD_STEP: f64 = 1e-4;
+
+/// How far the optimum moves in ln p per unit of ln v0 of reference `i`: −(JᵀJ)⁺Jᵀ ∂r/∂ln v0,
+/// the derivative by a forward difference (`None`: the shifted reference did not simulate).
+fn speed_shift(
+    obj: &Objective,
+    set: &ParamSet,
+    values: &[f64],
+    i: usize,
+    r0: &DVector<f64>,
+    pinv_jt: &DMatrix<f64>,
+) -> Option<DVector<f64>> {
+    let mut shifted = obj.clone();
+    shifted.refs[i].v0_mps *= SPEED_FD_STEP.exp();
+    let r = machine_residuals(&shifted, set)(values)?;
+    if r.len() != r0.len() {
+        return None;
+    }
+    let g = (DVector::from_vec(r) - r0) / SPEED_FD_STEP;
+    Some(-(pinv_jt * g))
 }
 
 /// Lag-1 autocorrelation of a sequence.

@@ -10,6 +10,7 @@ pub mod fit;
 pub mod model;
 pub mod objective;
 pub mod report;
+pub mod speed;
 
 use rayon::prelude::*;
 
@@ -74,11 +75,16 @@ pub enum IdentifyError {
     Simulation,
 }
 
-/// Fit `prior`'s parameters to `refs`; `held_out` are only predicted. `progress` is told
-/// each finished local search and Monte Carlo draw.
+/// A reference blow and the standard error of its impact speed, m/s (0: taken as exact).
+pub type WithSpeedSd = (Reference, f64);
+
+/// Fit `prior`'s parameters to `refs`; `held_out` are only predicted. Each comes with its
+/// impact speed's standard error (`speed::impact_speed_sd_mps`), which enters the
+/// parameters' covariance (`fit::uncertainty`). `progress` is told each finished local
+/// search and Monte Carlo draw.
 pub fn identify(
-    refs: Vec<Reference>,
-    held_out: Vec<Reference>,
+    refs: Vec<WithSpeedSd>,
+    held_out: Vec<WithSpeedSd>,
     setting: Setting,
     prior: Machine,
     cfg: &IdentifyConfig,
@@ -91,11 +97,12 @@ pub fn identify(
     let set = ParamSet::new(prior, bare);
     // Every blow in order (a billet's height carries from blow to blow); the held-out ones
     // are simulated but not fitted.
-    let mut all: Vec<(Reference, bool)> =
+    let mut all: Vec<(WithSpeedSd, bool)> =
         refs.into_iter().map(|r| (r, true)).chain(held_out.into_iter().map(|r| (r, false))).collect();
-    all.sort_by_key(|(r, _)| r.blow_index.unwrap_or(0));
-    let (all_refs, fitted): (Vec<Reference>, Vec<bool>) = all.into_iter().unzip();
-    let obj = Objective::new(all_refs, fitted.clone(), setting, prior.kind());
+    all.sort_by_key(|((r, _), _)| r.blow_index.unwrap_or(0));
+    let speed_rel_sd: Vec<f64> = all.iter().map(|((r, sd), _)| sd / r.v0_mps).collect();
+    let (all_refs, fitted): (Vec<Reference>, Vec<bool>) = all.into_iter().map(|((r, _), f)| (r, f)).unzip();
+    let obj = Objective::new(all_refs, fitted.clone(), setting, &prior);
     let first = set.values_of(&prior);
     // Global stage: local searches on the ring-free envelope from every start; then the
     // full objective from where each ended (objective::Fidelity explains why).
@@ -114,7 +121,7 @@ pub fn identify(
     let best = runs.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)).ok_or(IdentifyError::NoReference)?.clone();
     let runs_agreeing = runs.iter().filter(|r| r.cost <= best.cost * 1.01).count();
     let machine = set.machine(&best.values);
-    let uncertainty = fit::uncertainty(&obj, &set, &best.values);
+    let uncertainty = fit::uncertainty(&obj, &set, &best.values, &speed_rel_sd);
     let sims = obj.simulate(&machine).ok_or(IdentifyError::Simulation)?;
     let (of, rms) = obj.report(&sims);
 

@@ -13,6 +13,7 @@
 //! 10 % of the measured peak (interpolated between samples), so neither the segmenter's
 //! contact sample nor a few samples of trigger jitter enter the fit.
 
+use crate::identify::model::default_prior;
 use crate::physics::blow::{SimOptions, simulate_blow};
 use crate::physics::effects::EffectSet;
 use crate::physics::integrator::Method;
@@ -38,6 +39,66 @@ pub const PAD_FACTOR: usize = 4;
 pub const FIT_RTOL: f64 = 1e-6;
 /// Consecutive equal samples at the maximum that mark a clipped sensor.
 pub const CLIP_RUN: usize = 3;
+/// Top of eq. 4's spectral term on the papers' machines, Hz: the hammer paper shows its
+/// spectrum to 5 kHz (seed 000 §2.2), the press paper to 1 kHz (seed 001 §3.1). A machine
+/// whose second mode sits elsewhere gets the same band in units of its own mode
+/// (`ModePrior::band_hz`).
+pub const PAPER_BAND_HZ_HAMMER: f64 = 5000.0;
+pub const PAPER_BAND_HZ_PRESS: f64 = 1000.0;
+
+/// What the objective needs of the machine before the fit: where the prior model's second
+/// mode sits, and where the paper's machine of its kind has it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModePrior {
+    /// The prior's second mode (`Machine::second_mode_hz`), Hz.
+    pub mode2_hz: f64,
+    /// The paper's machine's second mode (`model::default_prior`), Hz: 2049 Hz on the
+    /// hammer, 275 Hz on the press.
+    pub paper_mode2_hz: f64,
+    pub kind: MachineKind,
+}
+
+impl ModePrior {
+    /// Top of the spectral term, Hz: the paper's band scaled by the prior's mode over the
+    /// paper machine's, so the band spans the same multiple of the second mode the papers
+    /// show (2.44 × on the hammer, where the mode's peak and the pulse's ripples around it
+    /// lie; 3.64 × on the press, whose 275 Hz mode sits on a longer pulse's shoulder), and
+    /// the papers' machines keep exactly the papers' 5000 and 1000 Hz.
+    pub fn band_hz(&self) -> f64 {
+        let paper = match self.kind {
+            MachineKind::Hammer => PAPER_BAND_HZ_HAMMER,
+            MachineKind::ScrewPress => PAPER_BAND_HZ_PRESS,
+        };
+        // The ratio first: a paper's machine divides its mode by itself, exactly 1.
+        paper * (self.mode2_hz / self.paper_mode2_hz)
+    }
+}
+
+impl From<&Machine> for ModePrior {
+    /// The prior model's own second mode.
+    fn from(m: &Machine) -> Self {
+        ModePrior {
+            mode2_hz: m.second_mode_hz(),
+            paper_mode2_hz: default_prior(m.kind()).second_mode_hz(),
+            kind: m.kind(),
+        }
+    }
+}
+
+impl From<MachineKind> for ModePrior {
+    /// Without a model: the paper's machine of the kind.
+    fn from(kind: MachineKind) -> Self {
+        ModePrior::from(&default_prior(kind))
+    }
+}
+
+thread_local! {
+    /// The FFT plans of the simulated spectra, kept per thread across calls: a fit simulates
+    /// the same window lengths thousands of times, and a new planner computes each plan's
+    /// twiddle factors again (a tenth of a hammer blow's time in `benches/diagnose.rs`).
+    /// A plan depends only on the length, so the spectra are the same.
+    static SIM_PLANNER: std::cell::RefCell<SpectrumPlanner> = std::cell::RefCell::new(SpectrumPlanner::new());
+}
 
 /// Why a reference could not be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -169,8 +230,8 @@ pub struct Objective {
     envelope_window: Vec<usize>,
     /// The measured loads averaged over that window.
     measured_envelope: Vec<Vec<f64>>,
-    /// The second mode found in the measured spectra, Hz (`None`: none found; the kind's
-    /// typical value sets the envelope window).
+    /// The second mode found in the measured spectra, Hz (`None`: none found; the prior's
+    /// sets the envelope window).
     pub mode2_hz: Option<f64>,
     pub setting: Setting,
     /// Highest frequency of the spectral term, Hz.
@@ -195,14 +256,13 @@ pub struct Simulated {
 }
 
 impl Objective {
-    /// `fitted[i]`: whether reference i enters the residuals.
-    pub fn new(refs: Vec<Reference>, fitted: Vec<bool>, setting: Setting, kind: MachineKind) -> Objective {
-        // The second mode sits near 2 kHz on the hammer, 300 Hz on the press (papers):
-        // the spectral term runs to a little over twice that.
-        let f_max_hz = match kind {
-            MachineKind::Hammer => 5000.0,
-            MachineKind::ScrewPress => 1000.0,
-        };
+    /// `fitted[i]`: whether reference i enters the residuals. `prior`: the model the fit
+    /// starts from (or only its kind: the paper's machine). The spectral term runs to
+    /// `ModePrior::band_hz`; the second mode is looked for in the first fitted reference
+    /// below that, and where none is found the prior's own mode sets the envelope window.
+    pub fn new(refs: Vec<Reference>, fitted: Vec<bool>, setting: Setting, prior: impl Into<ModePrior>) -> Objective {
+        let prior = prior.into();
+        let f_max_hz = prior.band_hz();
         let mut planner = SpectrumPlanner::new();
         let spectra: Vec<_> = refs.iter().map(|r| planner.spectrum(&r.load_n, r.dt_s, PAD_FACTOR, 0)).collect();
         let measured_spectra = spectra.iter().map(|s| bins(s, f_max_hz)).collect();
@@ -213,8 +273,7 @@ impl Objective {
                 .max_by(|a, b| a.amplitude.total_cmp(&b.amplitude))
                 .map(|m| m.frequency_hz)
         });
-        let typical_hz = typical_mode2_hz(kind);
-        let period_s = 1.0 / mode2_hz.unwrap_or(typical_hz);
+        let period_s = 1.0 / mode2_hz.unwrap_or(prior.mode2_hz);
         let envelope_window: Vec<usize> = refs.iter().map(|r| ((period_s / r.dt_s).round() as usize).max(1)).collect();
         let measured_envelope = refs.iter().zip(&envelope_window).map(|(r, w)| moving_average(&r.load_n, *w)).collect();
         Objective {
@@ -277,7 +336,6 @@ impl Objective {
 
     /// Simulate the first `n` references.
     fn simulate_to(&self, machine: &Machine, n: usize) -> Option<Vec<Simulated>> {
-        let mut planner = SpectrumPlanner::new();
         let mut h = match &self.setting {
             Setting::Billet(p) => Some(p.billet.height_m),
             Setting::Bare => None,
@@ -314,7 +372,8 @@ impl Objective {
                     interpolate(&trace, t / r.dt_s)
                 })
                 .collect();
-            let spectrum = bins(&planner.spectrum(&load, r.dt_s, PAD_FACTOR, 0), self.f_max_hz);
+            let spectrum =
+                SIM_PLANNER.with_borrow_mut(|p| bins(&p.spectrum(&load, r.dt_s, PAD_FACTOR, 0), self.f_max_hz));
             // The model's instants on the window's clock (model time 0 is first contact).
             let on_window = |t: f64| t - t_cross + r.t_align_s;
             let forming_end = res.forming.map(|f| f.forming_time_s);
@@ -392,15 +451,6 @@ impl Objective {
     }
 }
 
-/// Where the second mode usually sits (hammer paper §2.2: ~1.8 kHz; press paper §3.1:
-/// ~300 Hz).
-pub fn typical_mode2_hz(kind: MachineKind) -> f64 {
-    match kind {
-        MachineKind::Hammer => 2000.0,
-        MachineKind::ScrewPress => 300.0,
-    }
-}
-
 /// Machine modes in a blow's load spectrum (`spectrum::blow_modes`: the spectrum weighted
 /// so that a mode stands above the ripples of the pulse, the papers' carrier, which is
 /// flagged and left out), below `f_max_hz`.
@@ -447,4 +497,32 @@ fn interpolate(v: &[f64], x: f64) -> f64 {
     }
     let f = x - i as f64;
     v[i] * (1.0 - f) + v[i + 1] * f
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::machine::Hammer;
+
+    #[test]
+    fn the_papers_machines_keep_the_papers_bands() {
+        // Seed 000 §2.2 shows the hammer's spectrum to 5 kHz, seed 001 §3.1 the press's to
+        // 1 kHz; derived from the prior's mode, the papers' own machines must get the same.
+        for (kind, hz) in [(MachineKind::Hammer, 5000.0), (MachineKind::ScrewPress, 1000.0)] {
+            let band = ModePrior::from(kind).band_hz();
+            assert_eq!(band, hz, "{kind:?}");
+        }
+    }
+
+    #[test]
+    fn the_band_follows_the_priors_second_mode() {
+        // Four times the spring over the same mass: the mode, sqrt(k/m2)/2π, doubles, so the
+        // band must double (2.44 modes wide either way).
+        let paper = default_prior(MachineKind::Hammer);
+        let Machine::Hammer(h) = paper else { panic!("a hammer") };
+        let stiff = Machine::Hammer(Hammer { k_n_per_m: 4.0 * h.k_n_per_m, ..h });
+        let (a, b) = (ModePrior::from(&paper), ModePrior::from(&stiff));
+        assert!((b.mode2_hz / a.mode2_hz - 2.0).abs() < 1e-12);
+        assert!((b.band_hz() / a.band_hz() - 2.0).abs() < 1e-12, "{} vs {}", b.band_hz(), a.band_hz());
+    }
 }
