@@ -1,9 +1,16 @@
-//! Speed of a full diagnosis (issue #17 target: 8 effects and 7 pairs, 5 calibration and 5
-//! holdout blows, a press billet pair in ≤ 30 s on the 2-core machine), on the
-//! withheld-effect suite's hammer and press with a hidden `friction_rise`, as `forgemon
-//! diagnose` runs it less the file I/O; and one hammer blow as the fits simulate it
+//! Speed of a full diagnosis (issue #17 target: a press billet pair in ≤ 30 s on the 2-core
+//! machine; 8 effects, every parameter of each fitted, 5 calibration and 5 holdout blows),
+//! on the withheld-effect suite's hammer and press with a hidden `friction_rise`, as
+//! `forgemon diagnose` runs it less the file I/O; and one hammer blow as the fits simulate it
 //! (issue #17 target ≤ 50 µs): one measured blow through `Objective::simulate`, window,
 //! trace and spectrum included.
+//!
+//! The bench names keep their "7 pairs" for comparison with earlier runs, but with a single
+//! hidden effect no pair is fitted any more: the best single effect leaves an error within
+//! five times the noise, which no pair can cut by the verdict's 80 %
+//! (`diagnose::attribute::hopeless_pair`). A case with two effects fits its pairs, and is not
+//! benched here (`tests/diagnose_families.rs`' ignored `full_diagnosis_table` prints the
+//! time of each diagnosis it runs).
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use forgemon::config::{parse_machine, parse_process};

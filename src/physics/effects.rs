@@ -124,6 +124,28 @@ impl Effect {
         }
     }
 
+    /// What blows determine of this effect, as names and values (README, "Diagnosis:
+    /// effect families"): the parameters themselves, except that `strain_rate` and
+    /// `strain_hardening` are determined as their exponent and the flow stress's level at
+    /// the default reference (σ·(ε̇/ε̇₀)^m is σ·(10/ε̇₀)^m at 10 /s: ε̇₀ moves the level at a
+    /// fixed m), and `foundation`'s damper as its damping ratio c3 / (2 √(k3 m3)).
+    pub fn identifiable(&self) -> Vec<(&'static str, f64)> {
+        match *self {
+            Effect::StrainRate { m, rate_ref_per_s } => {
+                vec![("m", m), ("level_at_ref", (DEFAULT_RATE_REF_PER_S / rate_ref_per_s).powf(m))]
+            }
+            Effect::StrainHardening { n, eps_ref } => {
+                vec![("n", n), ("level_at_ref", (DEFAULT_EPS_REF / eps_ref).powf(n))]
+            }
+            Effect::Foundation { m3_kg, k3_n_per_m, c3_ns_per_m } => vec![
+                ("m3_kg", m3_kg),
+                ("k3_N_per_m", k3_n_per_m),
+                ("zeta3", c3_ns_per_m / (2.0 * (k3_n_per_m * m3_kg).sqrt())),
+            ],
+            _ => self.params(),
+        }
+    }
+
     /// Build an effect from its name and `param -> value` pairs, checking every key.
     pub fn from_params(name: &str, given: &BTreeMap<String, f64>) -> Result<Effect, EffectError> {
         let effect: &'static str = EFFECT_NAMES
@@ -382,6 +404,18 @@ mod tests {
     fn optional_parameters_take_their_named_defaults() {
         let e = Effect::parse_spec("strain_rate:m=0.1").unwrap();
         assert_eq!(e, Effect::StrainRate { m: 0.1, rate_ref_per_s: DEFAULT_RATE_REF_PER_S });
+    }
+
+    /// The level is the law's factor at the default reference: 1 there when the reference is
+    /// the default, (10/2.5)^0.1 = 4^0.1 at 10 /s for a reference of 2.5 /s.
+    #[test]
+    fn a_reference_is_determined_as_the_level_it_gives_at_the_default() {
+        let level = |spec: &str| Effect::parse_spec(spec).unwrap().identifiable()[1].1;
+        assert_eq!(level("strain_rate:m=0.1"), 1.0);
+        assert!((level("strain_rate:m=0.1,rate_ref_per_s=2.5") - 4f64.powf(0.1)).abs() < 1e-12);
+        assert!((level("strain_hardening:n=0.5,eps_ref=0.05") - 2.0).abs() < 1e-12);
+        let zeta = Effect::parse_spec("foundation:m3_kg=100,k3_N_per_m=1e6,c3_Ns_per_m=2e3").unwrap().identifiable();
+        assert_eq!(zeta[2], ("zeta3", 0.1));
     }
 
     #[test]
