@@ -283,12 +283,12 @@ fn blow(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64) -> Fine
         let x_low = if massless { s.x3 } else { s.xl };
         let delta = s.xu - x_low - s.p;
         if k_eff * delta > fy {
-            let p_new = s.xu - x_low - fy / k_eff;
-            rate = (p_new - s.p) / dt / h;
-            s.p = p_new;
-        } else {
-            rate = 0.0;
+            s.p = s.xu - x_low - fy / k_eff;
         }
+        // The strain rate from the tools' closing speed (smooth, where the plastic increments
+        // of a return mapping flip between steps that flow and steps that do not).
+        let v_low = if massless { s.v3 } else { s.vl };
+        rate = (s.vu - v_low).max(0.0) / h;
         acc = forces(&s, rate);
         let (_, f_s, au, ar, al, a3) = acc;
         s.vu += 0.5 * dt * au;
