@@ -84,8 +84,8 @@ fn the_ram_leads_the_load_by_the_closure_on_independent_blows() {
 /// 0.46 on seed 3). Not holding, and left open (issue #17), on seed 3:
 /// - every hammer case but the clearance at impact (0.55–0.63), the clearance in the
 ///   forming (0.53 against 0.34). The base model's own impact differs here: the renderer's
-///   billet passes at most its yield load to the 26 kg die, which so takes ~0.24 ms to come
-///   up to speed, where the library's rigid billet picks the die up at once (its peak is
+///   billet passes at most its yield load to the 26 kg die, which so takes about 0.2 ms (estimated)
+///   to come up to speed, where the library's rigid billet picks the die up at once (its peak is
 ///   2.5× the renderer's on the first blow, 1.23 MN against 0.50 MN). The no-effect hammer
 ///   sits at impact 0.63 too.
 /// - every press case split between forming and spring-back at about 0.5 each, the

@@ -104,7 +104,7 @@ fn independent_table() {
                 .map_or(("none".to_string(), 0.0), |f| (f.name.clone(), 1.0 - f.holdout / d.baseline_holdout));
             let s = d.location.share();
             println!(
-                "| {name} | {renderer} | {seed}/{} | {verdict} (hidden {}) | {shrink:.2} | {:.4} | {} | {:.2} | {:.2} | {:.2} | {:.2} | ({:.0} s)",
+                "| {name} | {renderer} | {seed}/{} | {verdict} (hidden {}) | {shrink:.2} | {:.4} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.0} s |",
                 seed + 1,
                 hidden.library_name(),
                 d.baseline_holdout,
