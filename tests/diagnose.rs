@@ -181,6 +181,7 @@ fn clearance_is_named_and_located_at_impact() {
 fn elastic_recovery_is_named_and_located_in_the_spring_back() {
     let r = single("elastic", "elastic_recovery:k_contact_N_per_m=1.5e9");
     assert_eq!(r["baseline"]["dominant_phase"], "spring_back", "{r:#}");
+    located_phase_with_phase(&r, "spring_back");
     // The papers' gap: the real spring-back lasts longer than the model's (beyond 5× the
     // ≤ 1 % of the blow a no-effect hammer shows; src/diagnose/mod.rs's tests).
     assert!(r["baseline"]["indicators"]["spring_back_time"]["mean_rel_error"].as_f64().unwrap() < -0.05, "{r:#}");
@@ -263,6 +264,7 @@ fn two_effects_are_both_named() {
 fn press_clearance_is_named_and_located_at_impact() {
     let r = single_on(Kind::Press, "p-clearance", "clearance:gap_m=0.0003,m_lower_kg=800");
     assert_eq!(r["baseline"]["dominant_phase"], "impact", "{r:#}");
+    located_phase_with_phase(&r, "impact");
 }
 
 /// Issue #17's basin case: at the press's 20 kHz a clearance of a few tenths of a mm under a

@@ -233,7 +233,16 @@ pub fn localise(r: &Reference, model: &Simulated, mode2_hz: f64) -> Localised {
     let phase = |k: usize| (sum[k] / length[k] as f64).sqrt() / r.peak_n;
     let by_phase = ByPhase { impact: phase(0), forming: phase(1), spring_back: phase(2), post: phase(3) };
     let by_band = bands(&resid[start..end.max(start)], dt, mode2_hz, nrmse);
-    let location = Location::of(&r.load_n, &model_load, &measured, &modelled, r.peak_n);
+    // Phase with phase, the measured impact starts at the ram's own contact when its motion
+    // sensors saw it before the load rose (a clearance closing: `Reference::t_ram_contact_s`).
+    let located = match (r.measured, r.t_ram_contact_s.map(idx)) {
+        (Some(m), Some(ram)) if ram < measured.contact() => {
+            Phases::new(ram, idx(m.forming_end_s), &r.load_n, threshold, 0, post)
+        }
+        _ => measured,
+    };
+    let ring = ((1.0 / (mode2_hz * dt)).round() as usize).max(1);
+    let location = Location::of(&r.load_n, &model_load, &located, &modelled, r.peak_n, ring);
     Localised { nrmse, by_phase, by_band, window: (start, end), measured, model: modelled, location }
 }
 
@@ -465,6 +474,7 @@ mod tests {
             t_align_s: 1e-3,
             peak_n: peak,
             blow_index: Some(1),
+            t_ram_contact_s: None,
         };
         let s = Simulated {
             load_n: model,

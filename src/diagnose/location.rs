@@ -9,6 +9,15 @@
 //! other does not carry about the phase's mean square load. A late or early first contact
 //! counts to the impact's length.
 //!
+//! Two things are the impact's wherever they show. The measured impact starts at the ram's
+//! own contact (`Reference::t_ram_contact_s`, its accelerometer leaving the approach) when
+//! that comes before the load rises: the delay is a clearance closing, and counts to the
+//! impact's length. And the forming's ring about its level (one period of the second mode)
+//! differs in amplitude from the model's by what the impact set up (a die striking across a
+//! clearance rings harder): that difference of RMS, squared, over the forming's samples, is
+//! the impact's; the rest of the forming's shape error (its level, and rings drifting apart
+//! when the forming runs at another pace) stays the forming's.
+//!
 //! A model that forms too long therefore has a forming error and a spring-back of the
 //! right shape, wherever on the clock that spring-back falls; a spring-back that lasts
 //! longer than the model's is the spring-back's, however long the forming was.
@@ -28,7 +37,9 @@ use super::localise::Phases;
 /// The method, as the report states it.
 pub const METHOD: &str = "phase_aligned: each phase of the measured and the modelled blow on its own normalised time; \
      a phase's error is its mean square shape error there plus its length error (|model - measured| samples; the impact's \
-     is the first contact's offset, the forming's its length from contact) times the phase's mean square load; share: each \
+     is the first contact's offset, the measured one at the ram's own contact when it precedes the load's, the forming's its \
+     length from contact) times the phase's mean square load; the forming's ring amplitude error (about a one-period mean of \
+     the second mode) is the impact's; share: each \
      phase's part of the sum of squares over the blow, mean over the calibration blows";
 
 /// The four phases, in order, as the report names them.
@@ -52,14 +63,29 @@ pub struct Share {
 
 impl Location {
     /// Locate the residual of `model_load` against `measured_load`, each on its own phases.
-    pub fn of(measured_load: &[f64], model_load: &[f64], measured: &Phases, model: &Phases, peak_n: f64) -> Location {
+    /// `ring_samples`: one period of the machine's second mode, samples (1: no split).
+    pub fn of(
+        measured_load: &[f64],
+        model_load: &[f64],
+        measured: &Phases,
+        model: &Phases,
+        peak_n: f64,
+        ring_samples: usize,
+    ) -> Location {
         let length = measured.0[4].min(measured_load.len()).saturating_sub(measured.contact()).max(1) as f64;
         let scale = 1.0 / ((peak_n * peak_n).max(f64::MIN_POSITIVE) * length);
-        let mean_square = std::array::from_fn(|k| {
+        let mut mean_square: [f64; 4] = std::array::from_fn(|k| {
             let m = segment(measured_load, measured, k);
             let s = segment(model_load, model, k);
-            (shape_error(m, s) + duration_error(m, s, length_error(measured, model, k))) * scale
+            duration_error(m, s, length_error(measured, model, k)) * scale
         });
+        for k in 0..4 {
+            let (m, s) = (segment(measured_load, measured, k), segment(model_load, model, k));
+            let e = shape_residual(m, s);
+            let (own, impacts) = if k == 1 { split_ring(m, s, &e, ring_samples) } else { (sum_sq(&e), 0.0) };
+            mean_square[k] += own * scale;
+            mean_square[0] += impacts * scale;
+        }
         Location { mean_square }
     }
 
@@ -109,14 +135,53 @@ fn at(x: &[f64], u: f64) -> f64 {
     }
 }
 
-/// Σ over the measured phase's samples of (measured − model)², the model's phase laid on the
-/// measured one's normalised time.
-fn shape_error(measured: &[f64], model: &[f64]) -> f64 {
+/// The measured phase's samples less the model's phase laid on the measured one's
+/// normalised time (empty without a model phase).
+fn shape_residual(measured: &[f64], model: &[f64]) -> Vec<f64> {
     if model.is_empty() {
-        return 0.0;
+        return Vec::new();
     }
     let n = measured.len();
-    (0..n).map(|i| (measured[i] - at(model, (i as f64 + 0.5) / n as f64)).powi(2)).sum()
+    (0..n).map(|i| measured[i] - at(model, (i as f64 + 0.5) / n as f64)).collect()
+}
+
+fn sum_sq(x: &[f64]) -> f64 {
+    x.iter().map(|v| v * v).sum()
+}
+
+/// `x` less its mean over `w` samples (centred, shorter at the ends): the ring about its
+/// level.
+fn ring_of(x: &[f64], w: usize) -> Vec<f64> {
+    let n = x.len();
+    let mut prefix = vec![0.0; n + 1];
+    for (i, v) in x.iter().enumerate() {
+        prefix[i + 1] = prefix[i] + v;
+    }
+    let half = w / 2;
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(half), (i + w - half).min(n));
+            x[i] - (prefix[b] - prefix[a]) / (b - a) as f64
+        })
+        .collect()
+}
+
+/// The forming's shape error `e` (measured `m` less model `s`) split into the forming's own
+/// and the impact's: the ring's amplitude is set by the impact (a die striking across a
+/// clearance rings harder than the model's), so the difference of the two rings' RMS,
+/// squared, over the phase's samples, is the impact's; the rest of the error (the level,
+/// and the rings drifting apart when the forming runs at another pace) is the forming's.
+/// `w`: one period of the second mode, samples (≤ 1: no split).
+fn split_ring(m: &[f64], s: &[f64], e: &[f64], w: usize) -> (f64, f64) {
+    let total = sum_sq(e);
+    let n = m.len();
+    if w <= 1 || n == 0 || s.is_empty() {
+        return (total, 0.0);
+    }
+    let laid: Vec<f64> = (0..n).map(|i| at(s, (i as f64 + 0.5) / n as f64)).collect();
+    let rms = |x: &[f64]| (sum_sq(&ring_of(x, w)) / n as f64).sqrt();
+    let amplitude = (n as f64 * (rms(m) - rms(&laid)).powi(2)).min(total);
+    (total - amplitude, amplitude)
 }
 
 /// The samples by which phase `k` is off: the impact by its first contact (its length is a
@@ -163,7 +228,7 @@ mod tests {
     #[test]
     fn a_perfect_model_has_no_error_anywhere() {
         let (m, p) = blow(1.0, 100, 20);
-        let l = Location::of(&m, &m, &p, &p, 1.0);
+        let l = Location::of(&m, &m, &p, &p, 1.0, 1);
         assert_eq!(l.mean_square, [0.0; 4]);
         assert_eq!(l.share(), Share::default());
     }
@@ -174,7 +239,7 @@ mod tests {
         // 20 samples) comes 20 samples late, which sample by sample is a spring-back error.
         let (m, pm) = blow(1.2, 70, 20);
         let (s, ps) = blow(1.0, 90, 20);
-        let l = Location::of(&m, &s, &pm, &ps, 1.2);
+        let l = Location::of(&m, &s, &pm, &ps, 1.2, 1);
         assert_eq!(l.phase(), "forming", "{l:?}");
         // The spring-back keeps only its level difference on its own time: a ramp from 1.2
         // against one from 1.0 over the same 20 samples, 0.2·k/20 apart at k = 20..1, exact
@@ -191,7 +256,7 @@ mod tests {
         // Measured: forming 5 samples longer and unloading over 80 samples against 20.
         let (m, pm) = blow(1.0, 75, 80);
         let (s, ps) = blow(1.0, 70, 20);
-        let l = Location::of(&m, &s, &pm, &ps, 1.0);
+        let l = Location::of(&m, &s, &pm, &ps, 1.0, 1);
         assert_eq!(l.phase(), "spring_back", "{l:?}");
         // Laid on its own time the ramps coincide (to their sampling, half a model sample
         // of 1/20: under 0.2 % here): the error is the length's, 60 samples of the measured
@@ -207,12 +272,31 @@ mod tests {
         let mut s = m[8..].to_vec();
         s.extend([0.0; 8]);
         let ps = Phases(pm.0.map(|i| i - 8));
-        let l = Location::of(&m, &s, &pm, &ps, 1.0);
+        let l = Location::of(&m, &s, &pm, &ps, 1.0, 1);
         assert_eq!(l.phase(), "impact", "{l:?}");
         assert_eq!(&l.mean_square[1..], &[0.0; 3]);
         let share = l.share();
         let sum = share.impact + share.forming + share.spring_back + share.post;
         assert!((sum - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_harder_ring_through_the_forming_is_the_impacts() {
+        // The same blow, the measured one ringing at ±0.3 with a period of 8 samples through
+        // its forming: a level error of none, a ring the impact set up.
+        let (s, p) = blow(1.0, 100, 20);
+        let mut m = s.clone();
+        for (i, x) in m.iter_mut().enumerate().take(p.forming_end()).skip(p.0[1]) {
+            *x += 0.3 * (2.0 * std::f64::consts::PI * i as f64 / 8.0).sin();
+        }
+        let l = Location::of(&m, &s, &p, &p, 1.0, 8);
+        assert_eq!(l.phase(), "impact", "{l:?}");
+        // The ring's RMS is 0.3/√2 over the forming's 90 samples, the model's none: all of the
+        // forming's error is its amplitude (to the ends, where the mean over 8 samples is
+        // cut: under 10 % of it here).
+        assert!(l.mean_square[1] < 0.1 * l.mean_square[0], "{l:?}");
+        // Without the split (one-sample period) it is the forming's.
+        assert_eq!(Location::of(&m, &s, &p, &p, 1.0, 1).phase(), "forming");
     }
 
     #[test]

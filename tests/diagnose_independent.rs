@@ -1,0 +1,116 @@
+//! The diagnosis on data it was not fitted with (issue #17): blows rendered by
+//! `independent/` (its own contact law, integrator, DAQ chain and hand-measured heights),
+//! read and diagnosed by the project as real captures would be.
+//!
+//! Seeds: nothing was tuned on this renderer. The location method and the verdict rule were
+//! chosen on the project's own renderer (capture seed 5, and the rates' `tune` set,
+//! `src/diagnose/rates.rs`); these tests assert on capture seeds 3/4 (calibration/holdout),
+//! whose results were first seen when the assertions below were written, and the harness
+//! (`tests/diagnose_independent_table.rs`) also reports seeds 1/2. Where a case does not
+//! hold, it is listed, not asserted, and not weakened.
+//!
+//! CI tests here only render and localise (no fits: a few seconds each). The full diagnosis
+//! of every case, on both renderers, is the `#[ignore]`d harness in
+//! `tests/diagnose_independent_table.rs`.
+
+#[path = "independent/mod.rs"]
+mod independent;
+
+use forgemon::diagnose::localise::localise;
+use forgemon::diagnose::location::Location;
+use forgemon::identify::objective::Objective;
+use independent::{Hidden, Kind, billet, cases, machine, speeds};
+
+/// Assert seeds (module docs).
+const CALIB_SEED: u64 = 3;
+
+/// The base model's location on the calibration billet of a case, as `diagnose` reports it
+/// in `baseline.location`, and the mean lead of the ram's contact over the load's, samples.
+fn baseline_location(kind: Kind, hidden: &Hidden, seed: u64) -> (Location, f64) {
+    let m = machine(kind);
+    let b = billet(kind, hidden, &speeds(kind).0, 1.0, seed);
+    let lead = b
+        .refs
+        .iter()
+        .map(|r| match (r.t_ram_contact_s, r.measured) {
+            (Some(ram), Some(mi)) => (mi.contact_s - ram) / r.dt_s,
+            _ => 0.0,
+        })
+        .sum::<f64>()
+        / b.refs.len() as f64;
+    let n = b.refs.len();
+    let obj = Objective::new(b.refs, vec![true; n], b.setting, m.kind());
+    let sims = obj.simulate(&m).expect("the base model simulates the independent blows");
+    let loc: Vec<Location> =
+        obj.refs.iter().zip(&sims).map(|(r, s)| localise(r, s, m.second_mode_hz()).location).collect();
+    (Location::mean(&loc), lead)
+}
+
+/// The caliper noise is there, and the heights need not fall monotonically as measured.
+#[test]
+fn hand_measured_heights_carry_caliper_noise() {
+    let b = billet(Kind::Hammer, &Hidden::None, &speeds(Kind::Hammer).0, 1.0, CALIB_SEED);
+    let forgemon::identify::objective::Setting::Billet(p) = &b.setting else { panic!("a billet") };
+    assert_eq!(p.measured_final_heights_m.len(), 5);
+    for (m, t) in p.measured_final_heights_m.iter().zip(&b.heights_m) {
+        // ±0.2 mm (independent/mod.rs, CALIPER_M), and not exactly the truth.
+        assert!((m - t).abs() <= 0.2e-3 && m != t, "{m} {t}");
+    }
+    // The billet is upset on every blow (true heights fall).
+    assert!(b.heights_m.windows(2).all(|w| w[1] < w[0]), "{:?}", b.heights_m);
+}
+
+/// The ram's contact (its accelerometer) leads the load's by the clearance's closure on
+/// independently rendered blows too, and not without one. Bounds as in
+/// `diagnose::tests::the_ram_touches_before_the_load_rises_by_the_closure`: 0.25 mm at the
+/// hammer die's ~4 m/s is over 60 µs (6 samples at 100 kHz); the press's 600 kg die at under
+/// twice the tool's 0.36 m/s takes over 0.35 ms (7 samples at 20 kHz). Without a clearance
+/// the two agree within the sample the load's contact is rounded to, plus one for the
+/// anti-alias filter's delay, which the accelerometer and the load share.
+#[test]
+fn the_ram_leads_the_load_by_the_closure_on_independent_blows() {
+    for (kind, hidden, lo, hi) in [
+        (Kind::Hammer, Hidden::None, -2.0, 2.0),
+        (Kind::Hammer, Hidden::Clearance { gap_m: 0.25e-3, die_kg: 0.0 }, 6.0, f64::INFINITY),
+        (Kind::Press, Hidden::Clearance { gap_m: 0.25e-3, die_kg: 600.0 }, 7.0, f64::INFINITY),
+    ] {
+        let (_, lead) = baseline_location(kind, &hidden, CALIB_SEED);
+        assert!((lo..=hi).contains(&lead), "{kind:?} {hidden:?}: {lead}");
+    }
+}
+
+/// Issue #17: the location on independent blows, per case, asserted where it holds
+/// (module docs): only the press's strain rate (forming 0.54 against the spring-back's
+/// 0.46 on seed 3). Not holding, and left open (issue #17), on seed 3:
+/// - every hammer case but the clearance at impact (0.55–0.63), the clearance in the
+///   forming (0.53 against 0.34). The base model's own impact differs here: the renderer's
+///   billet passes at most its yield load to the 26 kg die, which so takes about 0.2 ms (estimated)
+///   to come up to speed, where the library's rigid billet picks the die up at once (its peak is
+///   2.5× the renderer's on the first blow, 1.23 MN against 0.50 MN). The no-effect hammer
+///   sits at impact 0.63 too.
+/// - every press case split between forming and spring-back at about 0.5 each, the
+///   no-effect one too (its holdout error 0.0063 of the peak, about 2.5× its noise), and
+///   the compliant contact (0.0605, named by the verdict with shrink 0.90) at 0.50/0.50 to
+///   two decimals. An even split is what a misplaced measured end of forming gives (its
+///   samples are one phase's length error and the other's, with the same mean square
+///   load); suspected, not verified. The clearance shows at impact only 0.03, though the
+///   ram leads the load by 23 samples (0.49 on the project's renderer with the same lead);
+///   why is not established.
+#[test]
+fn location_on_independent_blows() {
+    let mut wrong = Vec::new();
+    for (name, kind, hidden) in cases() {
+        let (loc, lead) = baseline_location(kind, &hidden, CALIB_SEED);
+        eprintln!("LOCATION {name}: {} {:?} (ram lead {lead:.1} samples)", loc.phase(), loc.share());
+        let holds = match name {
+            "press-rate" => Some("forming"),
+            _ => None,
+        };
+        if let Some(phase) = holds
+            && loc.phase() != phase
+        {
+            wrong.push(format!("{name}: {} not {phase}, {:?}", loc.phase(), loc.share()));
+        }
+    }
+    assert!(wrong.is_empty(), "{wrong:#?}");
+}
