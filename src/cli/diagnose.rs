@@ -45,8 +45,15 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<ExitCode> {
         indicatif::ProgressStyle::with_template("diagnose {bar:40} {pos}/{len} effects and pairs fitted {elapsed}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    let d = diagnose(&machine, &effects, calib, holdout, &|| bar.inc(1))
-        .context("the base model cannot simulate these blows")?;
+    // Ties among the single effects add pairs beyond `fit_count`: the bar grows with them.
+    let step = || {
+        if bar.length().is_some_and(|len| bar.position() >= len) {
+            bar.inc_length(1);
+        }
+        bar.inc(1);
+    };
+    let d =
+        diagnose(&machine, &effects, calib, holdout, &step).context("the base model cannot simulate these blows")?;
     bar.finish_and_clear();
     std::fs::create_dir_all(&args.out).with_context(|| format!("{}: cannot create", args.out.display()))?;
     let json = d.to_json();

@@ -87,8 +87,9 @@ fn noise(set: &BlowSet, loc: &[Localised]) -> f64 {
     mean(&v)
 }
 
-/// How many fits `diagnose` runs (and tells `progress` of) on a machine of `kind`: every
-/// library effect alone, then the best one paired with each other.
+/// How many fits `diagnose` runs (and tells `progress` of) on a machine of `kind` when one
+/// single effect is best: every library effect alone, then the best one paired with each
+/// other. Each single the holdout cannot tell from the best adds its own pairs.
 pub fn fit_count(kind: crate::physics::machine::MachineKind) -> usize {
     let n = library(kind).len();
     n + n.saturating_sub(1)
@@ -122,11 +123,28 @@ pub fn diagnose(
         .collect();
     let mut ranked = singles.clone();
     ranked.sort_by(|a, b| a.1.holdout.total_cmp(&b.1.holdout));
-    // Pairs: the best single effect with each other one (a second effect that only shows
-    // once the first is in place need not rank high alone).
+    // Pairs: each single effect the holdout cannot tell from the best (the ties the verdict
+    // settles by parsimony, so the winner is among them) with each other one (a second
+    // effect that only shows once the first is in place need not rank high alone).
     type Ranked<'a> = &'a (usize, Fitted);
-    let pairs_in: Vec<(Ranked, Ranked)> =
-        ranked.first().map(|best| ranked.iter().skip(1).map(|other| (best, other)).collect()).unwrap_or_default();
+    let anchors: Vec<Ranked> = ranked
+        .first()
+        .map(|best| {
+            ranked
+                .iter()
+                .filter(|r| r.0 == best.0 || evidence::equivalent(&best.1.holdout_per_blow, &r.1.holdout_per_blow))
+                .collect()
+        })
+        .unwrap_or_default();
+    let is_anchor = |i: usize| anchors.iter().position(|a| a.0 == i);
+    let pairs_in: Vec<(Ranked, Ranked)> = anchors
+        .iter()
+        .enumerate()
+        .flat_map(|(k, a)| {
+            // A pair of two anchors is fitted once, from the better-ranked one.
+            ranked.iter().filter(move |o| o.0 != a.0 && is_anchor(o.0).is_none_or(|j| j > k)).map(move |o| (*a, o))
+        })
+        .collect();
     let pairs: Vec<Fitted> = pairs_in
         .par_iter()
         .filter_map(|((ia, fa), (ib, _))| {
