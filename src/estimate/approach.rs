@@ -44,6 +44,9 @@ pub struct ApproachFit {
     /// ram met the billet, to about one sample's travel (the contact instant is known to a
     /// sample).
     pub x_contact_m: f64,
+    /// Standard error of the impact speed at the contact sample, m/s, from the fit's
+    /// covariance (`identify::speed`).
+    pub v_sd_mps: f64,
 }
 
 impl ApproachFit {
@@ -54,6 +57,7 @@ impl ApproachFit {
             v_impact_mps: self.v_impact_mps + self.acc_mps2 * tau_s,
             acc_mps2: self.acc_mps2,
             x_contact_m: self.x_contact_m + self.v_impact_mps * tau_s + 0.5 * self.acc_mps2 * tau_s * tau_s,
+            v_sd_mps: self.v_sd_mps,
         }
     }
 }
@@ -78,12 +82,12 @@ pub fn fit_impact_speed(
     let tc = samples[i_contact].t_s;
     let acc_end = i_contact.saturating_sub(ACC_GUARD_SAMPLES).clamp(start + MIN_FIT_SAMPLES / 2, end);
     let (acc, acc_var) = mean_and_variance_of_mean(samples[start..acc_end].iter().map(|s| s.acc_mps2));
-    let fit = parabola(w, tc, Some((acc, acc_var)));
+    let (fit, v_var) = parabola(w, tc, Some((acc, acc_var)));
     let (x_contact_m, v, acc) = (fit[0], fit[1], fit[2]);
     if !(v.is_finite() && v > 0.0) {
         return Err(ApproachError::NotApproaching { v_mps: v });
     }
-    Ok(ApproachFit { v_impact_mps: v, acc_mps2: acc, x_contact_m })
+    Ok(ApproachFit { v_impact_mps: v, acc_mps2: acc, x_contact_m, v_sd_mps: v_var.max(0.0).sqrt() })
 }
 
 /// The mean of `xs` and the variance of that mean.
@@ -94,11 +98,11 @@ fn mean_and_variance_of_mean(xs: impl Iterator<Item = f64> + Clone) -> (f64, f64
     (mean, var / n)
 }
 
-/// Least squares of `disp = x0 + v t + c t² / 2` (t from `tc`): `[x0, v, c]`. With
-/// `curvature = Some((c, var))`, that measurement of `c` enters as one more observation,
-/// the encoder's rows weighted by their residual variance (from the free fit), inflated by
-/// the samples per encoder step crossed.
-fn parabola(w: &[Sample], tc: f64, curvature: Option<(f64, f64)>) -> [f64; 3] {
+/// Least squares of `disp = x0 + v t + c t² / 2` (t from `tc`): `[x0, v, c]` and the
+/// variance of `v`. With `curvature = Some((c, var))`, that measurement of `c` enters as one
+/// more observation, the encoder's rows weighted by their residual variance (from the free
+/// fit), scaled for the residuals' correlation (`ar1_factor`).
+fn parabola(w: &[Sample], tc: f64, curvature: Option<(f64, f64)>) -> ([f64; 3], f64) {
     use nalgebra::{Matrix3, Vector3};
     let rows = || w.iter().map(|s| (Vector3::new(1.0, s.t_s - tc, 0.5 * (s.t_s - tc).powi(2)), s.disp_m));
     let mut a = Matrix3::zeros();
@@ -107,38 +111,56 @@ fn parabola(w: &[Sample], tc: f64, curvature: Option<(f64, f64)>) -> [f64; 3] {
         a += phi * phi.transpose();
         b += phi * y;
     }
-    let free = a.lu().solve(&b);
-    let (Some(free), Some((c, c_var))) = (free, curvature) else {
+    let (c, c_var) = curvature.unwrap_or((0.0, 0.0));
+    let Some(free) = a.lu().solve(&b) else {
         // Too few or degenerate samples for a bend: a line through the accelerometer's.
-        return line_with_curvature(w, tc, curvature.map_or(0.0, |c| c.0));
+        return line_with_curvature(w, tc, c, c_var);
     };
     let n = w.len() as f64;
-    let rss: f64 = rows().map(|(phi, y)| (y - phi.dot(&free)).powi(2)).sum();
-    let steps = w.windows(2).filter(|p| p[0].disp_m != p[1].disp_m).count().max(1) as f64;
-    let x_var = (rss / (n - 3.0).max(1.0)) * (n / steps).max(1.0);
+    let resid: Vec<f64> = rows().map(|(phi, y)| y - phi.dot(&free)).collect();
+    let rss: f64 = resid.iter().map(|r| r * r).sum();
+    let x_var = rss / (n - 3.0).max(1.0) * ar1_factor(&resid);
     if !(x_var > 0.0 && c_var > 0.0) {
-        return line_with_curvature(w, tc, c);
+        return line_with_curvature(w, tc, c, c_var);
     }
     let prior = Vector3::new(0.0, 0.0, 1.0);
     let a = a / x_var + prior * prior.transpose() / c_var;
     let b = b / x_var + prior * (c / c_var);
-    a.lu().solve(&b).map_or_else(|| line_with_curvature(w, tc, c), |x| [x[0], x[1], x[2]])
+    match (a.lu().solve(&b), a.try_inverse()) {
+        (Some(x), Some(cov)) => ([x[0], x[1], x[2]], cov[(1, 1)]),
+        _ => line_with_curvature(w, tc, c, c_var),
+    }
 }
 
-/// Least squares of `disp − c t² / 2 = x0 + v t` with the curvature fixed.
-fn line_with_curvature(w: &[Sample], tc: f64, c: f64) -> [f64; 3] {
-    let (mut st, mut sy, mut stt, mut sty) = (0.0, 0.0, 0.0, 0.0);
-    for s in w {
-        let t = s.t_s - tc;
-        let y = s.disp_m - 0.5 * c * t * t;
-        st += t;
-        sy += y;
-        stt += t * t;
-        sty += t * y;
+/// How much the variance of a fitted parameter exceeds the white-noise formula's for
+/// residuals with lag-1 autocorrelation ρ: (1 + ρ)/(1 − ρ). A counter read faster than it
+/// steps repeats its error (ρ near 1); one that crosses several steps a sample makes an
+/// error pattern whose slow part is smaller than white noise's (ρ < 0).
+fn ar1_factor(resid: &[f64]) -> f64 {
+    let var: f64 = resid.iter().map(|r| r * r).sum();
+    if var <= 0.0 || resid.len() < 3 {
+        return 1.0;
     }
+    let rho = (resid.windows(2).map(|p| p[0] * p[1]).sum::<f64>() / var).clamp(-0.9, 0.999);
+    (1.0 + rho) / (1.0 - rho)
+}
+
+/// Least squares of `disp − c t² / 2 = x0 + v t` with the curvature `c` (variance `c_var`)
+/// fixed, and the variance of `v`: the line's own, and the curvature's through
+/// ∂v/∂c = −½ Σ(t − t̄) t² / Σ(t − t̄)².
+fn line_with_curvature(w: &[Sample], tc: f64, c: f64, c_var: f64) -> ([f64; 3], f64) {
     let nf = w.len() as f64;
-    let v = (nf * sty - st * sy) / (nf * stt - st * st);
-    [(sy - v * st) / nf, v, c]
+    let t: Vec<f64> = w.iter().map(|s| s.t_s - tc).collect();
+    let y: Vec<f64> = w.iter().zip(&t).map(|(s, x)| s.disp_m - 0.5 * c * x * x).collect();
+    let (t_mean, y_mean) = (t.iter().sum::<f64>() / nf, y.iter().sum::<f64>() / nf);
+    let sxx: f64 = t.iter().map(|x| (x - t_mean).powi(2)).sum();
+    let v = t.iter().zip(&y).map(|(x, yy)| (x - t_mean) * (yy - y_mean)).sum::<f64>() / sxx;
+    let x0 = y_mean - v * t_mean;
+    let resid: Vec<f64> = t.iter().zip(&y).map(|(x, yy)| yy - x0 - v * x).collect();
+    let rss: f64 = resid.iter().map(|r| r * r).sum();
+    let dv_dc = -0.5 * t.iter().map(|x| (x - t_mean) * x * x).sum::<f64>() / sxx;
+    let line_var = rss / (nf - 2.0).max(1.0) * ar1_factor(&resid) / sxx;
+    ([x0, v, c], line_var + dv_dc * dv_dc * c_var)
 }
 
 #[cfg(test)]
