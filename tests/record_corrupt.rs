@@ -129,6 +129,24 @@ fn measured(blow: &Value) -> Value {
     OWN.iter().map(|k| ((*k).to_string(), blow[*k].clone())).collect::<serde_json::Map<_, _>>().into()
 }
 
+/// The blow's own figures agree: exactly for an observed blow; for a fitted one within the
+/// fit's convergence. The model fit starts from the billet's tracked height, which a lost
+/// chunk before the blow changes, and Levenberg–Marquardt stops at a relative cost change of
+/// 1e-5 (`estimate::fit::COST_RTOL`), so its optimum moves a little with its start:
+/// measured on this recording, 40 ns of contact time, 0.04 % of elastic energy, 0.02 % of
+/// final load, 3e-6 of residual. Bounds: 1 µs, 0.2 % relative, 5e-5 of residual.
+fn same_measured(a: &Value, b: &Value) -> bool {
+    if a["method"] != "model_fit" || b["method"] != "model_fit" {
+        return measured(a) == measured(b);
+    }
+    let close = |k: &str, abs: f64, rel: f64| (f(a, k) - f(b, k)).abs() <= abs + rel * f(b, k).abs();
+    a["t_end_s"] == b["t_end_s"]
+        && a["peak_load_N"] == b["peak_load_N"]
+        && close("t_contact_s", 1e-6, 0.0)
+        && close("residual", 5e-5, 0.0)
+        && ["v_impact_mps", "kinetic_in_J", "damped_J", "elastic_J", "final_load_N"].iter().all(|k| close(k, 0.0, 2e-3))
+}
+
 fn f(v: &Value, k: &str) -> f64 {
     v[k].as_f64().unwrap_or_else(|| panic!("{k} in {v}"))
 }
@@ -172,16 +190,15 @@ fn a_flipped_bit_in_a_chunk_is_skipped_named_and_exits_3_the_other_blows_unchang
     // Every blow before the corrupt chunk is exactly as before, number and all.
     assert_eq!(got[..first_lost], blows[..first_lost]);
     // Every blow after it is there, with the same measured figures.
-    let got_measured: Vec<Value> = got.iter().map(measured).collect();
     for b in blows.iter().filter(|b| !lost(b)) {
-        assert!(got_measured.contains(&measured(b)), "blow outside the corrupt chunk changed or lost: {b}");
+        assert!(got.iter().any(|g| same_measured(g, b)), "blow outside the corrupt chunk changed or lost: {b}");
     }
     // Nothing invented: every blow reported is one of the intact replay's, or one cut short
     // by the lost chunk, whose figures are still physical.
     for b in &got {
         let v = f(b, "v_impact_mps");
         assert!(v.is_finite() && v > 0.0 && v < 20.0, "impact speed {v} m/s: {b}");
-        assert!(blows.iter().any(|i| measured(i) == measured(b)) || lost(b), "an invented blow: {b}");
+        assert!(blows.iter().any(|i| same_measured(i, b)) || lost(b), "an invented blow: {b}");
     }
     assert!(got.len() < blows.len());
 
