@@ -68,25 +68,6 @@ fn blow_set(
     Some((BlowSet { obj, windows, mode2_hz: mode2 }, loc, ind))
 }
 
-/// Sensor noise over the peak: the load's spread before the model's first contact.
-fn noise(set: &BlowSet, loc: &[Localised]) -> f64 {
-    let v: Vec<f64> = set
-        .obj
-        .refs
-        .iter()
-        .zip(loc)
-        .map(|(r, l)| {
-            let pre = &r.load_n[..l.window.0.saturating_sub(10)];
-            if pre.len() < 5 {
-                return 0.0;
-            }
-            let m = pre.iter().sum::<f64>() / pre.len() as f64;
-            (pre.iter().map(|x| (x - m).powi(2)).sum::<f64>() / pre.len() as f64).sqrt() / r.peak_n
-        })
-        .collect();
-    mean(&v)
-}
-
 /// How many fits `diagnose` runs (and tells `progress` of) on a machine of `kind` when one
 /// single effect is best: every library effect alone, then the best one paired with each
 /// other. Each single the holdout cannot tell from the best adds its own pairs.
@@ -163,7 +144,7 @@ pub fn diagnose(
         .collect();
     let mut candidates: Vec<Fitted> = ranked.iter().map(|(_, f)| f.clone()).chain(pairs.iter().cloned()).collect();
     candidates.sort_by(|a, b| a.holdout.total_cmp(&b.holdout));
-    let noise_nrmse = noise(&holdout, &hold_loc);
+    let noise_nrmse = holdout.noise_nrmse();
     let baseline_holdout = mean(&base_hold);
     let singles: Vec<Fitted> = ranked.iter().map(|(_, f)| f.clone()).collect();
     let v = verdict::decide(machine, &base_hold, noise_nrmse, &singles, &pairs);

@@ -27,7 +27,7 @@ use crate::synth::{CaptureSpec, rows_batch, synth_blows};
 
 use super::attribute::{Fitted, fit_candidates, library, mean};
 use super::verdict::decide;
-use super::{blow_set, noise};
+use super::blow_set;
 
 const HAMMER: &str = "kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n";
 const PRESS: &str = "kind = \"screw_press\"\nm_tool_kg = 2500\nm_ram_kg = 90000\nk_link_N_per_m = 2.1e9\n\
@@ -150,7 +150,7 @@ fn verdict_error_rates() {
                         Some(Fitted { holdout: mean(&per_blow), holdout_per_blow: per_blow, ..f.clone() })
                     })
                     .collect();
-                let v = decide(&m, &base, noise(&hold, &hold_loc), &singles, &[]);
+                let v = decide(&m, &base, hold.noise_nrmse(), &singles, &[]);
                 let chosen = v.chosen.as_ref().map_or("none".to_string(), |f| f.name.clone());
                 t.runs += 1;
                 t.verdict_not_none += usize::from(v.chosen.is_some());
@@ -168,7 +168,7 @@ fn verdict_error_rates() {
                 }
                 lines.push(format!(
                     "{{\"case\":\"{name}\",\"calib_seed\":{cs},\"hold_seed\":{hs},\"noise\":{},\"base\":{:?},\"cands\":{{{}}},\"verdict\":\"{chosen}\"}}",
-                    noise(&hold, &hold_loc),
+                    hold.noise_nrmse(),
                     base,
                     singles.iter().map(|f| format!("\"{}\":{:?}", f.name, f.holdout_per_blow)).collect::<Vec<_>>().join(",")
                 ));
