@@ -26,8 +26,8 @@ use crate::signal::segment::{SegmentConfig, Segmenter};
 use crate::synth::{CaptureSpec, rows_batch, synth_blows};
 
 use super::attribute::{Fitted, fit_candidates, library, mean};
-use super::verdict::decide;
 use super::blow_set;
+use super::verdict::decide;
 
 const HAMMER: &str = "kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n";
 const PRESS: &str = "kind = \"screw_press\"\nm_tool_kg = 2500\nm_ram_kg = 90000\nk_link_N_per_m = 2.1e9\n\
