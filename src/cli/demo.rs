@@ -42,6 +42,16 @@ pub struct DemoArgs {
     /// Run as fast as possible instead of in real time.
     #[arg(long)]
     pub fast: bool,
+    /// Serve the dashboard and `/status` here (loopback only: the demo has no token);
+    /// default: a free loopback port.
+    #[arg(long, value_name = "ADDR")]
+    pub http: Option<std::net::SocketAddr>,
+    /// Serve the PLC result image (Modbus TCP, CONTRACTS §8) here.
+    #[arg(long, value_name = "ADDR")]
+    pub plc: Option<std::net::SocketAddr>,
+    /// Serve the Foxglove WebSocket protocol here.
+    #[arg(long, value_name = "ADDR")]
+    pub foxglove: Option<std::net::SocketAddr>,
 }
 
 /// The DAQ's channels: 1 N, 1 µm and 1 mm/s² per count.
@@ -56,6 +66,11 @@ pub fn demo_channels() -> Vec<ChannelSpec> {
 pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     if !(args.interval.is_finite() && args.interval >= 0.2) {
         anyhow::bail!("--interval must be at least 0.2 s (a blow and its capture take 0.05 s)");
+    }
+    if let Some(a) = args.http.filter(|a| !a.ip().is_loopback()) {
+        anyhow::bail!(
+            "--http {a}: the demo serves loopback only (a service file's [http] token_file guards other addresses)"
+        );
     }
     let machine = parse_machine("hammer-lg1000.machine.toml", MACHINE)?.machine;
     let steel = parse_process("steel-16NiCrMo13.process.toml", STEEL)?;
@@ -73,7 +88,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         recording_dir: args.dir.clone(),
         rotate_bytes: crate::config::service::DEFAULT_ROTATE_BYTES,
         rotate_seconds: crate::config::service::DEFAULT_ROTATE_SECONDS,
-        http_listen: "127.0.0.1:0".parse().expect("a valid address"),
+        http_listen: args.http.unwrap_or_else(|| "127.0.0.1:0".parse().expect("a valid address")),
+        http_token_file: None,
+        plc_listen: args.plc,
+        foxglove_listen: args.foxglove,
         alerts: crate::alert::AlertConfig::default(),
         webhook: None,
         plc_coil: None,
@@ -122,10 +140,18 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         };
         tokio::spawn(run_on_stream(cfg, slave, system_clock_ns, tx, shutdown_rx));
         let dir = args.dir.clone();
+        let (plc, foxglove) = (args.plc, args.foxglove);
         let hooks = Hooks {
             on_listening: Some(Box::new(move |addr| {
                 println!("forgemon demo: a simulated MONTBARD LG1000 drop hammer (paper Table 1) forges {} steel billets, 60 x 112 mm,", args.billets.max(1));
                 println!("  streaming 3 channels at 100 kHz over a pty; recording to {}/; status on http://{addr}/status", dir.display());
+                println!("  dashboard on http://{addr}/");
+                if let Some(plc) = plc {
+                    println!("  PLC result image (Modbus TCP, unit 1) on {plc}");
+                }
+                if let Some(fox) = foxglove {
+                    println!("  Foxglove live view on ws://{fox}");
+                }
                 println!("blow  billet  impact m/s  plastic J  efficiency                    class");
             })),
             on_blow: Some(Box::new(move |e| {

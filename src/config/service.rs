@@ -78,6 +78,13 @@ pub struct ServiceConfig {
     pub rotate_bytes: u64,
     pub rotate_seconds: u64,
     pub http_listen: SocketAddr,
+    /// `[http] token_file`: the file holding the bearer token every request needs when
+    /// `listen` is not loopback (required then; read when the service starts).
+    pub http_token_file: Option<PathBuf>,
+    /// `[plc_server] listen`: serve the PLC result image (CONTRACTS §8) here.
+    pub plc_listen: Option<SocketAddr>,
+    /// `[foxglove] listen`: serve the Foxglove WebSocket protocol here.
+    pub foxglove_listen: Option<SocketAddr>,
     pub alerts: AlertConfig,
     pub webhook: Option<String>,
     pub plc_coil: Option<PlcCoil>,
@@ -96,6 +103,8 @@ struct RawService {
     process: Option<String>,
     recording: RawRecording,
     http: Option<RawHttp>,
+    plc_server: Option<RawListen>,
+    foxglove: Option<RawListen>,
     alerts: Option<RawAlerts>,
     billets: Option<RawBillets>,
     /// Each read by its `kind` (`source.rs`).
@@ -113,6 +122,14 @@ struct RawRecording {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawHttp {
+    listen: String,
+    token_file: Option<String>,
+}
+
+/// A server's table with only its address (`[plc_server]`, `[foxglove]`).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawListen {
     listen: String,
 }
 
@@ -153,7 +170,9 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
     let raw: RawService = doc.read()?;
     let path = |s: &str| relative_to(base, s);
     let (rotate_bytes, rotate_seconds) = parse_rotation(&doc, &raw.recording)?;
-    let http_listen = parse_http(&doc, raw.http.as_ref())?;
+    let (http_listen, http_token_file) = parse_http(&doc, raw.http.as_ref(), base)?;
+    let plc_listen = raw.plc_server.as_ref().map(|r| address(&doc, "plc_server.listen", &r.listen)).transpose()?;
+    let foxglove_listen = raw.foxglove.as_ref().map(|r| address(&doc, "foxglove.listen", &r.listen)).transpose()?;
     let (alerts, webhook, plc_coil) = match &raw.alerts {
         Some(a) => parse_alerts(&doc, a)?,
         None => (AlertConfig::default(), None, None),
@@ -167,6 +186,9 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         rotate_bytes,
         rotate_seconds,
         http_listen,
+        http_token_file,
+        plc_listen,
+        foxglove_listen,
         alerts,
         webhook,
         plc_coil,
@@ -195,12 +217,25 @@ fn parse_rotation(doc: &Document<'_>, rec: &RawRecording) -> Result<(u64, u64), 
     Ok((rotate_bytes, rotate_seconds))
 }
 
-/// `[http] listen`, or the loopback default.
-fn parse_http(doc: &Document<'_>, http: Option<&RawHttp>) -> Result<SocketAddr, ConfigError> {
-    match http {
-        Some(h) => address(doc, "http.listen", &h.listen),
-        None => Ok(DEFAULT_HTTP_LISTEN.parse().expect("a valid default address")),
+/// `[http] listen`, or the loopback default, and the token file, which an address other
+/// than loopback requires (its requests then need `Authorization: Bearer <token>`).
+fn parse_http(
+    doc: &Document<'_>,
+    http: Option<&RawHttp>,
+    base: &Path,
+) -> Result<(SocketAddr, Option<PathBuf>), ConfigError> {
+    let Some(h) = http else {
+        return Ok((DEFAULT_HTTP_LISTEN.parse().expect("a valid default address"), None));
+    };
+    let listen = address(doc, "http.listen", &h.listen)?;
+    let token_file = h.token_file.as_deref().map(|f| relative_to(base, f));
+    if token_file.is_none() && !listen.ip().is_loopback() {
+        return Err(doc.invalid(
+            "http.token_file",
+            format!("is required when http.listen ({listen}) is not loopback: a file holding the bearer token"),
+        ));
     }
+    Ok((listen, token_file))
 }
 
 /// The `count` `[[sources]]` tables: at least one, each read by its kind, names unique.
@@ -487,6 +522,25 @@ gain = 0.01
         assert_eq!(m.timeout, std::time::Duration::from_millis(200));
         let e = parse_service("p", &dir, &text.replace("type = \"i16\"", "type = \"i8\"")).unwrap_err();
         assert!(e.to_string().contains("key 'sources[2].registers[2].type'"), "{e}");
+    }
+
+    #[test]
+    fn the_front_ends_read_their_addresses_and_a_wide_listen_needs_a_token() {
+        let ok = |text: &str| parse_service("s.toml", Path::new("/etc/forgemon"), text).unwrap();
+        let e = |text: &str| parse_service("s.toml", Path::new("/"), text).unwrap_err().to_string();
+        let c = ok(GOOD);
+        assert_eq!((c.http_token_file.as_ref(), c.plc_listen, c.foxglove_listen), (None, None, None));
+        let c =
+            ok(&format!("{GOOD}[plc_server]\nlisten = \"127.0.0.1:5020\"\n[foxglove]\nlisten = \"127.0.0.1:8765\"\n"));
+        assert_eq!(c.plc_listen.map(|a| a.port()), Some(5020));
+        assert_eq!(c.foxglove_listen.map(|a| a.port()), Some(8765));
+        let wide = format!("{GOOD}[http]\nlisten = \"0.0.0.0:9187\"\n");
+        let why = e(&wide);
+        assert!(why.contains("key 'http.token_file'") && why.contains("not loopback"), "{why}");
+        let c = ok(&format!("{wide}token_file = \"token\"\n"));
+        assert_eq!(c.http_token_file, Some(PathBuf::from("/etc/forgemon/token")));
+        assert!(e(&format!("{GOOD}[plc_server]\nlisten = \"plc\"\n")).contains("key 'plc_server.listen'"));
+        assert!(e(&format!("{GOOD}[foxglove]\nport = 8765\n")).contains("unknown key 'port'"));
     }
 
     #[test]

@@ -7,6 +7,7 @@
 //! The sources are spawned by the caller and speak `acquire::SourceEvent` on one channel,
 //! so the service neither knows nor cares which transport (or simulated device) feeds it.
 
+pub mod live;
 pub mod queue;
 mod service;
 pub mod sinks;
@@ -55,6 +56,8 @@ pub enum Control {
     /// now (`None`), or from the source's sample at this device time on, so that samples
     /// still queued from the last billet are estimated as that billet's.
     NewBillet { at_device_ns: Option<i64> },
+    /// The operator acknowledged the latched alert (`POST /ack`, the PLC's coil 0).
+    Acknowledge,
 }
 
 /// Source name of the control markers in a recording.
@@ -143,10 +146,11 @@ pub async fn serve(
     if let (Some(f), Ok(addr)) = (hooks.on_listening.take(), listener.local_addr()) {
         f(addr);
     }
-    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx));
+    let live = live::Live::default();
+    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone()));
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
     let feeder = Feeder::new(Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine)));
-    let mut service = service::Service::new(writer, feeder, status, sinks, hooks, parts.config_path.clone());
+    let mut service = service::Service::new(writer, feeder, status, live, sinks, hooks, parts.config_path.clone());
 
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;

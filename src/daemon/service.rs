@@ -7,6 +7,7 @@
 //! (`record_errors` in `/status`, the metrics and the summary) and the service goes on.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use crate::acquire::SourceEvent;
 use crate::estimate::BlowEstimate;
@@ -16,6 +17,7 @@ use crate::record::{BlowBoundary, Gap, Payload, RecordError, RecordWriter};
 use crate::signal::merge::Merger;
 use crate::signal::sample::SampleBatch;
 
+use super::live::{Live, LiveEvent};
 use super::status::SharedStatus;
 use super::{Control, Hooks, SERVICE_CONFIG_NAME, Summary, host_now_ns, new_billet_marker, reload, sinks};
 
@@ -31,6 +33,7 @@ pub(super) struct Service {
     /// A new billet announced for a device time the samples have not reached yet.
     pending_billet: Option<i64>,
     status: SharedStatus,
+    live: Live,
     sinks: sinks::Sinks,
     hooks: Hooks,
     summary: Summary,
@@ -42,6 +45,7 @@ impl Service {
         writer: RecordWriter,
         feeder: Feeder,
         status: SharedStatus,
+        live: Live,
         sinks: sinks::Sinks,
         hooks: Hooks,
         config_path: PathBuf,
@@ -54,6 +58,7 @@ impl Service {
             events: Vec::new(),
             pending_billet: None,
             status,
+            live,
             sinks,
             hooks,
             summary: Summary::default(),
@@ -121,6 +126,12 @@ impl Service {
                 self.emit(host_now_ns());
             }
             Control::NewBillet { at_device_ns: Some(at) } => self.pending_billet = Some(at),
+            Control::Acknowledge => {
+                if self.status.lock().map(|mut s| s.acknowledge()).unwrap_or(false) {
+                    tracing::info!("the latched alert was acknowledged");
+                    self.live.publish(LiveEvent::Acknowledged);
+                }
+            }
         }
     }
 
@@ -164,6 +175,7 @@ impl Service {
         self.recorded("the new-billet marker", r);
         let billets = self.feeder.pipeline_mut().billets();
         self.status.lock().map(|mut s| s.billets = u64::from(billets)).ok();
+        self.live.publish(LiveEvent::NewBillet);
         tracing::info!("new billet");
     }
 
@@ -214,6 +226,7 @@ impl Service {
             self.recorded("an alert", r);
             self.sinks.fire(alert, log_time_ns, &self.status);
         }
+        self.live.publish(LiveEvent::Blow(Arc::new(estimate.clone())));
         if let Some(f) = self.hooks.on_blow.as_mut() {
             f(estimate);
         }
@@ -232,6 +245,7 @@ impl Service {
             "billet"
         );
         self.status.lock().map(|mut s| s.on_billet(b)).ok();
+        self.live.publish(LiveEvent::Billet(Arc::new(b.clone())));
         if let Some(f) = self.hooks.on_billet.as_mut() {
             f(b);
         }

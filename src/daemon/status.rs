@@ -16,6 +16,7 @@ use serde::Serialize;
 
 use crate::estimate::BlowEstimate;
 use crate::estimate::billet_book::BilletSummary;
+use crate::estimate::result::Alert;
 use crate::record::{Gap, Status};
 use crate::signal::align::ClockModel;
 use crate::signal::merge::MergeStats;
@@ -69,6 +70,9 @@ pub struct StatusSnapshot {
     pub last_efficiency: Option<f64>,
     pub last_class: Option<String>,
     pub last_blow: Option<BlowEstimate>,
+    /// The last alert raised, latched until the operator acknowledges it (`POST /ack`, the
+    /// PLC's coil 0); `None` when there is none or it was acknowledged.
+    pub latched_alert: Option<Alert>,
     /// From the host receiving the samples that ended the last blow to its result, ms.
     pub last_result_latency_ms: Option<f64>,
     /// From the host receiving the samples that ended the last alerting blow to the
@@ -99,6 +103,7 @@ impl StatusSnapshot {
             last_efficiency: None,
             last_class: None,
             last_blow: None,
+            latched_alert: None,
             last_result_latency_ms: None,
             last_webhook_latency_ms: None,
             sources: BTreeMap::new(),
@@ -143,6 +148,14 @@ impl StatusSnapshot {
         self.last_efficiency = e.efficiency;
         self.last_class = Some(e.class.as_str().to_string());
         self.last_blow = Some(e.clone());
+        if let Some(a) = &e.alert {
+            self.latched_alert = Some(a.clone());
+        }
+    }
+
+    /// The operator acknowledged the latched alert; whether there was one.
+    pub fn acknowledge(&mut self) -> bool {
+        self.latched_alert.take().is_some()
     }
 
     /// A billet was summarised: finished when the next one started, or the run's last.

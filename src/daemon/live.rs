@@ -1,0 +1,51 @@
+//! The service's live feed to its front ends (the dashboard, the PLC image, the Foxglove
+//! view): each blow's result, each billet's summary and each change of the latched alert,
+//! as the pipeline produced them, on a broadcast channel. A front end that falls behind
+//! loses the oldest events (tokio's `broadcast` says how many) and reads the status
+//! snapshot again; it never holds up the service.
+
+use std::sync::Arc;
+
+use tokio::sync::broadcast;
+
+use crate::estimate::BlowEstimate;
+use crate::estimate::billet_book::BilletSummary;
+
+/// Events a slow front end may fall behind by before it loses the oldest.
+pub const LIVE_CHANNEL_EVENTS: usize = 256;
+
+/// One thing a front end shows.
+#[derive(Debug, Clone)]
+pub enum LiveEvent {
+    /// A blow's result (CONTRACTS §5), with its alert if it raised one.
+    Blow(Arc<BlowEstimate>),
+    /// A billet's summary (finished, or the run's last).
+    Billet(Arc<BilletSummary>),
+    /// A new billet is in the dies.
+    NewBillet,
+    /// The latched alert was acknowledged (`POST /ack`, the PLC's coil 0).
+    Acknowledged,
+}
+
+/// The sending side, cloned into whatever publishes; `subscribe` for a front end.
+#[derive(Debug, Clone)]
+pub struct Live {
+    tx: broadcast::Sender<LiveEvent>,
+}
+
+impl Default for Live {
+    fn default() -> Self {
+        Live { tx: broadcast::channel(LIVE_CHANNEL_EVENTS).0 }
+    }
+}
+
+impl Live {
+    /// Publish `e` to every front end listening now (none listening is fine).
+    pub fn publish(&self, e: LiveEvent) {
+        let _ = self.tx.send(e);
+    }
+
+    pub fn subscribe(&self) -> broadcast::Receiver<LiveEvent> {
+        self.tx.subscribe()
+    }
+}
