@@ -270,12 +270,17 @@ fn press_fit_on_a_billet_of_its_sheets_height() {
     }
 }
 
-/// The tuning table: every rate, both machines, on the tuning seeds.
+/// The tuning table: every rate, both machines, on the tuning seeds. `TUNING_ONLY=Press:5`
+/// (a machine, and a rate in kHz) prints one row of it.
 #[test]
 #[ignore = "prints the tuning table; run with --ignored --nocapture"]
 fn tuning_table() {
+    let only = std::env::var("TUNING_ONLY").unwrap_or_default();
     for rig in [Rig::Hammer, Rig::Press] {
         for rate in [5e3, 10e3, 20e3, 50e3, 100e3] {
+            if !only.is_empty() && only != format!("{rig:?}:{}", rate / 1e3) {
+                continue;
+            }
             for seed in TUNING_SEEDS {
                 let rows = run(rig, rate, seed);
                 let (de, dv, dh) = worst(&rows);
