@@ -2,6 +2,7 @@
 //! hammers and screw presses). See ARCHITECTURE.md for the map of the crate.
 
 pub mod acquire;
+pub mod advise;
 pub mod alert;
 pub mod cli;
 pub mod config;

@@ -6,6 +6,7 @@ use std::path::Path;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 
+pub mod advise;
 pub mod demo;
 pub mod diagnose;
 pub mod identify;
@@ -44,6 +45,8 @@ pub enum Command {
     Demo(demo::DemoArgs),
     /// A simulated hammer or press driving a real transport (a pty), like a DAQ.
     SimulateDevice(simulate_device::SimulateDeviceArgs),
+    /// Plan the next blows from the billet's height to a target with the machine model.
+    Advise(advise::AdviseArgs),
 }
 
 impl Cli {
@@ -58,6 +61,7 @@ impl Cli {
             Command::Run(args) => run::run(args),
             Command::Demo(args) => demo::run(args),
             Command::SimulateDevice(args) => simulate_device::run(args),
+            Command::Advise(args) => advise::run(args),
         }
     }
 }
