@@ -13,6 +13,7 @@ pub mod estimate;
 pub mod identify;
 pub mod physics;
 pub mod pipeline;
+pub mod recipe;
 pub mod record;
 pub mod report;
 pub mod signal;

@@ -8,6 +8,7 @@ use crate::estimate::billet_book::{BilletBook, BilletSummary};
 use crate::estimate::{BlowEstimate, EstimateError, Estimator, EstimatorConfig};
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
+use crate::recipe::{Recipe, Signature, signature};
 use crate::signal::sample::SampleBatch;
 use crate::signal::segment::{Blow, SegmentConfig, SegmentStats, Segmenter};
 
@@ -62,6 +63,10 @@ pub struct Pipeline {
     /// The billet of the last blow judged: the alert memory starts over with each billet.
     billet: u32,
     billets: BilletBook,
+    /// The part's recipe the blows are judged against (CONTRACTS §9), if one is active.
+    recipe: Option<Recipe>,
+    /// Each complete blow's signature, kept for `forgemon teach` (`keep_signatures`).
+    signatures: Option<Vec<(u32, u32, Signature)>>,
 }
 
 impl Pipeline {
@@ -73,6 +78,8 @@ impl Pipeline {
             cut: Vec::new(),
             billet: 0,
             billets: BilletBook::default(),
+            recipe: None,
+            signatures: None,
         }
     }
 
@@ -124,6 +131,25 @@ impl Pipeline {
         self.alerts.set_config(cfg);
     }
 
+    /// Judge every blow from now on against `recipe` (`None`: no judgement).
+    pub fn set_recipe(&mut self, recipe: Option<Recipe>) {
+        self.recipe = recipe;
+    }
+
+    pub fn recipe(&self) -> Option<&Recipe> {
+        self.recipe.as_ref()
+    }
+
+    /// Keep each complete blow's signature (billet, blow on it, signature) for teaching.
+    pub fn keep_signatures(&mut self) {
+        self.signatures.get_or_insert_with(Vec::new);
+    }
+
+    /// The signatures kept since the last call.
+    pub fn take_signatures(&mut self) -> Vec<(u32, u32, Signature)> {
+        self.signatures.as_mut().map(std::mem::take).unwrap_or_default()
+    }
+
     pub fn segment_stats(&self) -> SegmentStats {
         self.segmenter.stats()
     }
@@ -140,6 +166,15 @@ impl Pipeline {
                     if estimate.billet.billet != self.billet {
                         self.billet = estimate.billet.billet;
                         self.alerts.reset();
+                    }
+                    let sig = (self.recipe.is_some() || self.signatures.is_some())
+                        .then(|| signature(&blow, &estimate))
+                        .flatten();
+                    if let (Some(r), Some(sig)) = (&self.recipe, &sig) {
+                        estimate.judgement = Some(r.judge(estimate.billet.billet_blow, sig));
+                    }
+                    if let (Some(kept), Some(sig)) = (self.signatures.as_mut(), sig) {
+                        kept.push((estimate.billet.billet, estimate.billet.billet_blow, sig));
                     }
                     estimate.alert = self.alerts.on_blow(&estimate);
                     out.extend(self.billets.on_blow(&estimate).map(|b| PipelineEvent::Billet(Box::new(b))));

@@ -46,6 +46,7 @@ fn batch(k: i64, rng: &mut Lcg) -> SampleBatch {
 fn result(blow: u32) -> BlowEstimate {
     let hard = blow.is_multiple_of(4);
     BlowEstimate {
+        judgement: None,
         blow,
         t_contact_s: 0.7 * f64::from(blow),
         v_impact_mps: 3.9,

@@ -43,6 +43,7 @@ fn result(blow: u32, with_sheet: bool) -> BlowEstimate {
     // Without a sheet the blow is also an incomplete one: no energies, a gap.
     let whole = with_sheet;
     BlowEstimate {
+        judgement: None,
         blow,
         t_contact_s: 81.2031 + f64::from(blow),
         v_impact_mps: 5.21,

@@ -183,6 +183,11 @@ impl AlertRules {
                     100.0 * c.residual_limit
                 ),
             ))
+        } else if let Some(j) = b.judgement.as_ref().filter(|j| !j.ok) {
+            Some((
+                AlertKind::Nok,
+                format!("blow {} is NOK against recipe '{}': {}", b.blow, j.recipe, j.reasons.join("; ")),
+            ))
         } else {
             None
         };
@@ -204,6 +209,7 @@ mod tests {
     fn blow(n: u32, efficiency: f64, residual: f64) -> BlowEstimate {
         let cfg = crate::estimate::EstimatorConfig::for_kind(crate::physics::MachineKind::Hammer);
         BlowEstimate {
+            judgement: None,
             blow: n,
             t_contact_s: n as f64,
             v_impact_mps: 4.0,
@@ -231,6 +237,7 @@ mod tests {
 
     fn incomplete(n: u32) -> BlowEstimate {
         BlowEstimate {
+            judgement: None,
             kinetic_in_j: None,
             plastic_j: None,
             damped_j: None,

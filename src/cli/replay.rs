@@ -43,6 +43,10 @@ pub struct ReplayArgs {
     /// One JSON object per blow (CONTRACTS.md §5) instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Judge every blow against this recipe (CONTRACTS §9, `forgemon teach`): the §5
+    /// `judgement`, and `nok` alerts, as the service would.
+    #[arg(long, value_name = "PART.recipe.toml")]
+    pub recipe: Option<PathBuf>,
 }
 
 /// A source of sample batches, whatever the input.
@@ -77,6 +81,25 @@ fn pick(option: &Option<PathBuf>, stored: Option<String>, input: &Path, name: &s
 }
 
 pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
+    let recipe = args.recipe.as_ref().map(|p| load_recipe(p)).transpose()?;
+    let stdout = std::io::stdout();
+    let (status, _) = replay_into(&args, stdout.lock(), |p| p.set_recipe(recipe))?;
+    Ok(status)
+}
+
+/// Read and check a recipe file.
+pub(crate) fn load_recipe(path: &Path) -> anyhow::Result<crate::recipe::Recipe> {
+    Ok(crate::config::recipe::parse_recipe(&path.display().to_string(), &read_text(path)?)?)
+}
+
+/// Replay `args.input` with its output to `out`, after `setup` prepared the pipeline (a
+/// recipe, the signatures `forgemon teach` keeps); the exit status and the feeder after the
+/// end of the input.
+pub(crate) fn replay_into<W: Write>(
+    args: &ReplayArgs,
+    out: W,
+    setup: impl FnOnce(&mut Pipeline),
+) -> anyhow::Result<(ExitCode, Feeder)> {
     let (input, stored) = open_input(&args.input)?;
     let Some((machine_origin, machine_text)) = pick(&args.machine, stored.machine, &args.input, "machine.toml")? else {
         bail!("{}: holds no machine model; give one with --machine M.toml", args.input.display());
@@ -118,14 +141,28 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         }
         None => None,
     };
-    let stdout = std::io::stdout();
+    let mut pipeline = Pipeline::new(machine, process, tuned_config(&tuning, &machine));
+    if let Some(r) = pipeline.recipe().or(None) {
+        bail!("internal: a fresh pipeline has recipe '{}'", r.name);
+    }
+    setup(&mut pipeline);
+    if let Some(r) = pipeline.recipe()
+        && r.machine != machine.kind().as_str()
+    {
+        bail!(
+            "recipe '{}' was taught on a {} but the machine model is a {}",
+            r.name,
+            r.machine,
+            machine.kind().as_str()
+        );
+    }
     let mut replay = Replay {
-        feeder: Feeder::new(Pipeline::new(machine, process, tuned_config(&tuning, &machine))),
+        feeder: Feeder::new(pipeline),
         merger: Merger::default(),
         merged: Vec::new(),
         events: Vec::new(),
         writer,
-        out: std::io::BufWriter::new(stdout.lock()),
+        out: std::io::BufWriter::new(out),
         json: args.json,
         blows: 0,
         rejected: 0,
@@ -171,8 +208,8 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             status = super::inspect::input_status(reader.report());
         }
     }
-    replay.finish()?;
-    Ok(status)
+    let feeder = replay.finish()?;
+    Ok((status, feeder))
 }
 
 const TABLE_HEADER: &str =
@@ -255,7 +292,7 @@ impl<W: Write> Replay<W> {
     }
 
     /// The end of the input: the last blow and billet closed, the recording finished.
-    fn finish(mut self) -> anyhow::Result<()> {
+    fn finish(mut self) -> anyhow::Result<Feeder> {
         self.feeder.pipeline_mut().end_of_stream(&mut self.events);
         self.feeder.pipeline_mut().close_billet(&mut self.events);
         self.handle()?;
@@ -274,7 +311,7 @@ impl<W: Write> Replay<W> {
             s.triggers_without_contact,
             s.batches_dropped
         );
-        Ok(())
+        Ok(self.feeder)
     }
 }
 

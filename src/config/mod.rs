@@ -12,6 +12,7 @@ pub(crate) mod keys;
 pub mod limits;
 pub mod machine;
 pub mod process;
+pub mod recipe;
 pub mod service;
 mod source;
 

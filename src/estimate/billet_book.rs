@@ -175,6 +175,7 @@ mod tests {
         let complete = class != BlowClass::Incomplete;
         let t = f64::from(billet * 10 + billet_blow);
         BlowEstimate {
+            judgement: None,
             blow: billet * 10 + billet_blow,
             t_contact_s: t,
             v_impact_mps: 5.0,

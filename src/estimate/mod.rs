@@ -343,6 +343,7 @@ impl Estimator {
         self.billet_blows += 1;
         let (h_start_m, height_check) = self.start_height(fit.x_contact_m, v0 * blow.period_s);
         let mut e = BlowEstimate {
+            judgement: None,
             blow: n,
             t_contact_s,
             v_impact_mps: v0,

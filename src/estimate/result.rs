@@ -19,6 +19,8 @@ pub enum AlertKind {
     /// the last `sensor_n` complete blows: a wrong gain, a drifting charge amplifier, a
     /// loose or dead accelerometer.
     Sensor,
+    /// The blow left its recipe's windows or envelope (CONTRACTS §5 `judgement`).
+    Nok,
 }
 
 impl AlertKind {
@@ -27,6 +29,7 @@ impl AlertKind {
             AlertKind::ElasticBlow => "elastic_blow",
             AlertKind::ModelHealth => "model_health",
             AlertKind::Sensor => "sensor",
+            AlertKind::Nok => "nok",
         }
     }
 }
@@ -123,6 +126,9 @@ pub struct BlowEstimate {
     pub class: BlowClass,
     /// The alert this blow raised, if any.
     pub alert: Option<Alert>,
+    /// The blow against the active recipe (CONTRACTS §5, §9): `None` without one, and on an
+    /// incomplete blow, which is never judged.
+    pub judgement: Option<crate::recipe::Judgement>,
     /// Device time at which the blow's end was detected, s.
     pub t_end_s: f64,
     #[serde(rename = "peak_load_N")]

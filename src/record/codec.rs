@@ -209,6 +209,7 @@ fn alert_kind_str(kind: AlertKind) -> &'static str {
         AlertKind::ElasticBlow => "elastic_blow",
         AlertKind::ModelHealth => "model_health",
         AlertKind::Sensor => "sensor",
+        AlertKind::Nok => "nok",
     }
 }
 
@@ -226,6 +227,7 @@ fn alert_from_pb(a: pb::Alert) -> Result<Alert, DecodeError> {
         "elastic_blow" => AlertKind::ElasticBlow,
         "model_health" => AlertKind::ModelHealth,
         "sensor" => AlertKind::Sensor,
+        "nok" => AlertKind::Nok,
         _ => return Err(DecodeError::UnknownAlertKind { kind: a.kind }),
     };
     Ok(Alert { kind, blow: a.blow, reason: a.reason, figures: a.figures })
@@ -278,6 +280,7 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
     // a 0 out.
     let energy = |v: Option<f64>| if class == BlowClass::Incomplete { v } else { Some(v.unwrap_or(0.0)) };
     Ok(BlowEstimate {
+        judgement: None,
         blow: r.blow,
         t_contact_s: r.t_contact_s,
         v_impact_mps: r.v_impact_mps,
@@ -508,6 +511,7 @@ mod tests {
 
     pub(crate) fn estimate(with_optional: bool) -> BlowEstimate {
         BlowEstimate {
+            judgement: None,
             blow: 3,
             t_contact_s: 81.2031,
             v_impact_mps: 5.21,
@@ -593,6 +597,7 @@ mod tests {
             Payload::Result(Box::new(BlowEstimate { class: BlowClass::Soft, ..estimate(false) })),
             Payload::Result(Box::new(BlowEstimate { class: BlowClass::Hard, ..estimate(false) })),
             Payload::Result(Box::new(BlowEstimate {
+                judgement: None,
                 class: BlowClass::Incomplete,
                 kinetic_in_j: None,
                 plastic_j: None,

@@ -265,6 +265,7 @@ mod tests {
 
     fn estimate() -> BlowEstimate {
         BlowEstimate {
+            judgement: None,
             blow: 1,
             t_contact_s: 0.12,
             v_impact_mps: 3.9,
