@@ -183,13 +183,11 @@ impl AlertRules {
                     100.0 * c.residual_limit
                 ),
             ))
-        } else if let Some(j) = b.judgement.as_ref().filter(|j| !j.ok) {
-            Some((
-                AlertKind::Nok,
-                format!("blow {} is NOK against recipe '{}': {}", b.blow, j.recipe, j.reasons.join("; ")),
-            ))
         } else {
-            None
+            b.judgement.as_ref().filter(|j| !j.ok).map(|j| {
+                let why = j.reasons.join("; ");
+                (AlertKind::Nok, format!("blow {} is NOK against recipe '{}': {why}", b.blow, j.recipe))
+            })
         };
         let (kind, reason) = candidate?;
         if let Some(&last) = self.last_fired.get(kind.as_str())
