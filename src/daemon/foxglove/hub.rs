@@ -363,3 +363,138 @@ fn add_channel(st: &mut State, topic: &str, kind: MessageKind) -> u32 {
     st.by_topic.insert(topic.to_string(), id);
     id
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn data(n: u64, bytes: usize) -> Data {
+        Data { subscription_id: 1, log_time_ns: n, payload: Arc::from(vec![n as u8; bytes]) }
+    }
+
+    fn drain(o: &Outbox) -> Vec<Outgoing> {
+        std::iter::from_fn(|| o.try_next().flatten()).collect()
+    }
+
+    fn tapped<'a>(topic: &'a str, kind: MessageKind, data: &'a [u8], t: u64) -> TappedMessage<'a> {
+        TappedMessage { topic, kind, data, log_time_ns: t, publish_time_ns: t }
+    }
+
+    /// The JSON of each text message, and (subscription, log time, payload) of each datum.
+    fn split(out: Vec<Outgoing>) -> (Vec<serde_json::Value>, Vec<(u32, u64, Vec<u8>)>) {
+        let (mut texts, mut datas) = (Vec::new(), Vec::new());
+        for o in out {
+            match o {
+                Outgoing::Text(t) => texts.push(serde_json::from_str(&t).expect("JSON")),
+                Outgoing::Data(d) => datas.push((d.subscription_id, d.log_time_ns, d.payload.to_vec())),
+            }
+        }
+        (texts, datas)
+    }
+
+    /// DESIGN.md §4: a full outbox loses its oldest data, counted; the client is told first.
+    #[test]
+    fn a_full_outbox_drops_the_oldest_data_counts_it_and_says_so_first() {
+        // Room for three 100-byte messages (each costs its payload and the overhead).
+        let o = Outbox::new(3 * (100 + QUEUED_OVERHEAD_BYTES));
+        let dropped: u64 = (0..10).map(|n| o.push_data(data(n, 100))).sum();
+        assert!(o.push_text("{\"op\":\"advertise\",\"channels\":[]}".into()));
+        assert_eq!((dropped, o.dropped()), (7, 7));
+        let (texts, datas) = split(drain(&o));
+        assert_eq!(texts[0]["op"], "status");
+        assert_eq!(texts[0]["level"], 1);
+        let message = texts[0]["message"].as_str().unwrap_or_default();
+        assert!(message.contains("oldest 7 messages"), "{message}");
+        assert_eq!(texts[1]["op"], "advertise", "JSON before data, never dropped");
+        assert_eq!(datas.iter().map(|d| d.1).collect::<Vec<_>>(), [7, 8, 9], "the newest kept, in order");
+        // Once told, not again; a message larger than the bound still goes alone.
+        assert_eq!(o.push_data(data(10, 10_000)), 0);
+        assert_eq!(o.push_data(data(11, 1)), 1);
+        assert_eq!(split(drain(&o)).1.iter().map(|d| d.1).collect::<Vec<_>>(), [11]);
+        o.close();
+        assert_eq!(o.try_next(), None);
+    }
+
+    #[test]
+    fn a_client_that_leaves_its_json_unread_is_closed_not_grown() {
+        let o = Outbox::new(1000);
+        for _ in 0..CLIENT_CONTROL_MESSAGES {
+            assert!(o.push_text("{}".into()));
+        }
+        assert!(!o.push_text("{}".into()));
+        assert_eq!(o.try_next(), None, "closed");
+    }
+
+    #[test]
+    fn data_goes_to_the_subscribed_clients_with_their_ids_and_new_topics_are_advertised() {
+        let hub = Hub::new(CLIENT_QUEUE_BYTES);
+        let info = ServerMessage::status(Level::Info, "hello");
+        let ((a, out_a), (b, out_b)) = (hub.connect(&info), hub.connect(&info));
+        let (texts, _) = split(drain(&out_a));
+        assert_eq!(texts.len(), 2);
+        let advertised = texts[1]["channels"].as_array().cloned().unwrap_or_default();
+        let topics: Vec<&str> = advertised.iter().filter_map(|c| c["topic"].as_str()).collect();
+        assert_eq!(topics, ["/blows", "/results", "/alerts", "/gaps", "/status", "/config", "/billets"]);
+        let results = advertised[1]["id"].as_u64().unwrap_or_default();
+        assert_eq!(advertised[1]["schemaName"], "forgemon.BlowResult");
+        drain(&out_b);
+
+        hub.on_text(a, &format!(r#"{{"op":"subscribe","subscriptions":[{{"id":40,"channelId":{results}}}]}}"#));
+        hub.publish(&tapped("/results", MessageKind::Result, b"r1", 5));
+        hub.publish(&tapped("/blows", MessageKind::Boundary, b"b1", 5));
+        assert_eq!(split(drain(&out_a)).1, [(40, 5, b"r1".to_vec())], "A: its subscription only");
+        assert!(drain(&out_b).is_empty(), "B subscribed to nothing");
+
+        // A source's first batch adds its channel, advertised to everyone connected.
+        hub.publish(&tapped("/samples/daq", MessageKind::Samples, b"s1", 6));
+        for out in [&out_a, &out_b] {
+            let (texts, datas) = split(drain(out));
+            assert_eq!(texts.len(), 1);
+            assert_eq!(texts[0]["channels"][0]["topic"], "/samples/daq");
+            assert_eq!(texts[0]["channels"][0]["schemaName"], "forgemon.SampleBatch");
+            assert!(datas.is_empty());
+        }
+
+        // Garbage and bad subscriptions are answered, counted, and change nothing.
+        hub.on_text(b, "not json");
+        hub.on_text(b, r#"{"op":"subscribe","subscriptions":[{"id":1,"channelId":99}]}"#);
+        hub.on_text(a, &format!(r#"{{"op":"subscribe","subscriptions":[{{"id":40,"channelId":{results}}}]}}"#));
+        hub.on_unexpected(b, "binary");
+        let (texts, _) = split(drain(&out_b));
+        assert_eq!(texts.iter().filter(|t| t["op"] == "status" && t["level"] == 2).count(), 3);
+        assert!(texts[1]["message"].as_str().unwrap_or_default().contains("no channel 99"));
+        let (texts, _) = split(drain(&out_a));
+        assert!(texts[0]["message"].as_str().unwrap_or_default().contains("in use"));
+        assert_eq!(hub.stats().bad_frames, 4);
+
+        hub.on_text(a, r#"{"op":"unsubscribe","subscriptionIds":[40]}"#);
+        hub.publish(&tapped("/results", MessageKind::Result, b"r2", 7));
+        assert!(drain(&out_a).is_empty(), "unsubscribed");
+        assert_eq!(hub.disconnect(a), 0);
+        assert_eq!(out_a.try_next(), None, "closed on disconnect");
+        let s = hub.stats();
+        assert_eq!((s.clients_now, s.clients_served, s.queued, s.dropped), (1, 2, 1, 0));
+    }
+
+    /// A client that never reads: every publish returns, the outbox stays within its bound,
+    /// and each message is either still queued or counted as dropped.
+    #[test]
+    fn a_client_that_never_reads_costs_the_publisher_only_drops() {
+        let hub = Hub::new(CLIENT_QUEUE_BYTES);
+        let (client, outbox) = hub.connect(&ServerMessage::status(Level::Info, "hi"));
+        hub.on_text(client, r#"{"op":"subscribe","subscriptions":[{"id":3,"channelId":2}]}"#);
+        // 10 ms of 3 × 100 kHz doubles per message, 20 s of them.
+        let batch = vec![0u8; 3 * 1000 * 8];
+        let n = 2000;
+        for t in 0..n {
+            hub.publish(&tapped("/results", MessageKind::Result, &batch, t));
+        }
+        let s = hub.stats();
+        assert_eq!(s.queued, n);
+        let (_, kept) = split(drain(&outbox));
+        assert!(s.dropped > 0);
+        assert_eq!(s.dropped + kept.len() as u64, n);
+        assert!(kept.len() * (batch.len() + QUEUED_OVERHEAD_BYTES) <= CLIENT_QUEUE_BYTES);
+        assert_eq!(kept.last().map(|d| d.1), Some(n - 1), "the newest kept");
+    }
+}
