@@ -6,7 +6,7 @@ subprotocol; reads serverInfo and the advertised channels; subscribes to /result
 every /samples/<source> channel; decodes the message data frames with the `protobuf`
 package from the schema the server advertised (base64 FileDescriptorSet), and nothing of
 forgemon's. Stops after RESULTS decoded results (and at least one sample batch), then prints
-JSON: the server's info, the channels, and each decoded message with its subscription id and
+JSON (floats as their repr() text, to be parsed exactly): the server's info, the channels, and each decoded message with its subscription id and
 log time.
 
 Usage: foxglove_client.py URL RESULTS DEADLINE_S
@@ -28,6 +28,17 @@ except ImportError as e:  # pragma: no cover - the test says how to install
     sys.exit(3)
 
 SUBPROTOCOL = "foxglove.websocket.v1"
+
+
+def exact(obj):
+    """Floats as their shortest round-trip text, so the reader parses the very same double."""
+    if isinstance(obj, float):
+        return repr(obj)
+    if isinstance(obj, dict):
+        return {k: exact(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [exact(v) for v in obj]
+    return obj
 
 
 def message_class(channel):
@@ -91,14 +102,14 @@ async def run(url, want_results, deadline):
             topic, cls = subscriptions[sub_id]
             decoded = cls.FromString(frame[13:])
             d = json_format.MessageToDict(decoded, preserving_proto_field_name=True)
-            entry = {"subscription": sub_id, "topic": topic, "log_time_ns": log_time, "message": d}
+            entry = {"subscription": sub_id, "topic": topic, "log_time_ns": log_time, "message": exact(d)}
             if topic == "/results":
                 out["results"].append(entry)
             elif len(out["samples"]) < 2:
                 # The values as doubles, not MessageToDict's strings for int64s.
-                d["values_len"] = len(decoded.values)
-                d["values_sum"] = sum(decoded.values)
-                d.pop("values", None)
+                entry["message"].pop("values", None)
+                entry["message"]["values_len"] = len(decoded.values)
+                entry["message"]["values_first_last"] = exact(list(decoded.values[:1]) + list(decoded.values[-1:]))
                 out["samples"].append(entry)
     return out
 

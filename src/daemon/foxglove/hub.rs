@@ -380,8 +380,11 @@ mod tests {
         TappedMessage { topic, kind, data, log_time_ns: t, publish_time_ns: t }
     }
 
-    /// The JSON of each text message, and (subscription, log time, payload) of each datum.
-    fn split(out: Vec<Outgoing>) -> (Vec<serde_json::Value>, Vec<(u32, u64, Vec<u8>)>) {
+    /// A datum as (subscription, log time, payload).
+    type Sent = (u32, u64, Vec<u8>);
+
+    /// The JSON of each text message, and each datum.
+    fn split(out: Vec<Outgoing>) -> (Vec<serde_json::Value>, Vec<Sent>) {
         let (mut texts, mut datas) = (Vec::new(), Vec::new());
         for o in out {
             match o {
