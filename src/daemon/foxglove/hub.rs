@@ -11,7 +11,7 @@ use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
-use tokio::sync::Notify;
+use tokio::sync::{Notify, watch};
 
 use crate::record::schema::FILE_DESCRIPTOR_SET;
 use crate::record::{MessageKind, TappedMessage};
@@ -202,6 +202,8 @@ pub struct Hub {
     state: Arc<Mutex<State>>,
     counters: Arc<Counters>,
     capacity_bytes: usize,
+    /// Turns true when the service stops, so a connection stuck on its socket ends too.
+    stopping: Arc<watch::Sender<bool>>,
 }
 
 impl Hub {
@@ -209,7 +211,12 @@ impl Hub {
     /// `/samples/<source>` channels are added as their sources' first batches come.
     pub fn new(capacity_bytes: usize) -> Self {
         let state = State { channels: Vec::new(), by_topic: HashMap::new(), clients: BTreeMap::new(), next_client: 1 };
-        let hub = Hub { state: Arc::new(Mutex::new(state)), counters: Arc::default(), capacity_bytes };
+        let hub = Hub {
+            state: Arc::new(Mutex::new(state)),
+            counters: Arc::default(),
+            capacity_bytes,
+            stopping: Arc::new(watch::channel(false).0),
+        };
         if let Ok(mut st) = hub.state.lock() {
             for kind in MessageKind::ALL {
                 if let Some(topic) = kind.fixed_topic() {
@@ -271,11 +278,18 @@ impl Hub {
         })
     }
 
-    /// Close every client's outbox (the service stops).
+    /// Close every client's outbox and tell the connections (the service stops).
     pub fn close_all(&self) {
         if let Ok(st) = self.state.lock() {
             st.clients.values().for_each(|c| c.outbox.close());
         }
+        self.stopping.send_replace(true);
+    }
+
+    /// Resolves once [`Hub::close_all`] was called.
+    pub async fn stopped(&self) {
+        let mut rx = self.stopping.subscribe();
+        let _ = rx.wait_for(|stopping| *stopping).await;
     }
 
     /// Act on a client's text frame; a frame that is not protocol is answered with an error

@@ -208,6 +208,8 @@ async fn connection(stream: TcpStream, peer: SocketAddr, hub: Hub, session_id: S
     };
     let why = tokio::select! {
         _ = reader => "the client closed".to_string(),
+        // Also ends a connection whose writer is stuck on a client that does not read.
+        _ = hub.stopped() => "the service stopped".to_string(),
         r = writer => match r {
             Ok(()) => "the server closed it (stopping, or the client left its messages unread)".to_string(),
             Err(e) => format!("write failed: {e}"),
