@@ -227,3 +227,30 @@ fn frame(out: Outgoing) -> Message {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn request(protocols: Option<&str>) -> Request {
+        let mut r = Request::builder().uri("ws://127.0.0.1:8765/");
+        if let Some(p) = protocols {
+            r = r.header("Sec-WebSocket-Protocol", p);
+        }
+        r.body(()).expect("a request")
+    }
+
+    #[test]
+    fn the_handshake_echoes_the_subprotocol_or_refuses_saying_why() {
+        let ok = negotiate(&request(Some("other, foxglove.websocket.v1")), Response::new(()), false).expect("accepted");
+        assert_eq!(ok.headers().get("sec-websocket-protocol").map(|v| v.as_bytes()), Some(SUBPROTOCOL.as_bytes()));
+        let refused = |protocols, full| negotiate(&request(protocols), Response::new(()), full).expect_err("refused");
+        for r in [refused(None, false), refused(Some("foxglove.websocket.v2"), false)] {
+            assert_eq!(r.status(), StatusCode::BAD_REQUEST);
+            assert!(r.body().as_deref().is_some_and(|b| b.contains(SUBPROTOCOL)));
+        }
+        let r = refused(Some(SUBPROTOCOL), true);
+        assert_eq!(r.status(), StatusCode::SERVICE_UNAVAILABLE);
+        assert!(r.body().as_deref().is_some_and(|b| b.contains("16 clients")));
+    }
+}
