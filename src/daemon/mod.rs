@@ -7,6 +7,7 @@
 //! The sources are spawned by the caller and speak `acquire::SourceEvent` on one channel,
 //! so the service neither knows nor cares which transport (or simulated device) feeds it.
 
+pub mod foxglove;
 pub mod live;
 pub mod queue;
 mod service;
@@ -148,6 +149,11 @@ pub async fn serve(
     }
     let live = live::Live::default();
     let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone()));
+    // The Foxglove live view: the recorder's tap feeds it; it stops when `serve` returns.
+    let _foxglove = match cfg.foxglove_listen {
+        Some(addr) => Some(foxglove::start(addr, &mut writer).await?),
+        None => None,
+    };
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
     let feeder = Feeder::new(Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine)));
     let mut service = service::Service::new(writer, feeder, status, live, sinks, hooks, parts.config_path.clone());

@@ -13,6 +13,7 @@
 //! - [`batch`]: joining/cutting sample batches to 10–100 ms (sans-IO).
 //! - [`writer`]: chunked zstd MCAP, `.part` then rename, sync every second of log time,
 //!   rotation.
+//! - [`tap`]: each message as the writer encoded it, handed to a live consumer too.
 //! - [`reader`]: indexed reading, and recovery of files cut off by a crash or damaged:
 //!   every chunk's CRC is checked (`chunk`), a corrupt chunk is skipped and named in the
 //!   [`report`]; the summary (`summary`) is checked against its CRC; a file without a
@@ -36,6 +37,7 @@ pub mod report;
 pub mod rotation;
 pub mod schema;
 mod summary;
+pub mod tap;
 pub mod writer;
 
 pub use batch::Rebatcher;
@@ -44,4 +46,5 @@ pub use message::{BlowBoundary, ConfigFile, Gap, Payload, Recorded, Status};
 pub use reader::{RecordReader, Recording, read_recording};
 pub use report::{CorruptChunk, ReadReport};
 pub use schema::MessageKind;
+pub use tap::{Tap, TappedMessage};
 pub use writer::{ChunkCompression, RecordOptions, RecordWriter, Rotation, SyncPoint};

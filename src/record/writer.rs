@@ -23,6 +23,7 @@ use super::message::{BlowBoundary, ConfigFile, Gap, Payload, Status};
 use super::rotation::Naming;
 pub use super::rotation::Rotation;
 use super::schema::{MessageKind, pb, samples_topic};
+use super::tap::{Tap, TappedMessage};
 
 pub use super::options::{
     ChunkCompression, DEFAULT_CHUNK_SIZE_BYTES, DEFAULT_SYNC_INTERVAL_NS, DEFAULT_ZSTD_LEVEL, RecordOptions, SyncPoint,
@@ -44,6 +45,8 @@ pub struct RecordWriter {
     /// Every configuration file written, by name, rewritten into each new file.
     configs: BTreeMap<String, String>,
     buf: Vec<u8>,
+    /// A live consumer of every message encoded (`tap.rs`), if one was set.
+    tap: Option<Tap>,
 }
 
 impl RecordWriter {
@@ -61,6 +64,7 @@ impl RecordWriter {
             finished: Vec::new(),
             configs: BTreeMap::new(),
             buf: Vec::new(),
+            tap: None,
         };
         writer.open_next()?;
         Ok(writer)
@@ -141,6 +145,14 @@ impl RecordWriter {
         self.write_encoded(kind, None, log_time, log_time)
     }
 
+    /// Hand every message encoded from now on to `tap` too (replacing any tap set before),
+    /// whether or not the file write that follows succeeds: a live view goes on showing the
+    /// pipeline's messages while the disk is full. The configuration files that rotation
+    /// writes again into each new file are not handed over again.
+    pub fn set_tap(&mut self, tap: Tap) {
+        self.tap = Some(tap);
+    }
+
     /// Close the current chunk, flush, and `sync_data` the current file.
     pub fn flush_and_sync(&mut self) -> Result<(), RecordError> {
         match self.current.as_mut() {
@@ -194,6 +206,18 @@ impl RecordWriter {
         log_time: u64,
         publish_time: u64,
     ) -> Result<(), RecordError> {
+        if let Some(tap) = self.tap.as_mut() {
+            let samples;
+            let topic = match (kind.fixed_topic(), source) {
+                (Some(t), _) => t,
+                (None, s) => {
+                    samples = samples_topic(s.unwrap_or_default());
+                    samples.as_str()
+                }
+            };
+            let data = &self.buf;
+            tap(&TappedMessage { topic, kind, data, log_time_ns: log_time, publish_time_ns: publish_time });
+        }
         if self.current.as_ref().is_some_and(|f| f.rotation_due(&self.options.rotation, log_time)) {
             if let Some(file) = self.current.take() {
                 self.finished.push(file.finish()?);
@@ -423,6 +447,72 @@ mod tests {
         assert_eq!(w.last_sync().map(|s| s.file_messages), Some(41));
         w.flush_and_sync().expect("sync on demand");
         w.finish().expect("finish");
+    }
+
+    /// One message as (topic, schema name, schema data, encodings, bytes, log and publish time).
+    type Seen = (String, String, Vec<u8>, String, String, Vec<u8>, u64, u64);
+
+    #[test]
+    fn the_tap_sees_every_message_as_the_file_holds_it_and_changes_nothing() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let write = |path: &std::path::Path, tapped: Option<std::sync::Arc<std::sync::Mutex<Vec<Seen>>>>| {
+            let mut w = RecordWriter::create(path, Rotation::by_duration_ns(500 * MS as u64)).expect("create");
+            if let Some(tapped) = tapped {
+                w.set_tap(Box::new(move |m: &TappedMessage<'_>| {
+                    let seen = (
+                        m.topic.to_string(),
+                        m.schema_name().to_string(),
+                        m.schema().to_vec(),
+                        m.schema_encoding().to_string(),
+                        m.message_encoding().to_string(),
+                        m.data.to_vec(),
+                        m.log_time_ns,
+                        m.publish_time_ns,
+                    );
+                    tapped.lock().expect("not poisoned").push(seen);
+                }));
+            }
+            for (t, p) in &every_payload() {
+                w.write_payload(*t, p).expect("write");
+            }
+            // Past the rotation: the next file starts with the config written again.
+            w.write_samples(&batch(20, 10)).expect("write");
+            w.finish().expect("finish")
+        };
+        let tapped = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let files = write(&dir.path().join("tapped.mcap"), Some(tapped.clone()));
+        let plain = write(&dir.path().join("plain.mcap"), None);
+        // What the files hold, read back through the mcap crate (not our reader).
+        let read = |files: &[PathBuf]| -> Vec<Seen> {
+            let mut out = Vec::new();
+            for f in files {
+                let bytes = std::fs::read(f).expect("read back");
+                for m in mcap::MessageStream::new(&bytes).expect("stream").map(|m| m.expect("message")) {
+                    let schema = m.channel.schema.as_ref().expect("a schema");
+                    out.push((
+                        m.channel.topic.clone(),
+                        schema.name.clone(),
+                        schema.data.to_vec(),
+                        schema.encoding.clone(),
+                        m.channel.message_encoding.clone(),
+                        m.data.to_vec(),
+                        m.log_time,
+                        m.publish_time,
+                    ));
+                }
+            }
+            out
+        };
+        let (recorded, recorded_plain) = (read(&files), read(&plain));
+        assert_eq!(files.len(), 2, "the recording rotated");
+        assert_eq!(recorded, recorded_plain, "a tap changes nothing that is recorded");
+        let tapped = tapped.lock().expect("not poisoned").clone();
+        // Every message once, in order; the config rewritten into the second file is not.
+        let first_config_again = recorded.iter().rposition(|m| m.0 == "/config").expect("config rewritten");
+        let mut expected = recorded.clone();
+        expected.remove(first_config_again);
+        assert_eq!(tapped.len(), every_payload().len() + 1);
+        assert_eq!(tapped, expected);
     }
 
     #[test]
