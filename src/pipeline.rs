@@ -5,6 +5,7 @@
 
 use crate::alert::{AlertConfig, AlertRules};
 use crate::estimate::billet_book::{BilletBook, BilletSummary};
+use crate::estimate::curve::BlowCurve;
 use crate::estimate::{BlowEstimate, EstimateError, Estimator, EstimatorConfig};
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
@@ -62,6 +63,8 @@ pub struct Pipeline {
     /// The billet of the last blow judged: the alert memory starts over with each billet.
     billet: u32,
     billets: BilletBook,
+    /// The last blow estimated, drawn for a screen (`BlowCurve`).
+    last_curve: Option<std::sync::Arc<BlowCurve>>,
 }
 
 impl Pipeline {
@@ -73,6 +76,7 @@ impl Pipeline {
             cut: Vec::new(),
             billet: 0,
             billets: BilletBook::default(),
+            last_curve: None,
         }
     }
 
@@ -124,6 +128,11 @@ impl Pipeline {
         self.alerts.set_config(cfg);
     }
 
+    /// The last blow estimated, its measured and modelled load for a screen.
+    pub fn last_curve(&self) -> Option<std::sync::Arc<BlowCurve>> {
+        self.last_curve.clone()
+    }
+
     pub fn segment_stats(&self) -> SegmentStats {
         self.segmenter.stats()
     }
@@ -142,6 +151,8 @@ impl Pipeline {
                         self.alerts.reset();
                     }
                     estimate.alert = self.alerts.on_blow(&estimate);
+                    let course = self.estimator.take_course();
+                    self.last_curve = Some(std::sync::Arc::new(BlowCurve::new(&blow, &estimate, course.as_ref())));
                     out.extend(self.billets.on_blow(&estimate).map(|b| PipelineEvent::Billet(Box::new(b))));
                     out.push(PipelineEvent::Blow { cut, estimate: Box::new(estimate) });
                 }

@@ -7,6 +7,7 @@
 //! The sources are spawned by the caller and speak `acquire::SourceEvent` on one channel,
 //! so the service neither knows nor cares which transport (or simulated device) feeds it.
 
+pub mod dashboard;
 pub mod live;
 pub mod queue;
 mod service;
@@ -147,7 +148,8 @@ pub async fn serve(
         f(addr);
     }
     let live = live::Live::default();
-    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone()));
+    let token = dashboard::auth::Token::read(cfg.http_token_file.as_deref())?;
+    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone(), live.clone(), token));
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
     let feeder = Feeder::new(Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine)));
     let mut service = service::Service::new(writer, feeder, status, live, sinks, hooks, parts.config_path.clone());
