@@ -114,7 +114,8 @@ function renderSources(status) {
     const tr = document.createElement("tr");
     tr.title = "samples lost in gaps: " + s.samples_lost + (s.detail ? "; " + s.detail : "");
     tr.append(cell(name), cell(s.state || "–", s.state === "connected" ? "st-connected" : "st-other"),
-      cell(s.samples >= 1e6 ? (s.samples / 1e6).toFixed(2) + " M" : s.samples), cell(rate), cell(s.drops), cell(s.gaps + (s.samples_lost ? " (" + s.samples_lost + " lost)" : "")),
+      cell(s.samples >= 1e6 ? (s.samples / 1e6).toFixed(1) + " M" : s.samples >= 1e4 ? (s.samples / 1e3).toFixed(0) + " k" : s.samples),
+      cell(rate), cell(s.drops), cell(s.gaps + (s.samples_lost ? " (" + s.samples_lost + " lost)" : "")),
       cell(fmt(s.clock_drift_ppm, 1)));
     return tr;
   });
@@ -165,7 +166,7 @@ function drawCurve(c) {
   const end = c.phases.post_end_s !== null && c.phases.post_end_s !== undefined ? c.phases.post_end_s + 0.002 : Infinity;
   const t0 = Math.min(...all) * 1000, t1 = Math.min(Math.max(...all), end) * 1000;
   const lmax = Math.max(...loads, 1), lmin = Math.min(...loads, 0);
-  const L = 64, R = 12, T = 10, B = 34;
+  const L = 64, R = 12, T = 36, B = 34; // the phase names sit in the top margin
   const x = (ms) => L + ((ms - t0) / (t1 - t0 || 1)) * (w - L - R);
   const y = (kn) => T + (1 - (kn - lmin) / (lmax - lmin || 1)) * (h - T - B);
   g.font = "13px DejaVu Sans, Arial, sans-serif";
@@ -175,12 +176,16 @@ function drawCurve(c) {
     g.fillStyle = colour;
     g.fillRect(x(a * 1000), T, x(b * 1000) - x(a * 1000), h - T - B);
   }
-  // Phase names on two staggered rows so that a short phase's name does not cover the next.
+  // Phase names above the plot, on two staggered rows so that a short phase's name does not
+  // cover the next, each with a tick down to where its phase starts.
   g.fillStyle = "#3d434a";
+  g.strokeStyle = "#9aa1a9";
   PHASES.forEach(([name, from, to], i) => {
     const a = from ? c.phases[from] : 0, b = c.phases[to];
     if (a === null || a === undefined || b === null || b === undefined) return;
-    g.fillText(name, x(a * 1000) + 3, T + 16 + (i % 2) * 16);
+    const row = 13 + (i % 2) * 15;
+    g.fillText(name, x(a * 1000) + 3, row);
+    g.beginPath(); g.moveTo(x(a * 1000) + 0.5, row - 10); g.lineTo(x(a * 1000) + 0.5, T); g.stroke();
   });
   // Axes with round ticks.
   g.strokeStyle = "#9aa1a9";
