@@ -5,7 +5,8 @@
 //! code path apart from the page's JSON and script), take a row live (a blow after the page
 //! loaded, without a reload), draw the blow's measured and model curves, show the latched
 //! alert and, after its Acknowledge button, the acknowledged state, which `/status` confirms.
-//! It saves `target/dashboard.png`, the README's screenshot (`docs/dashboard.png`).
+//! It saves `target/dashboard.png`, the README's screenshot (`docs/dashboard.png`). A second
+//! test stops the service under an open page and starts another: the page reconnects by itself.
 //! CI installs Chromium and `websockets` (`.ci/run`); elsewhere the test fails saying how.
 
 use std::io::{BufRead, BufReader};
@@ -106,4 +107,35 @@ fn the_page_shows_the_first_blow_live_and_the_acknowledged_alert() {
     assert_eq!(after["button_hidden"], true);
     assert!(seen["status_latched_alert"].is_null(), "/status still latches {}", seen["status_latched_alert"]);
     assert!(std::fs::metadata(&shot).unwrap().len() > 10_000, "a screenshot was saved");
+}
+
+/// The page follows a service restart by itself: the demo it opened on stops (the page says
+/// so), another starts on the same port, and the page shows the new run's blows (fewer than
+/// the first run had: a table fetched again, not kept) without a reload.
+#[test]
+fn the_page_reconnects_by_itself_after_the_service_restarts() {
+    let browser = chromium();
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let dir = tempfile::tempdir().unwrap();
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/dashboard_cdp.py");
+    let out = Command::new("python3")
+        .args([script, "--restart", &browser, env!("CARGO_BIN_EXE_forgemon"), &port.to_string()])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "the browser session failed ({INSTALL}):\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let seen: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let before = seen["max_blow_before"].as_u64().unwrap();
+    let after = seen["after"]["max_blow"].as_u64().unwrap();
+    assert!(before >= 6, "{seen}");
+    // The second run (blows 1 s apart) had reached only a few blows when the page came back.
+    assert!(after >= 1 && after < before, "{seen}");
+    let header: u64 = seen["after"]["header_blows"].as_str().unwrap().parse().unwrap();
+    let status = seen["status_blows"].as_u64().unwrap();
+    assert!(header == status || header + 1 == status, "header {header} blows, /status {status}");
 }

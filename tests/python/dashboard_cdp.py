@@ -1,6 +1,7 @@
 """Drive the dashboard in headless Chromium over the DevTools protocol (tests/dashboard_browser.rs).
 
 Usage: dashboard_cdp.py CHROMIUM URL SCREENSHOT.png
+       dashboard_cdp.py --restart CHROMIUM FORGEMON PORT DIR
 
 Opens URL at 1280 x 800 while the demo runs, and prints one JSON object: the first blow row
 the page showed (its cells as the DOM has them), whether a row arrived while the page was open
@@ -76,7 +77,51 @@ ALERT = "({cls: document.getElementById('alert').className, kind: document.getEl
  button_hidden: document.getElementById('ack').hidden})"
 
 
+def restart(chromium, forgemon, port, workdir):
+    """Open the page on one demo, stop it, start another on the same port: the page must
+    reconnect by itself and show the new run. Prints what it saw."""
+    url = f"http://127.0.0.1:{port}/"
+
+    def demo(name, interval):
+        return subprocess.Popen([forgemon, "demo", "--http", f"127.0.0.1:{port}", "--interval", interval,
+                                 "--billets", "1", "--dir", os.path.join(workdir, name)],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    first = demo("a", "0.3")
+    with tempfile.TemporaryDirectory(ignore_cleanup_errors=True) as profile:
+        proc, ws_url = launch(chromium, profile)
+        second = None
+        try:
+            p = Page(ws_url)
+            p.call("Page.enable")
+            deadline = time.monotonic() + 20
+            while True:  # the demo's port may not listen yet
+                p.call("Page.navigate", url=url)
+                time.sleep(0.3)
+                if p.eval("!!document.getElementById('conn')") or time.monotonic() > deadline:
+                    break
+            p.wait(f"{MAX_BLOW} >= 6", "six blows of the first run")
+            first.kill()
+            first.wait()
+            before = p.eval(MAX_BLOW)
+            p.wait("document.getElementById('conn').textContent !== 'live'", "the page to see the service gone")
+            second = demo("b", "1.0")
+            p.wait(f"document.getElementById('conn').textContent === 'live' && {MAX_BLOW} >= 1", "the page to reconnect",
+                   timeout_s=30)
+            time.sleep(0.2)
+            after = p.eval(f"({{max_blow: {MAX_BLOW}, header_blows: document.getElementById('blows-total').textContent}})")
+            status = json.load(urllib.request.urlopen(url + "status"))
+            print(json.dumps({"max_blow_before": before, "after": after, "status_blows": status["blows"]}))
+        finally:
+            for child in (first, second, proc):
+                if child:
+                    child.kill()
+                    child.wait()
+
+
 def main():
+    if sys.argv[1] == "--restart":
+        return restart(*sys.argv[2:6])
     chromium, url, shot = sys.argv[1:4]
     with tempfile.TemporaryDirectory() as profile:
         proc, ws_url = launch(chromium, profile)
