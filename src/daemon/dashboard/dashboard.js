@@ -107,7 +107,7 @@ function renderSources(status) {
   const now = performance.now();
   const rows = Object.entries(status.sources).map(([name, s]) => {
     let rate = "–";
-    if (lastHealth && lastHealth.samples[name] !== undefined && now > lastHealth.t_ms) {
+    if (lastHealth && lastHealth.samples[name] !== undefined && now - lastHealth.t_ms >= 900) {
       const hz = (s.samples - lastHealth.samples[name]) / ((now - lastHealth.t_ms) / 1000);
       rate = hz >= 1000 ? (hz / 1000).toFixed(1) + " kHz" : hz.toFixed(0) + " Hz";
     }
@@ -119,7 +119,8 @@ function renderSources(status) {
       cell(fmt(s.clock_drift_ppm, 1)));
     return tr;
   });
-  if (!lastHealth || now - lastHealth.t_ms > 900) {
+  // The rate is averaged over 1 to 5 s: batches arrive in bursts and fetches jitter.
+  if (!lastHealth || now - lastHealth.t_ms > 5000) {
     lastHealth = { t_ms: now, samples: Object.fromEntries(Object.entries(status.sources).map(([k, s]) => [k, s.samples])) };
   }
   $("sources").tBodies[0].replaceChildren(...rows);
