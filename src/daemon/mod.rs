@@ -7,6 +7,7 @@
 //! The sources are spawned by the caller and speak `acquire::SourceEvent` on one channel,
 //! so the service neither knows nor cares which transport (or simulated device) feeds it.
 
+pub mod dashboard;
 pub mod foxglove;
 pub mod live;
 pub mod queue;
@@ -148,7 +149,8 @@ pub async fn serve(
         f(addr);
     }
     let live = live::Live::default();
-    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone()));
+    let token = dashboard::auth::Token::read(cfg.http_token_file.as_deref())?;
+    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone(), live.clone(), token));
     // The Foxglove live view: the recorder's tap feeds it; it stops when `serve` returns.
     let _foxglove = match cfg.foxglove_listen {
         Some(addr) => Some(foxglove::start(addr, &mut writer).await?),

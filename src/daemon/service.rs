@@ -212,10 +212,12 @@ impl Service {
         tracing::info!(blow = estimate.blow, efficiency = estimate.efficiency, class = estimate.class.as_str(), "blow");
         // From the host receiving the batch that ended the blow to its result.
         let latency_ms = (host_now_ns() - log_time_ns) as f64 * 1e-6;
+        let curve = self.feeder.pipeline_mut().last_curve().filter(|c| c.blow == estimate.blow);
         self.status
             .lock()
             .map(|mut s| {
                 s.on_blow(estimate);
+                s.on_curve(curve);
                 s.last_result_latency_ms = Some(latency_ms);
             })
             .ok();

@@ -1,6 +1,7 @@
 //! The service's live state, served on loopback: `/status` (JSON) and `/metrics`
 //! (Prometheus text format): samples, drops, gaps, transport states, blows, the last
-//! efficiency and class, alerts.
+//! efficiency and class, alerts. The same server carries the dashboard (`dashboard`) and,
+//! when a token is configured, refuses every request without it (`dashboard::auth`).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -16,11 +17,16 @@ use serde::Serialize;
 
 use crate::estimate::BlowEstimate;
 use crate::estimate::billet_book::BilletSummary;
+use crate::estimate::curve::BlowCurve;
 use crate::estimate::result::Alert;
 use crate::record::{Gap, Status};
 use crate::signal::align::ClockModel;
 use crate::signal::merge::MergeStats;
 use crate::signal::sample::SampleBatch;
+
+use super::dashboard::auth::{Token, require_token};
+use super::dashboard::board::Board;
+use super::live::Live;
 
 /// Shared between the service loop and the HTTP handlers.
 pub type SharedStatus = Arc<Mutex<StatusSnapshot>>;
@@ -83,6 +89,9 @@ pub struct StatusSnapshot {
     /// source carries all three.
     pub merge: MergeStats,
     pub recording: String,
+    /// What the dashboard shows beyond this (`GET /dashboard/state`), not in `/status`.
+    #[serde(skip)]
+    pub board: Board,
 }
 
 impl StatusSnapshot {
@@ -109,6 +118,7 @@ impl StatusSnapshot {
             sources: BTreeMap::new(),
             merge: MergeStats::default(),
             recording: String::new(),
+            board: Board::default(),
         }
     }
 
@@ -151,11 +161,22 @@ impl StatusSnapshot {
         if let Some(a) = &e.alert {
             self.latched_alert = Some(a.clone());
         }
+        self.board.on_blow(e);
+    }
+
+    /// The last blow's curve, for the dashboard.
+    pub fn on_curve(&mut self, c: Option<Arc<BlowCurve>>) {
+        self.board.curve = c;
     }
 
     /// The operator acknowledged the latched alert; whether there was one.
     pub fn acknowledge(&mut self) -> bool {
-        self.latched_alert.take().is_some()
+        let acked = self.latched_alert.take();
+        let was = acked.is_some();
+        if was {
+            self.board.acknowledged_alert = acked;
+        }
+        was
     }
 
     /// A billet was summarised: finished when the next one started, or the run's last.
@@ -164,6 +185,7 @@ impl StatusSnapshot {
             self.billets_finished += 1;
             self.last_billet_blows = Some(u64::from(b.blows));
             self.billet_blows = 0;
+            self.board.on_billet_finished();
         }
         self.last_billet = Some(b.clone());
     }
@@ -294,17 +316,23 @@ async fn new_billet(State(tx): State<tokio::sync::mpsc::Sender<super::Control>>)
     }
 }
 
-/// Serve `GET /status`, `GET /metrics` and `POST /billet` on an already bound listener.
+/// Serve `GET /status`, `GET /metrics`, `POST /billet` and the dashboard (`GET /`, its
+/// state and events, `POST /ack`) on an already bound listener; with a token, only to
+/// requests that present it.
 pub async fn serve_http(
     listener: tokio::net::TcpListener,
     status: SharedStatus,
     control: tokio::sync::mpsc::Sender<super::Control>,
+    live: Live,
+    token: Option<Token>,
 ) {
     let app = Router::new()
         .route("/status", get(status_json))
         .route("/metrics", get(metrics_text))
-        .with_state(status)
-        .merge(Router::new().route("/billet", post(new_billet)).with_state(control));
+        .with_state(status.clone())
+        .merge(Router::new().route("/billet", post(new_billet)).with_state(control.clone()))
+        .merge(super::dashboard::routes(status, control, live))
+        .layer(axum::middleware::from_fn_with_state(token, require_token));
     if let Err(e) = axum::serve(listener, app).await {
         tracing::error!("status endpoint stopped: {e}");
     }

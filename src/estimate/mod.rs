@@ -16,6 +16,7 @@ pub mod approach;
 pub mod billet;
 pub mod billet_book;
 pub mod contact;
+pub mod curve;
 pub mod decimate;
 pub mod fit;
 pub mod observer;
@@ -176,6 +177,8 @@ pub struct Estimator {
     scale: f64,
     /// How the last blow was estimated.
     last_method: Option<Method>,
+    /// What the last blow's estimate saw of its course (the dashboard's curve).
+    last_course: Option<curve::Course>,
 }
 
 /// Where the last blow left the billet, in encoder terms.
@@ -209,6 +212,7 @@ impl Estimator {
             die_x_m: None,
             scale: 1.0,
             last_method: None,
+            last_course: None,
         }
     }
 
@@ -216,6 +220,11 @@ impl Estimator {
     /// incomplete blow).
     pub fn last_method(&self) -> Option<Method> {
         self.last_method
+    }
+
+    /// What the last blow's estimate saw of its course, taken (`None` for an incomplete blow).
+    pub fn take_course(&mut self) -> Option<curve::Course> {
+        self.last_course.take()
     }
 
     /// The rule of the module's doc: the observer when the samples resolve the second mode.
@@ -314,6 +323,7 @@ impl Estimator {
     pub fn estimate(&mut self, blow: &Blow) -> Result<BlowEstimate, EstimateError> {
         self.blows += 1;
         self.last_method = None;
+        self.last_course = None;
         let n = self.blows;
         let approach = fit_impact_speed(&blow.samples, blow.i_contact, self.cfg.fit_s, blow.period_s)
             .map_err(|source| EstimateError::Approach { blow: n, source })?;
@@ -469,6 +479,11 @@ impl Estimator {
     fn fill_from_fit(&mut self, e: &mut BlowEstimate, blow: &Blow, f: &fit::ModelFit) -> Option<f64> {
         self.last_method = Some(Method::ModelFit);
         e.method = self.last_method;
+        self.last_course = Some(curve::Course {
+            model_load: f.blow.trace.iter().map(|p| (p.t_s, p.out.sensor_n)).collect(),
+            forming_time_s: f.blow.forming.map(|fm| fm.forming_time_s),
+            spring_back_time_s: f.blow.forming.and_then(|fm| fm.spring_back_time_s),
+        });
         let l = f.blow.energy;
         // The model supplies the set, corrected by what the encoder saw in the spring-back
         // (`fit::spring_back_set_offset`); the start is the billet's (the encoder chain's),
@@ -520,6 +535,8 @@ impl Estimator {
         let n = self.blows;
         let v0 = e.v_impact_mps;
         let o = observer::observe(&self.machine, blow, v0);
+        let forming_s = (o.forming_end as f64 - delta0) * blow.period_s;
+        self.last_course = Some(curve::Course { forming_time_s: Some(forming_s), ..curve::Course::default() });
         // The observer's compression starts at the contact sample. On a press the support
         // is massless, so the ram's travel from the located contact to that sample was all
         // compression already; on a hammer the lower tool first moves with the ram and the
