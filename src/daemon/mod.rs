@@ -8,6 +8,7 @@
 //! so the service neither knows nor cares which transport (or simulated device) feeds it.
 
 pub mod live;
+pub mod plc_server;
 pub mod queue;
 mod service;
 pub mod sinks;
@@ -148,6 +149,8 @@ pub async fn serve(
     }
     let live = live::Live::default();
     let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone()));
+    // The PLC result image (CONTRACTS §8), when configured; stops when `_plc` drops.
+    let _plc = plc_server::start(cfg.plc_listen, status.clone(), &live, control_tx.clone()).await?;
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
     let feeder = Feeder::new(Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine)));
     let mut service = service::Service::new(writer, feeder, status, live, sinks, hooks, parts.config_path.clone());
