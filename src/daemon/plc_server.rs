@@ -364,7 +364,9 @@ async fn update(
             },
             _ = tick.tick() => heartbeat = heartbeat.wrapping_add(1),
         }
-        image.send_replace(encode(heartbeat, &snapshot(&status), last.as_deref(), warn));
+        // Encoded under the lock (about 50 ns, `benches/plc_image.rs`), not on a copy.
+        let words = encode(heartbeat, &status.lock().unwrap_or_else(|p| p.into_inner()), last.as_deref(), warn);
+        image.send_replace(words);
     }
 }
 
