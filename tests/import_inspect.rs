@@ -79,6 +79,22 @@ fn inspect_counts_blows_classes_and_alerts_of_a_replay() {
     assert_eq!(v["alerts"]["elastic_blow"].as_u64().unwrap_or(0), alerts);
     let mean = results.iter().map(|r| r["efficiency"].as_f64().unwrap()).sum::<f64>() / results.len() as f64;
     assert!((v["mean_efficiency"].as_f64().unwrap() - mean).abs() < 1e-12);
+    // Per-billet statistics, from the replayed results here: one billet, its efficiencies'
+    // mean and sample standard deviation, and the billet blow of its first hard blow, which
+    // the billet's own summary also names.
+    let stats = &v["billet_stats"][0];
+    assert_eq!(v["billet_stats"].as_array().map(Vec::len), Some(1));
+    assert_eq!(stats["blows"].as_u64(), Some(results.len() as u64));
+    let effs: Vec<f64> = results.iter().map(|r| r["efficiency"].as_f64().unwrap()).collect();
+    let sd = (effs.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (effs.len() - 1) as f64).sqrt();
+    assert!((stats["efficiency_mean"].as_f64().unwrap() - mean).abs() < 1e-12);
+    assert!((stats["efficiency_sd"].as_f64().unwrap() - sd).abs() < 1e-12);
+    let plastic: Vec<f64> = results.iter().map(|r| r["plastic_J"].as_f64().unwrap()).collect();
+    let plastic_mean = plastic.iter().sum::<f64>() / plastic.len() as f64;
+    assert!((stats["plastic_J_mean"].as_f64().unwrap() - plastic_mean).abs() < 1e-9 * plastic_mean);
+    let first_hard = results.iter().find(|r| r["class"] == "hard").map(|r| r["billet_blow"].as_u64().unwrap());
+    assert_eq!(stats["first_hard_blow"].as_u64(), first_hard);
+    assert_eq!(v["billet_summaries"][0]["first_hard_blow"].as_u64(), first_hard);
     // The text form says the same for people.
     let text = String::from_utf8(forgemon(&["inspect", rec.to_str().unwrap()]).stdout).unwrap();
     assert!(text.contains("finished properly") && text.contains(&format!("blows: {}", results.len())), "{text}");

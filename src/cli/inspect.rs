@@ -1,6 +1,7 @@
 //! `forgemon inspect FILE.mcap`: what a recording holds, in forging terms: sources with
-//! their rates and durations, blows, results by class, billets, alerts, gaps and drops, the stored
-//! configuration, and whether the file was finished or had to be recovered. Corrupt chunks
+//! their rates and durations, blows, results by class, billets with their statistics (blows,
+//! mean and spread of efficiency and plastic energy, the first hard blow), alerts, gaps and
+//! drops, the stored configuration, and whether the file was finished or had to be recovered. Corrupt chunks
 //! are named on stderr and the exit status is 3 ([`input_status`], shared with `replay`).
 
 use std::collections::BTreeMap;
@@ -11,6 +12,7 @@ use std::process::ExitCode;
 use clap::Args;
 use serde_json::json;
 
+use crate::estimate::{BlowClass, BlowEstimate};
 use crate::record::{Payload, ReadReport, RecordReader};
 
 /// Exit status when the input recording was corrupt and the results cover only part of it
@@ -36,6 +38,90 @@ pub struct InspectArgs {
     pub json: bool,
 }
 
+/// One billet's blows as the recorded results give them (`billet_stats` in the JSON).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct BilletStats {
+    pub billet: u32,
+    pub blows: u32,
+    /// Blows with energies (not `incomplete`): the ones the means and spreads cover.
+    pub complete_blows: u32,
+    pub efficiency_mean: Option<f64>,
+    /// Sample standard deviation (n − 1); `None` below two complete blows.
+    pub efficiency_sd: Option<f64>,
+    #[serde(rename = "plastic_J_mean")]
+    pub plastic_j_mean: Option<f64>,
+    #[serde(rename = "plastic_J_sd")]
+    pub plastic_j_sd: Option<f64>,
+    /// The blow on the billet (`billet_blow`) that was its first hard one: the blows it
+    /// took to get there; `None` when none was hard.
+    pub first_hard_blow: Option<u32>,
+}
+
+/// Mean and sample standard deviation of `xs`; the deviation needs two values.
+fn mean_sd(xs: &[f64]) -> (Option<f64>, Option<f64>) {
+    if xs.is_empty() {
+        return (None, None);
+    }
+    let n = xs.len() as f64;
+    let mean = xs.iter().sum::<f64>() / n;
+    let sd = (xs.len() >= 2).then(|| (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt());
+    (Some(mean), sd)
+}
+
+/// Per-billet statistics of `results` (in recorded order), by billet number.
+pub fn billet_stats(results: &[BlowEstimate]) -> Vec<BilletStats> {
+    let mut by_billet: BTreeMap<u32, Vec<&BlowEstimate>> = BTreeMap::new();
+    for r in results {
+        by_billet.entry(r.billet.billet).or_default().push(r);
+    }
+    by_billet
+        .into_iter()
+        .map(|(billet, blows)| {
+            let complete: Vec<&&BlowEstimate> = blows.iter().filter(|r| r.is_complete()).collect();
+            let (efficiency_mean, efficiency_sd) =
+                mean_sd(&complete.iter().filter_map(|r| r.efficiency).collect::<Vec<_>>());
+            let (plastic_j_mean, plastic_j_sd) =
+                mean_sd(&complete.iter().filter_map(|r| r.plastic_j).collect::<Vec<_>>());
+            BilletStats {
+                billet,
+                blows: blows.len() as u32,
+                complete_blows: complete.len() as u32,
+                efficiency_mean,
+                efficiency_sd,
+                plastic_j_mean,
+                plastic_j_sd,
+                first_hard_blow: blows.iter().find(|r| r.class == BlowClass::Hard).map(|r| r.billet.billet_blow),
+            }
+        })
+        .collect()
+}
+
+/// One line for a person: `statistics: 8 blows, efficiency 0.705 ± 0.196, ...`.
+impl std::fmt::Display for BilletStats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let pm = |mean: Option<f64>, sd: Option<f64>, digits: usize| match (mean, sd) {
+            (Some(m), Some(s)) => format!("{m:.digits$} ± {s:.digits$}"),
+            (Some(m), None) => format!("{m:.digits$}"),
+            _ => "-".to_string(),
+        };
+        let plural = if self.blows == 1 { "" } else { "s" };
+        write!(f, "statistics of billet {}: {} blow{plural}", self.billet, self.blows)?;
+        if self.complete_blows < self.blows {
+            write!(f, " ({} complete)", self.complete_blows)?;
+        }
+        write!(
+            f,
+            ", efficiency {} and plastic {} J (mean ± sd), ",
+            pm(self.efficiency_mean, self.efficiency_sd, 3),
+            pm(self.plastic_j_mean, self.plastic_j_sd, 0)
+        )?;
+        match self.first_hard_blow {
+            Some(n) => write!(f, "first hard blow at blow {n}"),
+            None => write!(f, "no hard blow"),
+        }
+    }
+}
+
 #[derive(Default)]
 struct SourceSummary {
     batches: u64,
@@ -56,6 +142,7 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
     let mut configs = Vec::new();
     let mut efficiency = Vec::new();
     let mut billets = Vec::new();
+    let mut results = Vec::new();
     for m in reader.by_ref() {
         match m?.payload {
             Payload::Samples(b) => {
@@ -71,6 +158,7 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
             Payload::Result(r) => {
                 *classes.entry(r.class.as_str().to_string()).or_default() += 1;
                 efficiency.extend(r.efficiency);
+                results.push(*r);
             }
             Payload::Alert(a) => *alerts.entry(a.kind.as_str().to_string()).or_default() += 1,
             Payload::Gap(g) => {
@@ -85,6 +173,7 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
         }
     }
     let report = reader.report().clone();
+    let stats = billet_stats(&results);
     let src_json: Vec<_> = sources
         .iter()
         .map(|(name, s)| {
@@ -113,6 +202,7 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
         "billets": billets.len(),
         "billets_finished": billets.iter().filter(|b| b.finished).count(),
         "billet_summaries": billets,
+        "billet_stats": stats,
         "alerts": alerts,
         "gaps": gaps,
         "samples_lost": samples_lost,
@@ -166,8 +256,16 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
     }
     let finished = billets.iter().filter(|b| b.finished).count();
     writeln!(w, "  billets: {} ({finished} finished)", billets.len())?;
+    // Each billet's summary, then its statistics; statistics of billets no summary names
+    // (a recording from before the summaries) after them.
     for b in &billets {
         writeln!(w, "    {b}")?;
+        for s in stats.iter().filter(|s| s.billet == b.billet) {
+            writeln!(w, "      {s}")?;
+        }
+    }
+    for s in stats.iter().filter(|s| !billets.iter().any(|b| b.billet == s.billet)) {
+        writeln!(w, "    {s}")?;
     }
     writeln!(
         w,
@@ -194,4 +292,69 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
     )?;
     w.flush()?;
     Ok(input_status(&report))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn blow(billet: u32, billet_blow: u32, class: BlowClass, efficiency: f64, plastic_j: f64) -> BlowEstimate {
+        let complete = class != BlowClass::Incomplete;
+        BlowEstimate {
+            judgement: None,
+            blow: billet * 10 + billet_blow,
+            t_contact_s: 0.0,
+            v_impact_mps: 5.0,
+            kinetic_in_j: complete.then_some(plastic_j / efficiency),
+            plastic_j: complete.then_some(plastic_j),
+            friction_j: None,
+            damped_j: None,
+            elastic_j: None,
+            efficiency: complete.then_some(efficiency),
+            final_load_n: 0.0,
+            h_end_m: None,
+            class,
+            alert: None,
+            t_end_s: 0.0,
+            peak_load_n: 0.0,
+            residual: None,
+            sensor_check: None,
+            method: None,
+            gap_s: 0.0,
+            h_start_m: None,
+            height_check: None,
+            billet: crate::estimate::BilletTag { billet, billet_blow, ..Default::default() },
+        }
+    }
+
+    #[test]
+    fn billet_statistics_cover_the_complete_blows_and_find_the_first_hard_one() {
+        use BlowClass::*;
+        let results = [
+            blow(1, 1, Soft, 0.9, 5000.0),
+            blow(1, 2, Incomplete, 0.0, 0.0),
+            blow(1, 3, Intermediate, 0.6, 7000.0),
+            blow(1, 4, Hard, 0.3, 3000.0),
+            blow(1, 5, Hard, 0.3, 3000.0),
+            blow(2, 1, Soft, 0.85, 6000.0),
+        ];
+        let s = billet_stats(&results);
+        assert_eq!(s.len(), 2);
+        assert_eq!((s[0].billet, s[0].blows, s[0].complete_blows, s[0].first_hard_blow), (1, 5, 4, Some(4)));
+        // By hand: efficiencies 0.9, 0.6, 0.3, 0.3: mean 0.525; squared deviations
+        // 0.140625 + 0.005625 + 0.050625 + 0.050625 = 0.2475, over 3: sd 0.28723.
+        assert!((s[0].efficiency_mean.unwrap_or(0.0) - 0.525).abs() < 1e-12);
+        assert!((s[0].efficiency_sd.unwrap_or(0.0) - (0.2475f64 / 3.0).sqrt()).abs() < 1e-12);
+        // Plastic 5000, 7000, 3000, 3000 J: mean 4500; squared deviations
+        // 0.25e6 + 6.25e6 + 2.25e6 + 2.25e6 = 11e6, over 3.
+        assert!((s[0].plastic_j_mean.unwrap_or(0.0) - 4500.0).abs() < 1e-9);
+        assert!((s[0].plastic_j_sd.unwrap_or(0.0) - (11e6f64 / 3.0).sqrt()).abs() < 1e-9);
+        // One blow: a mean, no spread; no hard blow.
+        assert_eq!((s[1].efficiency_mean, s[1].efficiency_sd, s[1].first_hard_blow), (Some(0.85), None, None));
+        assert_eq!(
+            s[1].to_string(),
+            "statistics of billet 2: 1 blow, efficiency 0.850 and plastic 6000 J (mean ± sd), no hard blow"
+        );
+        assert!(s[0].to_string().contains("5 blows (4 complete), efficiency 0.525 ± 0.287"), "{}", s[0]);
+    }
 }

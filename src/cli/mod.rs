@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 pub mod advise;
 pub mod demo;
 pub mod diagnose;
+pub mod export;
 pub mod identify;
 pub mod import;
 pub mod inspect;
@@ -37,6 +38,8 @@ pub enum Command {
     Replay(replay::ReplayArgs),
     /// Turn capture CSV files or a capture directory into an MCAP recording.
     Import(import::ImportArgs),
+    /// Write the blow results of recordings as one table (CSV or Parquet), a row per blow.
+    Export(export::ExportArgs),
     /// Say what a recording holds: sources, rates, duration, blows, gaps, drops, alerts.
     Inspect(inspect::InspectArgs),
     /// The always-on service: acquire, segment, estimate, alert, record.
@@ -57,6 +60,7 @@ impl Cli {
             Command::Diagnose(args) => diagnose::run(args),
             Command::Replay(args) => replay::run(args),
             Command::Import(args) => import::run(args),
+            Command::Export(args) => export::run(args),
             Command::Inspect(args) => inspect::run(args),
             Command::Run(args) => run::run(args),
             Command::Demo(args) => demo::run(args),

@@ -207,10 +207,10 @@ mod tests {
         let text = write_recipe(&recipe()).unwrap();
         let e = |t: &str| parse_recipe("part.recipe.toml", t).unwrap_err().to_string();
         let bad = e(&text.replace("efficiency = [0.9, 0.95]", "efficiency = [0.95, 0.9]"));
-        assert!(
-            bad.contains("part.recipe.toml") && bad.contains("blows[1].efficiency") && bad.contains("line"),
-            "{bad}"
-        );
+        // file:line:column, then the key.
+        let at = bad.split(' ').next().unwrap_or("");
+        assert!(at.starts_with("part.recipe.toml:") && at.matches(':').count() == 3, "{bad}");
+        assert!(bad.contains("key 'blows[1].efficiency'"), "{bad}");
         let bad = e(&text.replace("blow = 1", "blow = 2"));
         assert!(bad.contains("blows[1].blow"), "{bad}");
         let bad = e(&text.replace("load_fraction", "load_fractoin"));

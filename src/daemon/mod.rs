@@ -10,6 +10,7 @@
 pub mod dashboard;
 pub mod foxglove;
 pub mod live;
+pub mod plc_server;
 pub mod queue;
 mod service;
 pub mod sinks;
@@ -156,6 +157,8 @@ pub async fn serve(
         Some(addr) => Some(foxglove::start(addr, &mut writer).await?),
         None => None,
     };
+    // The PLC result image (CONTRACTS §8), when configured; stops when `_plc` drops.
+    let _plc = plc_server::start(cfg.plc_listen, status.clone(), &live, control_tx.clone()).await?;
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
     let feeder = Feeder::new(Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine)));
     let mut service = service::Service::new(writer, feeder, status, live, sinks, hooks, parts.config_path.clone());

@@ -265,6 +265,11 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
         h_start_off_sheet_m: r.billet.h_start_off_sheet_m,
         sensor_check: r.sensor_check,
         method: r.method.map(|m| m.as_str().to_string()),
+        judgement: r.judgement.as_ref().map(|j| pb::Judgement {
+            ok: j.ok,
+            recipe: j.recipe.clone(),
+            reasons: j.reasons.clone(),
+        }),
     }
 }
 
@@ -280,7 +285,7 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
     // a 0 out.
     let energy = |v: Option<f64>| if class == BlowClass::Incomplete { v } else { Some(v.unwrap_or(0.0)) };
     Ok(BlowEstimate {
-        judgement: None,
+        judgement: r.judgement.map(|j| crate::recipe::Judgement { ok: j.ok, recipe: j.recipe, reasons: j.reasons }),
         blow: r.blow,
         t_contact_s: r.t_contact_s,
         v_impact_mps: r.v_impact_mps,
@@ -511,7 +516,11 @@ mod tests {
 
     pub(crate) fn estimate(with_optional: bool) -> BlowEstimate {
         BlowEstimate {
-            judgement: None,
+            judgement: with_optional.then(|| crate::recipe::Judgement {
+                ok: false,
+                recipe: "flange".into(),
+                reasons: vec!["peak_load above window".into()],
+            }),
             blow: 3,
             t_contact_s: 81.2031,
             v_impact_mps: 5.21,

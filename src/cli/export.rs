@@ -1,0 +1,341 @@
+//! `forgemon export RECORDING_OR_DIR... (--csv OUT.csv | --parquet OUT.parquet)`: the blow
+//! results of recordings as one table for the quality department (issue 19 §4), one row per
+//! blow across files and billets: every CONTRACTS.md §5 field, the billet and the blow on
+//! it, the file and the wall-clock time the result was recorded at (the MCAP log time).
+//!
+//! The rows are the results the recordings hold, read with the project's reader
+//! (`record::RecordReader`), not estimated again. A directory stands for the recordings in
+//! it (`*.mcap`, `*.mcap.part`, by name: the service's rotated files in order). A file that
+//! is not a recording fails the whole export, naming it, and nothing is written; a
+//! recording with corrupt chunks is exported with what it holds, its chunks named on stderr
+//! and the exit status 3, as `replay` and `inspect` do.
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+
+use anyhow::{Context, bail};
+use arrow_array::{ArrayRef, Float64Array, RecordBatch, StringArray, TimestampNanosecondArray, UInt32Array};
+use arrow_schema::{DataType, Field, Schema, TimeUnit};
+use clap::Args;
+use serde::Serialize;
+
+use super::inspect::{EXIT_CORRUPT_INPUT, input_status};
+use crate::estimate::BlowEstimate;
+use crate::record::{Payload, RecordReader};
+
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    /// Recordings (.mcap, .mcap.part), or directories of them.
+    #[arg(required = true, value_name = "RECORDING_OR_DIR")]
+    pub inputs: Vec<PathBuf>,
+    /// Write CSV (a header row, then one row per blow; an empty field where a value is
+    /// `null`).
+    #[arg(long, value_name = "OUT.csv", required_unless_present = "parquet", conflicts_with = "parquet")]
+    pub csv: Option<PathBuf>,
+    /// Write Parquet (snappy-compressed; nullable columns where a value can be `null`).
+    #[arg(long, value_name = "OUT.parquet")]
+    pub parquet: Option<PathBuf>,
+}
+
+/// One blow as a row. The field names are the columns, CONTRACTS.md §5's names and units
+/// first; `alert` is the alert's kind, `alert_reason` its words.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ExportRow {
+    pub file: String,
+    /// When the result was recorded, UTC, RFC 3339 with nanoseconds (Parquet: a UTC
+    /// timestamp in ns).
+    pub wall_time: String,
+    #[serde(skip)]
+    pub wall_time_ns: i64,
+    pub billet: u32,
+    pub billet_blow: u32,
+    pub blow: u32,
+    pub t_contact_s: f64,
+    pub v_impact_mps: f64,
+    #[serde(rename = "kinetic_in_J")]
+    pub kinetic_in_j: Option<f64>,
+    #[serde(rename = "plastic_J")]
+    pub plastic_j: Option<f64>,
+    #[serde(rename = "friction_J")]
+    pub friction_j: Option<f64>,
+    #[serde(rename = "damped_J")]
+    pub damped_j: Option<f64>,
+    #[serde(rename = "elastic_J")]
+    pub elastic_j: Option<f64>,
+    pub efficiency: Option<f64>,
+    #[serde(rename = "final_load_N")]
+    pub final_load_n: f64,
+    pub h_end_m: Option<f64>,
+    pub class: &'static str,
+    pub gap_s: f64,
+    pub sensor_check: Option<f64>,
+    /// `OK`/`NOK` under a recipe; empty (null) without one, which is every recording until
+    /// recipes exist (issue 20).
+    pub judgement: Option<String>,
+    pub alert: Option<&'static str>,
+    pub alert_reason: Option<String>,
+    #[serde(rename = "peak_load_N")]
+    pub peak_load_n: f64,
+    pub t_end_s: f64,
+    pub h_start_m: Option<f64>,
+    pub residual: Option<f64>,
+    pub method: Option<&'static str>,
+}
+
+impl ExportRow {
+    pub fn new(file: &Path, log_time_ns: i64, r: &BlowEstimate) -> Self {
+        ExportRow {
+            file: file.display().to_string(),
+            wall_time: rfc3339_ns(log_time_ns),
+            wall_time_ns: log_time_ns,
+            billet: r.billet.billet,
+            billet_blow: r.billet.billet_blow,
+            blow: r.blow,
+            t_contact_s: r.t_contact_s,
+            v_impact_mps: r.v_impact_mps,
+            kinetic_in_j: r.kinetic_in_j,
+            plastic_j: r.plastic_j,
+            friction_j: r.friction_j,
+            damped_j: r.damped_j,
+            elastic_j: r.elastic_j,
+            efficiency: r.efficiency,
+            final_load_n: r.final_load_n,
+            h_end_m: r.h_end_m,
+            class: r.class.as_str(),
+            gap_s: r.gap_s,
+            sensor_check: r.sensor_check,
+            judgement: r.judgement.as_ref().and_then(|j| serde_json::to_string(j).ok()),
+            alert: r.alert.as_ref().map(|a| a.kind.as_str()),
+            alert_reason: r.alert.as_ref().map(|a| a.reason.clone()),
+            peak_load_n: r.peak_load_n,
+            t_end_s: r.t_end_s,
+            h_start_m: r.h_start_m,
+            residual: r.residual,
+            method: r.method.map(|m| m.as_str()),
+        }
+    }
+}
+
+/// `ns` since the epoch as `2026-11-24T07:15:18.123456789Z`.
+fn rfc3339_ns(ns: i64) -> String {
+    chrono::DateTime::from_timestamp_nanos(ns).format("%Y-%m-%dT%H:%M:%S%.9fZ").to_string()
+}
+
+pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
+    let mut files = Vec::new();
+    for input in &args.inputs {
+        files.extend(recordings(input)?);
+    }
+    let mut rows = Vec::new();
+    let mut corrupt = false;
+    for file in &files {
+        let mut reader = RecordReader::open(file).with_context(|| format!("{}: cannot export", file.display()))?;
+        for m in reader.by_ref() {
+            let m = m.with_context(|| format!("{}: cannot export", file.display()))?;
+            if let Payload::Result(r) = &m.payload {
+                rows.push(ExportRow::new(file, m.log_time_ns, r));
+            }
+        }
+        corrupt |= input_status(reader.report()) != ExitCode::SUCCESS;
+    }
+    match (&args.csv, &args.parquet) {
+        (Some(out), _) => write_csv(out, &rows)?,
+        (None, Some(out)) => write_parquet(out, &rows)?,
+        (None, None) => bail!("say where to write: --csv OUT.csv or --parquet OUT.parquet"),
+    }
+    eprintln!("forgemon: exported {} blows from {} recordings", rows.len(), files.len());
+    Ok(if corrupt { ExitCode::from(EXIT_CORRUPT_INPUT) } else { ExitCode::SUCCESS })
+}
+
+/// The recordings an input names: itself, or a directory's `*.mcap` and `*.mcap.part`
+/// files in name order.
+fn recordings(input: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    if !input.is_dir() {
+        return Ok(vec![input.to_path_buf()]);
+    }
+    let mut files: Vec<PathBuf> = std::fs::read_dir(input)
+        .with_context(|| format!("{}: cannot list", input.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file())
+        .filter(|p| p.to_str().is_some_and(|s| s.ends_with(".mcap") || s.ends_with(".mcap.part")))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        bail!("{}: a directory with no recordings (*.mcap, *.mcap.part)", input.display());
+    }
+    Ok(files)
+}
+
+fn write_csv(out: &Path, rows: &[ExportRow]) -> anyhow::Result<()> {
+    let mut w = csv::Writer::from_path(out).with_context(|| format!("{}: cannot write", out.display()))?;
+    if rows.is_empty() {
+        w.write_record(column_names())?;
+    }
+    for r in rows {
+        w.serialize(r).with_context(|| format!("{}: cannot write", out.display()))?;
+    }
+    w.flush().with_context(|| format!("{}: cannot write", out.display()))?;
+    Ok(())
+}
+
+/// The columns in order, as the CSV header names them.
+pub fn column_names() -> Vec<String> {
+    schema().fields().iter().map(|f| f.name().clone()).collect()
+}
+
+/// The Parquet schema: the CSV's columns, each typed; `wall_time` a UTC timestamp.
+fn schema() -> Schema {
+    let f64_col = |name: &str, nullable| Field::new(name, DataType::Float64, nullable);
+    let str_col = |name: &str, nullable| Field::new(name, DataType::Utf8, nullable);
+    let u32_col = |name: &str| Field::new(name, DataType::UInt32, false);
+    Schema::new(vec![
+        str_col("file", false),
+        Field::new("wall_time", DataType::Timestamp(TimeUnit::Nanosecond, Some("UTC".into())), false),
+        u32_col("billet"),
+        u32_col("billet_blow"),
+        u32_col("blow"),
+        f64_col("t_contact_s", false),
+        f64_col("v_impact_mps", false),
+        f64_col("kinetic_in_J", true),
+        f64_col("plastic_J", true),
+        f64_col("friction_J", true),
+        f64_col("damped_J", true),
+        f64_col("elastic_J", true),
+        f64_col("efficiency", true),
+        f64_col("final_load_N", false),
+        f64_col("h_end_m", true),
+        str_col("class", false),
+        f64_col("gap_s", false),
+        f64_col("sensor_check", true),
+        str_col("judgement", true),
+        str_col("alert", true),
+        str_col("alert_reason", true),
+        f64_col("peak_load_N", false),
+        f64_col("t_end_s", false),
+        f64_col("h_start_m", true),
+        f64_col("residual", true),
+        str_col("method", true),
+    ])
+}
+
+/// The rows as one Arrow batch, the columns in `schema()`'s order.
+fn batch(rows: &[ExportRow]) -> anyhow::Result<RecordBatch> {
+    fn f64s(rows: &[ExportRow], f: impl Fn(&ExportRow) -> Option<f64>) -> ArrayRef {
+        Arc::new(rows.iter().map(f).collect::<Float64Array>())
+    }
+    fn strs(rows: &[ExportRow], f: impl Fn(&ExportRow) -> Option<&str>) -> ArrayRef {
+        Arc::new(rows.iter().map(f).collect::<StringArray>())
+    }
+    fn u32s(rows: &[ExportRow], f: impl Fn(&ExportRow) -> u32) -> ArrayRef {
+        Arc::new(rows.iter().map(f).collect::<UInt32Array>())
+    }
+    let wall: TimestampNanosecondArray = rows.iter().map(|r| Some(r.wall_time_ns)).collect();
+    let columns: Vec<ArrayRef> = vec![
+        strs(rows, |r| Some(&r.file)),
+        Arc::new(wall.with_timezone("UTC")),
+        u32s(rows, |r| r.billet),
+        u32s(rows, |r| r.billet_blow),
+        u32s(rows, |r| r.blow),
+        f64s(rows, |r| Some(r.t_contact_s)),
+        f64s(rows, |r| Some(r.v_impact_mps)),
+        f64s(rows, |r| r.kinetic_in_j),
+        f64s(rows, |r| r.plastic_j),
+        f64s(rows, |r| r.friction_j),
+        f64s(rows, |r| r.damped_j),
+        f64s(rows, |r| r.elastic_j),
+        f64s(rows, |r| r.efficiency),
+        f64s(rows, |r| Some(r.final_load_n)),
+        f64s(rows, |r| r.h_end_m),
+        strs(rows, |r| Some(r.class)),
+        f64s(rows, |r| Some(r.gap_s)),
+        f64s(rows, |r| r.sensor_check),
+        strs(rows, |r| r.judgement.as_deref()),
+        strs(rows, |r| r.alert),
+        strs(rows, |r| r.alert_reason.as_deref()),
+        f64s(rows, |r| Some(r.peak_load_n)),
+        f64s(rows, |r| Some(r.t_end_s)),
+        f64s(rows, |r| r.h_start_m),
+        f64s(rows, |r| r.residual),
+        strs(rows, |r| r.method),
+    ];
+    Ok(RecordBatch::try_new(Arc::new(schema()), columns)?)
+}
+
+fn write_parquet(out: &Path, rows: &[ExportRow]) -> anyhow::Result<()> {
+    use parquet::arrow::ArrowWriter;
+    use parquet::basic::Compression;
+    use parquet::file::properties::WriterProperties;
+    let batch = batch(rows)?;
+    let file = File::create(out).with_context(|| format!("{}: cannot write", out.display()))?;
+    let props = WriterProperties::builder().set_compression(Compression::SNAPPY).build();
+    let mut w = ArrowWriter::try_new(BufWriter::new(file), batch.schema(), Some(props))?;
+    w.write(&batch).with_context(|| format!("{}: cannot write", out.display()))?;
+    w.close().with_context(|| format!("{}: cannot write", out.display()))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[test]
+    fn the_csv_header_and_the_parquet_schema_name_the_same_columns_in_order() {
+        // The CSV's header comes from the row's serde names, the Parquet's from `schema()`:
+        // one row written as CSV must start with exactly the schema's names.
+        let r = sample();
+        let mut w = csv::Writer::from_writer(Vec::new());
+        w.serialize(ExportRow::new(Path::new("a.mcap"), 0, &r)).expect("serialises");
+        let text = String::from_utf8(w.into_inner().expect("flushed")).expect("utf-8");
+        let header: Vec<&str> = text.lines().next().expect("a header").split(',').collect();
+        assert_eq!(header, column_names());
+        assert_eq!(batch(&[ExportRow::new(Path::new("a.mcap"), 0, &r)]).expect("a batch").num_columns(), header.len());
+    }
+
+    #[test]
+    fn wall_time_is_utc_with_nanoseconds() {
+        // 2026-11-24T07:15:18Z is 1 795 504 518 s after the epoch (`date -u -d @1795504518`).
+        assert_eq!(rfc3339_ns(1_795_504_518_000_000_123), "2026-11-24T07:15:18.000000123Z");
+    }
+
+    #[test]
+    fn exactly_one_output_is_required() {
+        let parse = |a: &[&str]| crate::cli::Cli::try_parse_from([&["forgemon", "export"], a].concat());
+        assert!(parse(&["a.mcap", "--csv", "o.csv"]).is_ok());
+        assert!(parse(&["a.mcap", "b", "--parquet", "o.parquet"]).is_ok());
+        assert!(parse(&["a.mcap"]).is_err(), "no output");
+        assert!(parse(&["a.mcap", "--csv", "o.csv", "--parquet", "o.parquet"]).is_err(), "two outputs");
+        assert!(parse(&["--csv", "o.csv"]).is_err(), "no input");
+    }
+
+    fn sample() -> BlowEstimate {
+        BlowEstimate {
+            judgement: None,
+            blow: 1,
+            t_contact_s: 0.5,
+            v_impact_mps: 3.9,
+            kinetic_in_j: None,
+            plastic_j: None,
+            friction_j: None,
+            damped_j: None,
+            elastic_j: None,
+            efficiency: None,
+            final_load_n: 0.0,
+            h_end_m: None,
+            class: crate::estimate::BlowClass::Incomplete,
+            alert: None,
+            t_end_s: 0.6,
+            peak_load_n: 0.0,
+            residual: None,
+            sensor_check: None,
+            method: None,
+            gap_s: 0.01,
+            h_start_m: None,
+            height_check: None,
+            billet: Default::default(),
+        }
+    }
+}

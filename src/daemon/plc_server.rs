@@ -1,0 +1,542 @@
+//! The PLC result image (CONTRACTS.md §8): the latest results as Modbus TCP holding
+//! registers, served by tokio-modbus's server on `[plc_server] listen`, unit id 1, so that
+//! the press's or hammer's PLC reads them every cycle; coil 0 acknowledges the latched
+//! alert, coil 1 says a new billet is in the dies.
+//!
+//! The image is rebuilt from the service's live feed (`live.rs`: each blow's result as the
+//! pipeline produced it) and the status snapshot (counters, sources, the latched alert) on
+//! every event and on the 1 s heartbeat; nothing is computed a second time. [`encode`] is
+//! the pure register encoding (scales, saturation, big-endian u32), [`answer`] one request
+//! against an image; the IO around them is the rest. A client that disconnects or sends
+//! garbage loses its connection, is counted in [`PlcStats`] and logged; the service and
+//! the other clients go on.
+
+use std::future::{Ready, ready};
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use anyhow::Context;
+use tokio::sync::{broadcast, mpsc, watch};
+use tokio::task::JoinHandle;
+use tokio_modbus::server::Service;
+use tokio_modbus::server::tcp::{Server, accept_tcp_connection};
+use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
+
+use super::Control;
+use super::live::{Live, LiveEvent};
+use super::status::{SharedStatus, StatusSnapshot};
+use crate::estimate::result::AlertKind;
+use crate::estimate::{BlowClass, BlowEstimate};
+
+/// The unit id the image answers (CONTRACTS.md §8).
+pub const PLC_UNIT_ID: u8 = 1;
+/// Holding registers 0–19.
+pub const IMAGE_WORDS: usize = 20;
+/// Coils 0 (acknowledge) and 1 (new billet).
+pub const COILS: u16 = 2;
+/// How often the heartbeat (register 0) counts up.
+pub const HEARTBEAT_PERIOD: Duration = Duration::from_secs(1);
+
+/// Register addresses of CONTRACTS.md §8 (a u32 takes its address and the next, high word
+/// first).
+pub mod reg {
+    pub const HEARTBEAT: usize = 0;
+    pub const STATUS_BITS: usize = 1;
+    pub const BLOWS: usize = 2;
+    pub const BILLETS: usize = 4;
+    pub const CLASS: usize = 6;
+    pub const EFFICIENCY: usize = 7;
+    pub const PLASTIC_J: usize = 8;
+    pub const KINETIC_J: usize = 10;
+    pub const IMPACT_MM_PER_S: usize = 12;
+    pub const PEAK_LOAD_100N: usize = 13;
+    pub const HEIGHT_10UM: usize = 15;
+    pub const JUDGEMENT: usize = 16;
+    pub const BLOWS_TO_TARGET: usize = 17;
+    pub const ADVISED_KINETIC_J: usize = 18;
+}
+
+/// Bits of register 1 (CONTRACTS.md §8).
+pub mod bit {
+    pub const RUNNING: u16 = 1 << 0;
+    pub const SOURCES_HEALTHY: u16 = 1 << 1;
+    pub const ALERT_LATCHED: u16 = 1 << 2;
+    pub const LAST_NOK: u16 = 1 << 3;
+    pub const LAST_INCOMPLETE: u16 = 1 << 4;
+    pub const MODEL_HEALTH: u16 = 1 << 5;
+    pub const SENSOR: u16 = 1 << 6;
+}
+
+/// Register 17 when the blows still needed are not known (no advisor yet, issue 20).
+pub const BLOWS_TO_TARGET_UNKNOWN: u16 = 0xFFFF;
+
+/// The warnings the image keeps from the blows' alerts until the operator acknowledges
+/// (bits 5 and 6): each kind stays set even when an alert of another kind is latched later.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Warnings {
+    pub model_health: bool,
+    pub sensor: bool,
+}
+
+impl Warnings {
+    /// Take the kind of an alert a blow raised.
+    pub fn raise(&mut self, kind: AlertKind) {
+        match kind {
+            AlertKind::ModelHealth => self.model_health = true,
+            AlertKind::Sensor => self.sensor = true,
+            AlertKind::ElasticBlow | AlertKind::Nok => {}
+        }
+    }
+}
+
+/// `x` rounded to the nearest whole number within `0..=max`; not a number gives 0.
+fn saturate(x: f64, max: u32) -> u32 {
+    if x.is_nan() || x <= 0.0 { 0 } else { x.round().min(f64::from(max)) as u32 }
+}
+
+fn sat_u16(x: f64) -> u16 {
+    saturate(x, u32::from(u16::MAX)) as u16
+}
+
+fn sat_u32(x: f64) -> u32 {
+    saturate(x, u32::MAX)
+}
+
+/// A count that does not fit a u32 saturates.
+fn count_u32(n: u64) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX)
+}
+
+/// Store `v` at `at` and `at + 1`, high word first.
+fn put_u32(words: &mut [u16; IMAGE_WORDS], at: usize, v: u32) {
+    words[at] = (v >> 16) as u16;
+    words[at + 1] = (v & 0xFFFF) as u16;
+}
+
+/// Register 6: 0 none yet, 1 soft, 2 intermediate, 3 hard, 4 incomplete.
+pub fn class_code(class: Option<BlowClass>) -> u16 {
+    match class {
+        None => 0,
+        Some(BlowClass::Soft) => 1,
+        Some(BlowClass::Intermediate) => 2,
+        Some(BlowClass::Hard) => 3,
+        Some(BlowClass::Incomplete) => 4,
+    }
+}
+
+/// The register image of CONTRACTS.md §8. `last` is the last blow's result as the live feed
+/// carried it; the counters, the sources and the latched alert come from `status`. A value
+/// that is not known (an incomplete blow's energies, a height without a process sheet) is
+/// 0; register 16 is the last blow's judgement against the active recipe, registers 17–19
+/// serve "unknown" and "none" until the live advisor exists (issue 20).
+pub fn encode(
+    heartbeat: u16,
+    status: &StatusSnapshot,
+    last: Option<&BlowEstimate>,
+    warn: Warnings,
+) -> [u16; IMAGE_WORDS] {
+    let mut w = [0u16; IMAGE_WORDS];
+    w[reg::HEARTBEAT] = heartbeat;
+    let healthy = !status.sources.is_empty() && status.sources.values().all(|s| s.state == "connected");
+    let flag = |on: bool, b: u16| if on { b } else { 0 };
+    w[reg::STATUS_BITS] = bit::RUNNING
+        | flag(healthy, bit::SOURCES_HEALTHY)
+        | flag(status.latched_alert.is_some(), bit::ALERT_LATCHED)
+        | flag(last.is_some_and(|b| !b.is_complete()), bit::LAST_INCOMPLETE)
+        | flag(last.and_then(|b| b.judgement.as_ref()).is_some_and(|j| !j.ok), bit::LAST_NOK)
+        | flag(warn.model_health, bit::MODEL_HEALTH)
+        | flag(warn.sensor, bit::SENSOR);
+    put_u32(&mut w, reg::BLOWS, count_u32(status.blows));
+    put_u32(&mut w, reg::BILLETS, count_u32(status.billets));
+    w[reg::CLASS] = class_code(last.map(|b| b.class));
+    if let Some(b) = last {
+        w[reg::EFFICIENCY] = sat_u16(b.efficiency.unwrap_or(0.0) * 1e4);
+        put_u32(&mut w, reg::PLASTIC_J, sat_u32(b.plastic_j.unwrap_or(0.0)));
+        put_u32(&mut w, reg::KINETIC_J, sat_u32(b.kinetic_in_j.unwrap_or(0.0)));
+        w[reg::IMPACT_MM_PER_S] = sat_u16(b.v_impact_mps * 1e3);
+        put_u32(&mut w, reg::PEAK_LOAD_100N, sat_u32(b.peak_load_n / 100.0));
+        w[reg::HEIGHT_10UM] = sat_u16(b.h_end_m.unwrap_or(0.0) * 1e5);
+    }
+    // Register 16: 0 no recipe (or a blow not judged: incomplete), 1 OK, 2 NOK.
+    w[reg::JUDGEMENT] = match last.and_then(|b| b.judgement.as_ref()) {
+        None => 0,
+        Some(j) if j.ok => 1,
+        Some(_) => 2,
+    };
+    w[reg::BLOWS_TO_TARGET] = BLOWS_TO_TARGET_UNKNOWN;
+    put_u32(&mut w, reg::ADVISED_KINETIC_J, 0);
+    w
+}
+
+/// What the server has done since it started (logged as it happens).
+#[derive(Debug, Default)]
+pub struct PlcStats {
+    pub connections: AtomicU64,
+    pub requests: AtomicU64,
+    /// Requests answered with a Modbus exception.
+    pub exceptions: AtomicU64,
+    /// Connections that ended on an error: garbage that did not decode, a reset.
+    pub connection_errors: AtomicU64,
+    /// Coil writes that reached the service.
+    pub commands: AtomicU64,
+}
+
+/// One request against `image` (Modbus Application Protocol v1.1b3 §6): holding registers
+/// 0–19 are read; coils 0 and 1 are written, and each coil written `true` sends its command
+/// through `command`. Every other function or address is refused with an exception; a
+/// command the service cannot take now is "server device busy".
+pub fn answer(
+    image: &[u16; IMAGE_WORDS],
+    request: Request<'_>,
+    mut command: impl FnMut(Control) -> bool,
+) -> Result<Response, ExceptionCode> {
+    match request {
+        Request::ReadHoldingRegisters(addr, n) => {
+            let (start, end) = (usize::from(addr), usize::from(addr) + usize::from(n));
+            if n == 0 || end > IMAGE_WORDS {
+                return Err(ExceptionCode::IllegalDataAddress);
+            }
+            Ok(Response::ReadHoldingRegisters(image[start..end].to_vec()))
+        }
+        Request::WriteSingleCoil(addr, on) => {
+            coils(addr, &[on], &mut command)?;
+            Ok(Response::WriteSingleCoil(addr, on))
+        }
+        Request::WriteMultipleCoils(addr, values) => {
+            coils(addr, &values, &mut command)?;
+            Ok(Response::WriteMultipleCoils(addr, values.len() as u16))
+        }
+        // The registers are read-only: a write is not a function this image offers; nor
+        // are reading coils (write-only), input registers or anything else.
+        _ => Err(ExceptionCode::IllegalFunction),
+    }
+}
+
+/// Coils `addr..` set to `values`: the command of each one set `true`.
+fn coils(addr: u16, values: &[bool], command: &mut impl FnMut(Control) -> bool) -> Result<(), ExceptionCode> {
+    if values.is_empty() || usize::from(addr) + values.len() > usize::from(COILS) {
+        return Err(ExceptionCode::IllegalDataAddress);
+    }
+    for (k, &on) in values.iter().enumerate() {
+        let c = match usize::from(addr) + k {
+            0 => Control::Acknowledge,
+            _ => Control::NewBillet { at_device_ns: None },
+        };
+        if on && !command(c) {
+            return Err(ExceptionCode::ServerDeviceBusy);
+        }
+    }
+    Ok(())
+}
+
+/// The Modbus service of one connection: the latest image, the control channel.
+#[derive(Clone)]
+struct ImageService {
+    image: watch::Receiver<[u16; IMAGE_WORDS]>,
+    control: mpsc::Sender<Control>,
+    stats: Arc<PlcStats>,
+}
+
+impl Service for ImageService {
+    type Request = SlaveRequest<'static>;
+    type Response = Response;
+    type Exception = ExceptionCode;
+    type Future = Ready<Result<Response, ExceptionCode>>;
+
+    fn call(&self, req: Self::Request) -> Self::Future {
+        self.stats.requests.fetch_add(1, Ordering::Relaxed);
+        let reply = if req.slave != PLC_UNIT_ID {
+            // Modbus TCP: the unit id names a device behind a gateway; there is no other.
+            Err(ExceptionCode::GatewayTargetDevice)
+        } else {
+            let image = *self.image.borrow();
+            answer(&image, req.request, |c| {
+                let sent = self.control.try_send(c).is_ok();
+                if sent {
+                    self.stats.commands.fetch_add(1, Ordering::Relaxed);
+                    tracing::info!(command = ?c, "PLC coil");
+                }
+                sent
+            })
+        };
+        if let Err(e) = &reply {
+            self.stats.exceptions.fetch_add(1, Ordering::Relaxed);
+            tracing::debug!(exception = ?e, "PLC request refused");
+        }
+        ready(reply)
+    }
+}
+
+/// The running PLC server; dropping it stops the server and the image's updates.
+pub struct PlcServer {
+    pub addr: SocketAddr,
+    pub stats: Arc<PlcStats>,
+    tasks: [JoinHandle<()>; 2],
+}
+
+impl Drop for PlcServer {
+    fn drop(&mut self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+    }
+}
+
+/// Serve the image on `listen` when it is set (`[plc_server] listen`); `None` otherwise.
+/// Fails only when the address cannot be listened on.
+pub async fn start(
+    listen: Option<SocketAddr>,
+    status: SharedStatus,
+    live: &Live,
+    control: mpsc::Sender<Control>,
+) -> anyhow::Result<Option<PlcServer>> {
+    let Some(listen) = listen else { return Ok(None) };
+    let listener = tokio::net::TcpListener::bind(listen)
+        .await
+        .with_context(|| format!("plc_server.listen {listen}: cannot listen"))?;
+    let addr = listener.local_addr().with_context(|| format!("plc_server.listen {listen}"))?;
+    let (image_tx, image_rx) = watch::channel(encode(0, &snapshot(&status), None, Warnings::default()));
+    let stats = Arc::new(PlcStats::default());
+    let updater = tokio::spawn(update(live.subscribe(), status, image_tx));
+    let service = ImageService { image: image_rx, control, stats: stats.clone() };
+    let server = tokio::spawn(serve(Server::new(listener), service));
+    tracing::info!(%addr, "PLC result image (Modbus TCP, unit {PLC_UNIT_ID}) listening");
+    Ok(Some(PlcServer { addr, stats, tasks: [updater, server] }))
+}
+
+/// A copy of the status (a poisoned lock still holds plain data).
+fn snapshot(status: &SharedStatus) -> StatusSnapshot {
+    status.lock().unwrap_or_else(|p| p.into_inner()).clone()
+}
+
+/// Accept clients until aborted; a failed accept (out of file descriptors) is logged and
+/// retried after a pause.
+async fn serve(server: Server, service: ImageService) {
+    let stats = service.stats.clone();
+    let on_connected = |stream, peer: SocketAddr| {
+        let service = service.clone();
+        async move {
+            service.stats.connections.fetch_add(1, Ordering::Relaxed);
+            tracing::info!(%peer, "PLC client connected");
+            accept_tcp_connection(stream, peer, move |_| Ok(Some(service.clone())))
+        }
+    };
+    let on_error = move |e: std::io::Error| {
+        stats.connection_errors.fetch_add(1, Ordering::Relaxed);
+        tracing::warn!("PLC client connection ended: {e}");
+    };
+    loop {
+        if let Err(e) = server.serve(&on_connected, on_error.clone()).await {
+            tracing::error!("PLC server: accepting a client failed: {e}");
+            tokio::time::sleep(Duration::from_millis(500)).await;
+        }
+    }
+}
+
+/// Rebuild the image on every live event and heartbeat, until the service stops.
+async fn update(
+    mut live: broadcast::Receiver<LiveEvent>,
+    status: SharedStatus,
+    image: watch::Sender<[u16; IMAGE_WORDS]>,
+) {
+    let mut heartbeat = 0u16;
+    let mut last: Option<Arc<BlowEstimate>> = None;
+    let mut warn = Warnings::default();
+    let mut tick = tokio::time::interval_at(tokio::time::Instant::now() + HEARTBEAT_PERIOD, HEARTBEAT_PERIOD);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tokio::select! {
+            ev = live.recv() => match ev {
+                Ok(LiveEvent::Blow(b)) => {
+                    if let Some(a) = &b.alert {
+                        warn.raise(a.kind);
+                    }
+                    last = Some(b);
+                }
+                Ok(LiveEvent::Acknowledged) => warn = Warnings::default(),
+                Ok(LiveEvent::Billet(_) | LiveEvent::NewBillet) => {}
+                Err(broadcast::error::RecvError::Lagged(n)) => {
+                    // Fell behind: the snapshot has the last blow and the latched alert.
+                    tracing::warn!(events = n, "PLC image fell behind the live feed");
+                    let s = snapshot(&status);
+                    last = s.last_blow.map(Arc::new);
+                    if let Some(a) = &s.latched_alert {
+                        warn.raise(a.kind);
+                    }
+                }
+                Err(broadcast::error::RecvError::Closed) => break,
+            },
+            _ = tick.tick() => heartbeat = heartbeat.wrapping_add(1),
+        }
+        // Encoded under the lock (about 50 ns, `benches/plc_image.rs`), not on a copy.
+        let words = encode(heartbeat, &status.lock().unwrap_or_else(|p| p.into_inner()), last.as_deref(), warn);
+        image.send_replace(words);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimate::result::Alert;
+
+    fn blow() -> BlowEstimate {
+        BlowEstimate {
+            judgement: None,
+            blow: 7,
+            t_contact_s: 1.0,
+            v_impact_mps: 5.2996,
+            kinetic_in_j: Some(10_280.4),
+            plastic_j: Some(7_195.6),
+            friction_j: Some(900.0),
+            damped_j: Some(500.0),
+            elastic_j: Some(100.0),
+            efficiency: Some(0.699_95),
+            final_load_n: 1.0e6,
+            h_end_m: Some(0.040_123),
+            class: BlowClass::Intermediate,
+            alert: None,
+            t_end_s: 1.02,
+            peak_load_n: 1_234_567.0,
+            residual: Some(0.0),
+            sensor_check: None,
+            method: None,
+            gap_s: 0.0,
+            h_start_m: None,
+            height_check: None,
+            billet: Default::default(),
+        }
+    }
+
+    fn u32_at(w: &[u16; IMAGE_WORDS], at: usize) -> u32 {
+        (u32::from(w[at]) << 16) | u32::from(w[at + 1])
+    }
+
+    #[test]
+    fn each_value_is_scaled_and_rounded_to_its_unit() {
+        let mut s = StatusSnapshot::new("hammer");
+        s.blows = 70_000; // above a u16: the high word carries it
+        s.billets = 3;
+        let w = encode(41, &s, Some(&blow()), Warnings::default());
+        assert_eq!(w[reg::HEARTBEAT], 41);
+        assert_eq!(w[reg::STATUS_BITS], bit::RUNNING, "no source yet: not healthy; nothing latched");
+        // Big-endian u32: 70 000 = 0x0001_1170, high word first.
+        assert_eq!((w[2], w[3]), (0x0001, 0x1170));
+        assert_eq!(u32_at(&w, reg::BILLETS), 3);
+        assert_eq!(w[reg::CLASS], 2, "intermediate");
+        assert_eq!(w[reg::EFFICIENCY], 7000, "0.69995 × 10 000 rounds to 7000");
+        assert_eq!(u32_at(&w, reg::PLASTIC_J), 7196);
+        assert_eq!(u32_at(&w, reg::KINETIC_J), 10_280);
+        assert_eq!(w[reg::IMPACT_MM_PER_S], 5300);
+        assert_eq!(u32_at(&w, reg::PEAK_LOAD_100N), 12_346);
+        assert_eq!(w[reg::HEIGHT_10UM], 4012);
+        assert_eq!((w[16], w[17], w[18], w[19]), (0, 0xFFFF, 0, 0), "no recipe, unknown, none");
+    }
+
+    #[test]
+    fn values_that_do_not_fit_saturate_and_unknown_ones_are_zero() {
+        let mut s = StatusSnapshot::new("hammer");
+        s.blows = u64::from(u32::MAX) + 5;
+        let mut b = blow();
+        b.v_impact_mps = 70.0; // 70 000 mm/s > 65 535
+        b.peak_load_n = 1e15; // 1e13 × 100 N > u32
+        b.h_end_m = Some(1.0); // 100 000 × 0.01 mm > 65 535
+        b.plastic_j = Some(-3.0); // below the type: 0
+        b.kinetic_in_j = Some(f64::NAN);
+        let w = encode(0, &s, Some(&b), Warnings::default());
+        assert_eq!(u32_at(&w, reg::BLOWS), u32::MAX);
+        assert_eq!(w[reg::IMPACT_MM_PER_S], u16::MAX);
+        assert_eq!(u32_at(&w, reg::PEAK_LOAD_100N), u32::MAX);
+        assert_eq!(w[reg::HEIGHT_10UM], u16::MAX);
+        assert_eq!(u32_at(&w, reg::PLASTIC_J), 0);
+        assert_eq!(u32_at(&w, reg::KINETIC_J), 0);
+        // An incomplete blow: no energies, its bit and class set.
+        let mut b = blow();
+        (b.class, b.efficiency, b.plastic_j, b.kinetic_in_j, b.h_end_m) =
+            (BlowClass::Incomplete, None, None, None, None);
+        let w = encode(0, &s, Some(&b), Warnings::default());
+        assert_eq!(w[reg::CLASS], 4);
+        assert_eq!(w[reg::STATUS_BITS] & bit::LAST_INCOMPLETE, bit::LAST_INCOMPLETE);
+        assert_eq!((w[reg::EFFICIENCY], u32_at(&w, reg::PLASTIC_J), w[reg::HEIGHT_10UM]), (0, 0, 0));
+        // Before the first blow: class 0, every value 0.
+        let w = encode(0, &StatusSnapshot::new("hammer"), None, Warnings::default());
+        assert_eq!(w[reg::CLASS], 0);
+        assert!(w[reg::EFFICIENCY..reg::JUDGEMENT].iter().all(|&x| x == 0));
+    }
+
+    #[test]
+    fn status_bits_follow_the_sources_the_latched_alert_and_the_warnings() {
+        let mut s = StatusSnapshot::new("hammer");
+        s.sources.insert(
+            "daq".into(),
+            super::super::status::SourceState { state: "connected".into(), ..Default::default() },
+        );
+        let alert = Alert { kind: AlertKind::Sensor, blow: 7, reason: String::new(), figures: Default::default() };
+        s.latched_alert = Some(alert);
+        let mut warn = Warnings::default();
+        warn.raise(AlertKind::Sensor);
+        warn.raise(AlertKind::ElasticBlow);
+        let w = encode(0, &s, None, warn);
+        assert_eq!(w[reg::STATUS_BITS], bit::RUNNING | bit::SOURCES_HEALTHY | bit::ALERT_LATCHED | bit::SENSOR);
+        s.sources.insert(
+            "plc".into(),
+            super::super::status::SourceState { state: "reconnecting".into(), ..Default::default() },
+        );
+        s.latched_alert = None;
+        warn.raise(AlertKind::ModelHealth);
+        let w = encode(0, &s, None, warn);
+        assert_eq!(w[reg::STATUS_BITS], bit::RUNNING | bit::MODEL_HEALTH | bit::SENSOR);
+    }
+
+    #[test]
+    fn registers_are_read_only_and_the_coils_send_their_commands() {
+        let image: [u16; IMAGE_WORDS] = std::array::from_fn(|i| i as u16 * 3);
+        let mut sent = Vec::new();
+        let mut take = |c| {
+            sent.push(c);
+            true
+        };
+        assert_eq!(
+            answer(&image, Request::ReadHoldingRegisters(18, 2), &mut take),
+            Ok(Response::ReadHoldingRegisters(vec![54, 57]))
+        );
+        let refused = |r| answer(&image, r, |_| true);
+        assert_eq!(refused(Request::ReadHoldingRegisters(19, 2)), Err(ExceptionCode::IllegalDataAddress));
+        assert_eq!(refused(Request::ReadHoldingRegisters(0, 0)), Err(ExceptionCode::IllegalDataAddress));
+        assert_eq!(refused(Request::WriteSingleRegister(0, 1)), Err(ExceptionCode::IllegalFunction));
+        assert_eq!(refused(Request::WriteMultipleRegisters(0, vec![1].into())), Err(ExceptionCode::IllegalFunction));
+        assert_eq!(refused(Request::ReadCoils(0, 2)), Err(ExceptionCode::IllegalFunction));
+        assert_eq!(refused(Request::ReadInputRegisters(0, 2)), Err(ExceptionCode::IllegalFunction));
+        assert_eq!(refused(Request::WriteSingleCoil(2, true)), Err(ExceptionCode::IllegalDataAddress));
+        assert_eq!(
+            answer(&image, Request::WriteSingleCoil(0, true), &mut take),
+            Ok(Response::WriteSingleCoil(0, true))
+        );
+        // Writing false does nothing; both at once send both.
+        assert!(answer(&image, Request::WriteSingleCoil(1, false), &mut take).is_ok());
+        assert!(answer(&image, Request::WriteMultipleCoils(0, vec![true, true].into()), &mut take).is_ok());
+        assert_eq!(sent, [Control::Acknowledge, Control::Acknowledge, Control::NewBillet { at_device_ns: None }]);
+        // A service that cannot take the command now says so.
+        assert_eq!(answer(&image, Request::WriteSingleCoil(1, true), |_| false), Err(ExceptionCode::ServerDeviceBusy));
+    }
+
+    #[tokio::test]
+    async fn other_units_are_refused_and_counted() {
+        let (tx, _rx) = watch::channel([7u16; IMAGE_WORDS]);
+        let (control, mut commands) = mpsc::channel(4);
+        let stats = Arc::new(PlcStats::default());
+        let s = ImageService { image: tx.subscribe(), control, stats: stats.clone() };
+        let req = |slave, request| SlaveRequest { slave, request };
+        assert_eq!(s.call(req(2, Request::ReadHoldingRegisters(0, 1))).await, Err(ExceptionCode::GatewayTargetDevice));
+        assert_eq!(
+            s.call(req(1, Request::ReadHoldingRegisters(0, 1))).await,
+            Ok(Response::ReadHoldingRegisters(vec![7]))
+        );
+        assert!(s.call(req(1, Request::WriteSingleCoil(1, true))).await.is_ok());
+        assert_eq!(commands.try_recv().ok(), Some(Control::NewBillet { at_device_ns: None }));
+        assert_eq!(stats.requests.load(Ordering::Relaxed), 3);
+        assert_eq!(stats.exceptions.load(Ordering::Relaxed), 1);
+        assert_eq!(stats.commands.load(Ordering::Relaxed), 1);
+    }
+}
