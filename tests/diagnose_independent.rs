@@ -23,6 +23,9 @@ use independent::{Hidden, Kind, billet, cases, machine, speeds};
 
 /// Assert seeds (module docs).
 const CALIB_SEED: u64 = 3;
+/// Seed for the assertions whose bounds were set on `CALIB_SEED` after the renderer was
+/// corrected (its hammer die at the impact speed, eq. 3, no ram weight in contact).
+const OTHER_SEED: u64 = 7;
 
 /// The base model's location on the calibration billet of a case, as `diagnose` reports it
 /// in `baseline.location`, and the mean lead of the ram's contact over the load's, samples.
@@ -113,4 +116,38 @@ fn location_on_independent_blows() {
         }
     }
     assert!(wrong.is_empty(), "{wrong:#?}");
+}
+
+/// The base model and the independent renderer describe the same machine (issue #17): on
+/// blows without an effect, the library's model with the machine file's parameters follows
+/// the renderer's elastic-plastic billet to about the noise. This failed on the hammer while
+/// the renderer's die started at rest (first peak 1.23 MN modelled against 0.50 MN rendered,
+/// seed 3, baseline holdout 0.20 of the peak): the hammer paper assigns the impact speed to
+/// both masses (§2.3.1), which the renderer now does.
+///
+/// Bounds set on seed 3 (largest nrmse per blow: hammer 0.0061, press 0.0134; first peaks
+/// within 0.4 % and 1 %), asserted on seed `OTHER_SEED`: nrmse ≤ 0.025 of the peak (about twice
+/// seed 3's worst, and still 8× under the 0.20 a die at rest gave), peaks within 3 %.
+#[test]
+fn the_base_model_matches_independent_blows_without_an_effect() {
+    for kind in [Kind::Hammer, Kind::Press] {
+        let m = machine(kind);
+        let b = billet(kind, &Hidden::None, &speeds(kind).0, 1.0, OTHER_SEED);
+        let n = b.refs.len();
+        let obj = Objective::new(b.refs, vec![true; n], b.setting, m.kind());
+        let sims = obj.simulate(&m).expect("the base model simulates the independent blows");
+        for (r, s) in obj.refs.iter().zip(&sims) {
+            let peak_model = s.load_n.iter().fold(0.0f64, |a, &v| a.max(v));
+            let e = forgemon::diagnose::localise::nrmse(r, s);
+            let what = format!(
+                "{kind:?} blow {:?}: nrmse {e:.4}, peak {:.3} MN rendered, {:.3} MN modelled",
+                r.blow_index,
+                r.peak_n / 1e6,
+                peak_model / 1e6
+            );
+            eprintln!("BASE {what}");
+            assert!(e <= 0.025, "{what}");
+            assert!((peak_model / r.peak_n - 1.0).abs() <= 0.03, "{what}");
+        }
+    }
 }
