@@ -2,12 +2,12 @@
 //! `independent/` (its own contact law, integrator, DAQ chain and hand-measured heights),
 //! read and diagnosed by the project as real captures would be.
 //!
-//! Seeds: nothing was tuned on this renderer. The location method and the verdict rule were
-//! chosen on the project's own renderer (capture seed 5, and the rates' `tune` set,
-//! `src/diagnose/rates.rs`); these tests assert on capture seeds 3/4 (calibration/holdout),
-//! whose results were first seen when the assertions below were written, and the harness
-//! (`tests/diagnose_independent_table.rs`) also reports seeds 1/2. Where a case does not
-//! hold, it is listed, not asserted, and not weakened.
+//! Seeds: the location method and the verdict rule were chosen on the project's own renderer
+//! (capture seed 5, and the rates' `tune` set, `src/diagnose/rates.rs`). On this renderer,
+//! seed 3 (calibration; 4 the holdout) is where the renderer's faults and the hammer's
+//! measured end of forming were found and fixed; the tests that assert on what was seen
+//! there say so and assert on seeds 7/8 (`OTHER_SEED`). The harness
+//! (`tests/diagnose_independent_table.rs`) reports seeds 3/4.
 //!
 //! CI tests here only render and localise (no fits: a few seconds each). The full diagnosis
 //! of every case, on both renderers, is the `#[ignore]`d harness in
@@ -82,37 +82,34 @@ fn the_ram_leads_the_load_by_the_closure_on_independent_blows() {
     }
 }
 
-/// Issue #17: the location on independent blows, per case, asserted where it holds
-/// (module docs): only the press's strain rate (forming 0.54 against the spring-back's
-/// 0.46 on seed 3). Not holding, and left open (issue #17), on seed 3:
-/// - every hammer case but the clearance at impact (0.55–0.63), the clearance in the
-///   forming (0.53 against 0.34). The base model's own impact differs here: the renderer's
-///   billet passes at most its yield load to the 26 kg die, which so takes about 0.2 ms (estimated)
-///   to come up to speed, where the library's rigid billet picks the die up at once (its peak is
-///   2.5× the renderer's on the first blow, 1.23 MN against 0.50 MN). The no-effect hammer
-///   sits at impact 0.63 too.
-/// - every press case split between forming and spring-back at about 0.5 each, the
-///   no-effect one too (its holdout error 0.0063 of the peak, about 2.5× its noise), and
-///   the compliant contact (0.0605, named by the verdict with shrink 0.90) at 0.50/0.50 to
-///   two decimals. An even split is what a misplaced measured end of forming gives (its
-///   samples are one phase's length error and the other's, with the same mean square
-///   load); suspected, not verified. The clearance shows at impact only 0.03, though the
-///   ram leads the load by 23 samples (0.49 on the project's renderer with the same lead);
-///   why is not established.
+/// Issue #17: the location on independent blows. A clearance at `impact`, a compliant contact
+/// in `spring_back`, the flow effects (friction rise, strain rate) in `forming`, on both
+/// machines. The no-effect cases have no location to hold; the damped foundation is not
+/// prescribed one by the issue (it shows in the forming on both renderers, 0.52–0.80).
+///
+/// Seeds: the causes were found and fixed on seed 3 (the renderer's press sensors rode on the
+/// tool instead of the ram, which split every press case 0.5/0.5 between forming and
+/// spring-back; the hammer's measured end of forming crept to the load's zero with a
+/// clearance, `localise::ram_speed_at_load_contact`). Asserted on seeds 7 and 8, first seen
+/// when this was written. Margins there: the hammer's clearance is the narrowest (impact
+/// 0.51 against the forming's 0.46), then the press's compliant contact (spring-back 0.47
+/// against 0.42 on seed 7).
 #[test]
 fn location_on_independent_blows() {
     let mut wrong = Vec::new();
-    for (name, kind, hidden) in cases() {
-        let (loc, lead) = baseline_location(kind, &hidden, CALIB_SEED);
-        eprintln!("LOCATION {name}: {} {:?} (ram lead {lead:.1} samples)", loc.phase(), loc.share());
-        let holds = match name {
-            "press-rate" => Some("forming"),
-            _ => None,
-        };
-        if let Some(phase) = holds
-            && loc.phase() != phase
-        {
-            wrong.push(format!("{name}: {} not {phase}, {:?}", loc.phase(), loc.share()));
+    for seed in [OTHER_SEED, OTHER_SEED + 1] {
+        for (name, kind, hidden) in cases() {
+            let expected = match hidden {
+                Hidden::Clearance { .. } => "impact",
+                Hidden::Compliant { .. } => "spring_back",
+                Hidden::FrictionRise { .. } | Hidden::StrainRate { .. } => "forming",
+                Hidden::None | Hidden::Foundation { .. } => continue,
+            };
+            let (loc, lead) = baseline_location(kind, &hidden, seed);
+            eprintln!("LOCATION {name} seed {seed}: {} {:?} (ram lead {lead:.1} samples)", loc.phase(), loc.share());
+            if loc.phase() != expected {
+                wrong.push(format!("{name} seed {seed}: {} not {expected}, {:?}", loc.phase(), loc.share()));
+            }
         }
     }
     assert!(wrong.is_empty(), "{wrong:#?}");

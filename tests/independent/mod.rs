@@ -322,8 +322,11 @@ fn blow(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64) -> Fine
         s.vl += 0.5 * dt * al;
         s.v3 += 0.5 * dt * a3;
         out.load_n.push(f_s);
-        out.ram_m.push(s.xu);
-        out.ram_acc.push(au);
+        // The encoder and the accelerometer ride on the ram (CONTRACTS §1, DESIGN §2.4): the
+        // hammer's upper mass, the press's heavy mass behind the link, not its tool.
+        let (x_ram, a_ram) = if rig.ram.is_some() { (s.xr, ar) } else { (s.xu, au) };
+        out.ram_m.push(x_ram);
+        out.ram_acc.push(a_ram);
     }
     out.h_end_m = h0 - s.p;
     out
