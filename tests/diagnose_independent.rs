@@ -2,12 +2,12 @@
 //! `independent/` (its own contact law, integrator, DAQ chain and hand-measured heights),
 //! read and diagnosed by the project as real captures would be.
 //!
-//! Seeds: nothing was tuned on this renderer. The location method and the verdict rule were
-//! chosen on the project's own renderer (capture seed 5, and the rates' `tune` set,
-//! `src/diagnose/rates.rs`); these tests assert on capture seeds 3/4 (calibration/holdout),
-//! whose results were first seen when the assertions below were written, and the harness
-//! (`tests/diagnose_independent_table.rs`) also reports seeds 1/2. Where a case does not
-//! hold, it is listed, not asserted, and not weakened.
+//! Seeds: the location method and the verdict rule were chosen on the project's own renderer
+//! (capture seed 5, and the rates' `tune` set, `src/diagnose/rates.rs`). On this renderer,
+//! seed 3 (calibration; 4 the holdout) is where the renderer's faults and the hammer's
+//! measured end of forming were found and fixed; the tests that assert on what was seen
+//! there say so and assert on seeds 7/8 (`OTHER_SEED`). The harness
+//! (`tests/diagnose_independent_table.rs`) reports seeds 3/4.
 //!
 //! CI tests here only render and localise (no fits: a few seconds each). The full diagnosis
 //! of every case, on both renderers, is the `#[ignore]`d harness in
@@ -23,6 +23,9 @@ use independent::{Hidden, Kind, billet, cases, machine, speeds};
 
 /// Assert seeds (module docs).
 const CALIB_SEED: u64 = 3;
+/// Seed for the assertions whose bounds were set on `CALIB_SEED` after the renderer was
+/// corrected (its hammer die at the impact speed, eq. 3, no ram weight in contact).
+const OTHER_SEED: u64 = 7;
 
 /// The base model's location on the calibration billet of a case, as `diagnose` reports it
 /// in `baseline.location`, and the mean lead of the ram's contact over the load's, samples.
@@ -79,38 +82,69 @@ fn the_ram_leads_the_load_by_the_closure_on_independent_blows() {
     }
 }
 
-/// Issue #17: the location on independent blows, per case, asserted where it holds
-/// (module docs): only the press's strain rate (forming 0.54 against the spring-back's
-/// 0.46 on seed 3). Not holding, and left open (issue #17), on seed 3:
-/// - every hammer case but the clearance at impact (0.55–0.63), the clearance in the
-///   forming (0.53 against 0.34). The base model's own impact differs here: the renderer's
-///   billet passes at most its yield load to the 26 kg die, which so takes about 0.2 ms (estimated)
-///   to come up to speed, where the library's rigid billet picks the die up at once (its peak is
-///   2.5× the renderer's on the first blow, 1.23 MN against 0.50 MN). The no-effect hammer
-///   sits at impact 0.63 too.
-/// - every press case split between forming and spring-back at about 0.5 each, the
-///   no-effect one too (its holdout error 0.0063 of the peak, about 2.5× its noise), and
-///   the compliant contact (0.0605, named by the verdict with shrink 0.90) at 0.50/0.50 to
-///   two decimals. An even split is what a misplaced measured end of forming gives (its
-///   samples are one phase's length error and the other's, with the same mean square
-///   load); suspected, not verified. The clearance shows at impact only 0.03, though the
-///   ram leads the load by 23 samples (0.49 on the project's renderer with the same lead);
-///   why is not established.
+/// Issue #17: the location on independent blows. A clearance at `impact`, a compliant contact
+/// in `spring_back`, the flow effects (friction rise, strain rate) in `forming`, on both
+/// machines. The no-effect cases have no location to hold; the damped foundation is not
+/// prescribed one by the issue (it shows in the forming on both renderers, 0.52–0.80).
+///
+/// Seeds: the causes were found and fixed on seed 3 (the renderer's press sensors rode on the
+/// tool instead of the ram, which split every press case 0.5/0.5 between forming and
+/// spring-back; the hammer's measured end of forming crept to the load's zero with a
+/// clearance, `localise::ram_speed_at_load_contact`). Asserted on seeds 7 and 8, first seen
+/// when this was written. Margins there: the hammer's clearance is the narrowest (impact
+/// 0.51 against the forming's 0.46), then the press's compliant contact (spring-back 0.47
+/// against 0.42 on seed 7).
 #[test]
 fn location_on_independent_blows() {
     let mut wrong = Vec::new();
-    for (name, kind, hidden) in cases() {
-        let (loc, lead) = baseline_location(kind, &hidden, CALIB_SEED);
-        eprintln!("LOCATION {name}: {} {:?} (ram lead {lead:.1} samples)", loc.phase(), loc.share());
-        let holds = match name {
-            "press-rate" => Some("forming"),
-            _ => None,
-        };
-        if let Some(phase) = holds
-            && loc.phase() != phase
-        {
-            wrong.push(format!("{name}: {} not {phase}, {:?}", loc.phase(), loc.share()));
+    for seed in [OTHER_SEED, OTHER_SEED + 1] {
+        for (name, kind, hidden) in cases() {
+            let expected = match hidden {
+                Hidden::Clearance { .. } => "impact",
+                Hidden::Compliant { .. } => "spring_back",
+                Hidden::FrictionRise { .. } | Hidden::StrainRate { .. } => "forming",
+                Hidden::None | Hidden::Foundation { .. } => continue,
+            };
+            let (loc, lead) = baseline_location(kind, &hidden, seed);
+            eprintln!("LOCATION {name} seed {seed}: {} {:?} (ram lead {lead:.1} samples)", loc.phase(), loc.share());
+            if loc.phase() != expected {
+                wrong.push(format!("{name} seed {seed}: {} not {expected}, {:?}", loc.phase(), loc.share()));
+            }
         }
     }
     assert!(wrong.is_empty(), "{wrong:#?}");
+}
+
+/// The base model and the independent renderer describe the same machine (issue #17): on
+/// blows without an effect, the library's model with the machine file's parameters follows
+/// the renderer's elastic-plastic billet to about the noise. This failed on the hammer while
+/// the renderer's die started at rest (first peak 1.23 MN modelled against 0.50 MN rendered,
+/// seed 3, baseline holdout 0.20 of the peak): the hammer paper assigns the impact speed to
+/// both masses (§2.3.1), which the renderer now does.
+///
+/// Bounds set on seed 3 (largest nrmse per blow: hammer 0.0061, press 0.0134; first peaks
+/// within 0.4 % and 1 %), asserted on seed `OTHER_SEED`: nrmse ≤ 0.025 of the peak (about twice
+/// seed 3's worst, and still 8× under the 0.20 a die at rest gave), peaks within 3 %.
+#[test]
+fn the_base_model_matches_independent_blows_without_an_effect() {
+    for kind in [Kind::Hammer, Kind::Press] {
+        let m = machine(kind);
+        let b = billet(kind, &Hidden::None, &speeds(kind).0, 1.0, OTHER_SEED);
+        let n = b.refs.len();
+        let obj = Objective::new(b.refs, vec![true; n], b.setting, m.kind());
+        let sims = obj.simulate(&m).expect("the base model simulates the independent blows");
+        for (r, s) in obj.refs.iter().zip(&sims) {
+            let peak_model = s.load_n.iter().fold(0.0f64, |a, &v| a.max(v));
+            let e = forgemon::diagnose::localise::nrmse(r, s);
+            let what = format!(
+                "{kind:?} blow {:?}: nrmse {e:.4}, peak {:.3} MN rendered, {:.3} MN modelled",
+                r.blow_index,
+                r.peak_n / 1e6,
+                peak_model / 1e6
+            );
+            eprintln!("BASE {what}");
+            assert!(e <= 0.025, "{what}");
+            assert!((peak_model / r.peak_n - 1.0).abs() <= 0.03, "{what}");
+        }
+    }
 }

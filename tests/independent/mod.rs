@@ -3,11 +3,16 @@
 //!
 //! - **Contact law**: the billet is elastic-plastic, a stiff spring capped at its yield load
 //!   (return mapping each step), not the library's rigid-plastic billet with its hybrid
-//!   phases. The yield load is `π r² σ (1 + 2μr/3h)` (Siebel's friction approximation, not
-//!   the library's exponential friction factor of eq. 3), r from volume constancy.
+//!   phases. The yield load is the hammer paper's eq. 3 (written out here, closed form), r
+//!   from volume constancy.
+//! - **The machine is the papers'**: the hammer paper's model (seed 000 §2.3.1, eqs. 1–2)
+//!   assigns the impact speed to the ram and to the lower tool (the clearances caught up
+//!   before forming); so does this renderer, and its ram feels no weight from first contact
+//!   (eq. 1). A die left at rest here, as this renderer once did, is a clearance that has not
+//!   been caught up: the library's base model then met a first peak 2.5× the rendered one.
 //! - **Integrator**: velocity Verlet at a fixed fine step (100 per DAQ sample), not
-//!   `forgemon::physics`' adaptive Dormand–Prince with located events. The ram feels
-//!   gravity (the library's blow does not).
+//!   `forgemon::physics`' adaptive Dormand–Prince with located events. The ram falls under
+//!   gravity until it touches.
 //! - **DAQ chain**: two cascaded second-order Butterworth low-passes at 0.4 × the sample
 //!   rate (bilinear transform, written here), decimation, a 16-bit load ADC over ±4 MN,
 //!   Gaussian noise, a 10 µm encoder, a noisy accelerometer on the ram.
@@ -198,8 +203,13 @@ fn yield_load(process: &Process, hidden: &Hidden, h_m: f64, rate_per_s: f64) -> 
         Hidden::StrainRate { m, rate_ref_per_s } => sigma *= (rate / rate_ref_per_s).powf(m),
         _ => {}
     }
-    let siebel = 1.0 + 2.0 * mu * r_sq.sqrt() / (3.0 * h_m);
-    std::f64::consts::PI * r_sq * sigma * siebel
+    // The hammer paper's eq. 3, F = π r h σ/μ ((e^A − 1)/A − 1), A = 2μr/h, written here as
+    // π r² σ times its friction factor 2/A ((e^A − 1)/A − 1) (→ 1 + A/3 for small A, Siebel's
+    // approximation, which is 2 % low at the hammer's flattest billets, A ≈ 0.5, and with the
+    // ram's weight made the no-effect hammer look like a flow stress off).
+    let a = (2.0 * mu * r_sq.sqrt() / h_m).max(1e-6);
+    let factor = 2.0 / a * ((a.exp() - 1.0) / a - 1.0);
+    std::f64::consts::PI * r_sq * sigma * factor
 }
 
 /// Integrate one blow from contact at `v0` on a billet of height `h0`.
@@ -233,7 +243,7 @@ fn blow(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64) -> Fine
         ram_acc: Vec::with_capacity(n),
         h_end_m: h0,
     };
-    let forces = |s: &State, rate: f64| -> (f64, f64, f64, f64, f64, f64) {
+    let forces = |s: &State, rate: f64, gravity: f64| -> (f64, f64, f64, f64, f64, f64) {
         // Billet force between the upper body and the lower one (or the fixed chain).
         let h = h0 - s.p;
         let fy = yield_load(process, hidden, h, rate);
@@ -263,8 +273,24 @@ fn blow(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64) -> Fine
         let a_3 = foundation.map_or(0.0, |(m, k, c)| (f_found - k * s.x3 - c * s.v3) / m);
         (f_b, f_s, a_u, a_r, a_l, a_3)
     };
-    let mut acc = forces(&s, rate);
-    for _ in 0..n {
+    let mut g_now = gravity;
+    let mut acc = forces(&s, rate, g_now);
+    // The hammer paper's model (§2.3.1, after eqs. 1–2): "the velocity v0 ... is assigned to
+    // mass 1 as well as mass 2"; the clearances of the lower tool-sensor system are caught up
+    // before forming starts and bring mass 2 to v0. So at first contact the die moves with the
+    // ram, its support unloaded. A hidden clearance is the case where it has not been caught up:
+    // the die then starts at rest across the gap (the library's `clearance`).
+    let die_caught_up = rig.kind == Kind::Hammer && rig.m_lower > 0.0 && gap == 0.0;
+    for step in 0..n {
+        if step == pre {
+            // From first contact the ram's weight is left out, as eq. 1 (m1 X1'' = F) does:
+            // 9 kN against loads of MN, but over a blow its work adds 1–2 % to the energy.
+            g_now = 0.0;
+            if die_caught_up {
+                s.vl = s.vu;
+            }
+            acc = forces(&s, rate, g_now);
+        }
         // Velocity Verlet (the dampers' velocities taken from the half step).
         let (_, _, au, ar, al, a3) = acc;
         s.vu += 0.5 * dt * au;
@@ -289,15 +315,18 @@ fn blow(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64) -> Fine
         // of a return mapping flip between steps that flow and steps that do not).
         let v_low = if massless { s.v3 } else { s.vl };
         rate = (s.vu - v_low).max(0.0) / h;
-        acc = forces(&s, rate);
+        acc = forces(&s, rate, g_now);
         let (_, f_s, au, ar, al, a3) = acc;
         s.vu += 0.5 * dt * au;
         s.vr += 0.5 * dt * ar;
         s.vl += 0.5 * dt * al;
         s.v3 += 0.5 * dt * a3;
         out.load_n.push(f_s);
-        out.ram_m.push(s.xu);
-        out.ram_acc.push(au);
+        // The encoder and the accelerometer ride on the ram (CONTRACTS §1, DESIGN §2.4): the
+        // hammer's upper mass, the press's heavy mass behind the link, not its tool.
+        let (x_ram, a_ram) = if rig.ram.is_some() { (s.xr, ar) } else { (s.xu, au) };
+        out.ram_m.push(x_ram);
+        out.ram_acc.push(a_ram);
     }
     out.h_end_m = h0 - s.p;
     out
