@@ -68,6 +68,8 @@ pub struct Pipeline {
     recipe: Option<Recipe>,
     /// Each complete blow's signature, kept for `forgemon teach` (`keep_signatures`).
     signatures: Option<Vec<(u32, u32, Signature)>>,
+    /// The machine's second-mode period, s: the signature's averaging window.
+    ring_period_s: f64,
     /// The last blow estimated, drawn for a screen (`BlowCurve`).
     last_curve: Option<std::sync::Arc<BlowCurve>>,
 }
@@ -75,6 +77,7 @@ pub struct Pipeline {
 impl Pipeline {
     pub fn new(machine: Machine, process: Option<Process>, cfg: PipelineConfig) -> Self {
         Pipeline {
+            ring_period_s: 1.0 / machine.second_mode_hz(),
             segmenter: Segmenter::new(cfg.segment),
             estimator: Estimator::new(machine, process, cfg.estimate),
             alerts: AlertRules::new(cfg.alerts),
@@ -177,7 +180,7 @@ impl Pipeline {
                         self.alerts.reset();
                     }
                     let sig = (self.recipe.is_some() || self.signatures.is_some())
-                        .then(|| signature(&blow, &estimate))
+                        .then(|| signature(&blow, &estimate, self.ring_period_s))
                         .flatten();
                     if let (Some(r), Some(sig)) = (&self.recipe, &sig) {
                         estimate.judgement = Some(r.judge(estimate.billet.billet_blow, sig));

@@ -17,6 +17,7 @@ pub mod replay;
 pub mod run;
 pub mod simulate;
 pub mod simulate_device;
+pub mod teach;
 
 /// forgemon: blow-by-blow monitoring of gravity drop hammers and screw presses.
 #[derive(Debug, Parser)]
@@ -50,6 +51,8 @@ pub enum Command {
     SimulateDevice(simulate_device::SimulateDeviceArgs),
     /// Plan the next blows from the billet's height to a target with the machine model.
     Advise(advise::AdviseArgs),
+    /// Learn a part's recipe (windows and an envelope per blow) from good billets.
+    Teach(teach::TeachArgs),
 }
 
 impl Cli {
@@ -66,6 +69,7 @@ impl Cli {
             Command::Demo(args) => demo::run(args),
             Command::SimulateDevice(args) => simulate_device::run(args),
             Command::Advise(args) => advise::run(args),
+            Command::Teach(args) => teach::run(args),
         }
     }
 }

@@ -39,6 +39,7 @@ struct RawBlow {
     plastic_j: [f64; 2],
     #[serde(rename = "peak_load_N")]
     peak_load_n: [f64; 2],
+    travel_m: [f64; 2],
     compression_m: Vec<f64>,
     #[serde(rename = "load_lower_N")]
     load_lower_n: Vec<f64>,
@@ -48,7 +49,7 @@ struct RawBlow {
 
 /// The header `write_recipe` puts above the tables.
 const HEADER: &str = "# forgemon recipe (CONTRACTS §9), taught by `forgemon teach`. Per blow: windows [min, max]\n\
-# on efficiency, plastic energy and peak load, and the load's envelope against the\n\
+# on efficiency, plastic energy, peak load and travel, and the load's envelope against the\n\
 # compression (the ram's travel since first contact). Each is the good billets' mean\n\
 # ± max(k·sd, tolerance); edit by hand if you like, the service checks the file on load.\n";
 
@@ -76,6 +77,7 @@ pub fn write_recipe(r: &Recipe) -> Result<String, toml::ser::Error> {
                 efficiency: [b.efficiency.min, b.efficiency.max],
                 plastic_j: [b.plastic_j.min, b.plastic_j.max],
                 peak_load_n: [b.peak_load_n.min, b.peak_load_n.max],
+                travel_m: [b.travel_m.min, b.travel_m.max],
                 compression_m: b.compression_m.clone(),
                 load_lower_n: b.load_lower_n.clone(),
                 load_upper_n: b.load_upper_n.clone(),
@@ -151,6 +153,7 @@ pub fn parse_recipe(origin: &str, text: &str) -> Result<Recipe, ConfigError> {
             efficiency: window("efficiency", b.efficiency)?,
             plastic_j: window("plastic_J", b.plastic_j)?,
             peak_load_n: window("peak_load_N", b.peak_load_n)?,
+            travel_m: window("travel_m", b.travel_m)?,
             compression_m: b.compression_m.clone(),
             load_lower_n: b.load_lower_n.clone(),
             load_upper_n: b.load_upper_n.clone(),
@@ -189,6 +192,7 @@ mod tests {
                 efficiency: Window { min: 0.9, max: 0.95 },
                 plastic_j: Window { min: 6000.0, max: 7000.0 },
                 peak_load_n: Window { min: 1e6, max: 1.2e6 },
+                travel_m: Window { min: 0.018, max: 0.020 },
                 compression_m: vec![0.0, 1e-3, 2e-3],
                 load_lower_n: vec![-1e4, 2e5, 4e5],
                 load_upper_n: vec![1e4, 3e5, 6e5],

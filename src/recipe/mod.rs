@@ -29,7 +29,7 @@ pub struct Tolerances {
     pub peak_load_fraction: f64,
     /// The envelope's load, a share of the learnt peak load.
     pub load_fraction: f64,
-    /// The envelope's widening along the compression, m.
+    /// The envelope's widening along the compression, and the travel's tolerance, m.
     pub compression_m: f64,
 }
 
@@ -37,7 +37,8 @@ impl Default for Tolerances {
     /// k = 3 (a normal lot's 99.7 %); 0.03 of efficiency (twice the estimator's accuracy on
     /// the paper machines, issue 16's 0.02 target with margin); 5 % of plastic energy and
     /// peak load (Helm's default learnt-sample limits); 5 % of the peak on the envelope;
-    /// 0.5 mm along the compression (a sawn billet's height spread, ±1 mm on 112 mm, halved).
+    /// 0.1 mm along the compression (ten encoder counts; the compression counts from first
+    /// contact, so a billet's height spread barely moves the curve along it).
     fn default() -> Self {
         Tolerances {
             k: 3.0,
@@ -45,7 +46,7 @@ impl Default for Tolerances {
             plastic_fraction: 0.05,
             peak_load_fraction: 0.05,
             load_fraction: 0.05,
-            compression_m: 0.5e-3,
+            compression_m: 0.1e-3,
         }
     }
 }
@@ -78,6 +79,9 @@ pub struct BlowWindows {
     pub efficiency: Window,
     pub plastic_j: Window,
     pub peak_load_n: Window,
+    /// The blow's deepest compression (the ram's travel from first contact), m: on an
+    /// energy-driven machine a harder billet takes the same energy over a shorter travel.
+    pub travel_m: Window,
     /// The envelope: compression points, m, and the load's bounds there, N.
     pub compression_m: Vec<f64>,
     pub load_lower_n: Vec<f64>,
@@ -183,6 +187,7 @@ fn learn_blow(blow: u32, sigs: &[&Signature], tol: Tolerances) -> BlowWindows {
         efficiency: Window::learn(&col(|s| s.efficiency), tol.k, tol.efficiency),
         plastic_j: Window::learn(&col(|s| s.plastic_j), tol.k, tol.plastic_fraction * plastic_mean.abs()),
         peak_load_n: Window::learn(&col(|s| s.peak_load_n), tol.k, tol.peak_load_fraction * peak_mean.abs()),
+        travel_m: Window::learn(&col(|s| s.max_compression_m()), tol.k, tol.compression_m),
         compression_m,
         load_lower_n,
         load_upper_n,
@@ -213,6 +218,7 @@ impl Recipe {
                 window("efficiency", sig.efficiency, &w.efficiency, 1.0, "", 3);
                 window("plastic_J", sig.plastic_j, &w.plastic_j, 1.0, "J", 0);
                 window("peak_load", sig.peak_load_n, &w.peak_load_n, 1e3, "kN", 0);
+                window("travel", sig.max_compression_m(), &w.travel_m, 1e-3, "mm", 2);
                 if let Some(r) = envelope_exit(w, sig) {
                     reasons.push(r);
                 }

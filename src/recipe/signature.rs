@@ -42,7 +42,10 @@ impl Signature {
 }
 
 /// The signature of a blow estimated whole; `None` for an incomplete one (never judged).
-pub fn signature(blow: &Blow, e: &BlowEstimate) -> Option<Signature> {
+/// The load is averaged over `ring_period_s` centred on each sample (the machine's second
+/// mode, `Machine::second_mode_hz`): a box that long cancels the ring, whose phase moves
+/// from billet to billet, and keeps the forming load the recipe is about.
+pub fn signature(blow: &Blow, e: &BlowEstimate, ring_period_s: f64) -> Option<Signature> {
     let (efficiency, plastic_j) = (e.efficiency?, e.plastic_j?);
     let s = &blow.samples;
     let end = blow.i_end.min(s.len().checked_sub(1)?);
@@ -56,10 +59,15 @@ pub fn signature(blow: &Blow, e: &BlowEstimate) -> Option<Signature> {
         _ => s[ic].disp_m,
     };
     let deepest = (ic..=end).max_by(|&a, &b| s[a].disp_m.total_cmp(&s[b].disp_m)).unwrap_or(ic);
+    let half = ((0.5 * ring_period_s / blow.period_s).round() as usize).min(s.len() / 2);
+    let smoothed = |k: usize| {
+        let (a, b) = (k.saturating_sub(half), (k + half).min(s.len() - 1));
+        s[a..=b].iter().map(|x| x.load_n).sum::<f64>() / (b - a + 1) as f64 - blow.load_zero_n
+    };
     let mut curve: Vec<(f64, f64)> = vec![(0.0, 0.0)];
-    for smp in &s[ic..=deepest] {
+    for (k, smp) in s.iter().enumerate().take(deepest + 1).skip(ic) {
         let x = smp.disp_m - x0;
-        let load = smp.load_n - blow.load_zero_n;
+        let load = smoothed(k);
         match curve.last_mut() {
             // Encoder steps: samples on the same count share a point, the highest load kept.
             Some(last) if x <= last.0 => last.1 = last.1.max(load),
