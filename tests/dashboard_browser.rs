@@ -80,8 +80,10 @@ fn the_page_shows_the_first_blow_live_and_the_acknowledged_alert() {
         .map(|w| vec![w[0], w[w.len() - 2], w[w.len() - 1]])
         .expect("the demo printed blow 1");
     let row: Vec<&str> = seen["first_row"].as_array().unwrap().iter().map(|c| c.as_str().unwrap()).collect();
-    // Columns: billet, blow, ..., efficiency (10th), ..., class (13th), alert.
-    assert_eq!(row.len(), 14, "{row:?}");
+    // Columns: billet, blow, ..., efficiency (10th), ..., class (13th), recipe (empty: the
+    // demo runs without one), alert.
+    assert_eq!(row.len(), 15, "{row:?}");
+    assert_eq!(row[13], "", "no recipe, no judgement");
     assert_eq!(row[1], printed[0], "blow number");
     let (page_eff, demo_eff): (f64, f64) = (row[9].parse().unwrap(), printed[1].parse().unwrap());
     // The page shows 3 decimals, the demo 2: they agree within the demo's rounding.

@@ -52,6 +52,7 @@ fn parts(dir: &std::path::Path, foxglove: std::net::SocketAddr) -> ServiceParts 
         config: ServiceConfig {
             machine_path: PathBuf::from("hammer-lg1000.machine.toml"),
             process_path: None,
+            recipe_path: None,
             recording_dir: dir.to_path_buf(),
             rotate_bytes: forgemon::config::service::DEFAULT_ROTATE_BYTES,
             rotate_seconds: forgemon::config::service::DEFAULT_ROTATE_SECONDS,

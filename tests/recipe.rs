@@ -180,6 +180,30 @@ fn teach_from_a_service_recording_and_replay_judges_with_it() {
         let j = &l["judgement"];
         assert_eq!((j["ok"].as_bool(), j["recipe"].as_str()), (Some(true), Some("flange")), "{l}");
     }
+    // The service judges with it (`demo --recipe`), records it, and a replay of that
+    // recording judges with the recorded recipe unasked.
+    let live = dir.path().join("live");
+    let out = std::process::Command::new(bin)
+        .args(["demo", "--fast", "--billets", "1", "--recipe"])
+        .arg(&recipe)
+        .arg("--dir")
+        .arg(&live)
+        .output()
+        .expect("demo runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let live_mcap = std::fs::read_dir(&live)
+        .expect("recorded")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .expect("an mcap file");
+    let out = std::process::Command::new(bin).arg("replay").arg(&live_mcap).arg("--json").output().expect("replay");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let judged: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).expect("json")["judgement"].clone())
+        .collect();
+    assert_eq!(judged.len(), 8);
+    assert!(judged.iter().all(|j| j["recipe"] == "flange" && j["ok"] == true), "{judged:?}");
     // A recipe file with an error is refused, naming the file and the key.
     let bad = dir.path().join("bad.recipe.toml");
     std::fs::write(&bad, text.replacen("k = 3.0", "k = -1.0", 1)).expect("write");

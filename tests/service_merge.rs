@@ -83,6 +83,7 @@ fn roles_from_two_daqs_on_their_own_clocks_are_merged() {
         config: ServiceConfig {
             machine_path: PathBuf::from(HAMMER),
             process_path: None,
+            recipe_path: None,
             recording_dir: dir.clone(),
             rotate_bytes: forgemon::config::service::DEFAULT_ROTATE_BYTES,
             rotate_seconds: forgemon::config::service::DEFAULT_ROTATE_SECONDS,

@@ -52,6 +52,9 @@ pub struct DemoArgs {
     /// Serve the Foxglove WebSocket protocol here.
     #[arg(long, value_name = "ADDR")]
     pub foxglove: Option<std::net::SocketAddr>,
+    /// Judge every blow against this recipe (`forgemon teach`), OK/NOK.
+    #[arg(long, value_name = "PART.recipe.toml")]
+    pub recipe: Option<PathBuf>,
 }
 
 /// The DAQ's channels: 1 N, 1 µm and 1 mm/s² per count.
@@ -85,6 +88,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let config = ServiceConfig {
         machine_path: PathBuf::from("hammer-lg1000.machine.toml"),
         process_path: None,
+        recipe_path: args.recipe.clone(),
         recording_dir: args.dir.clone(),
         rotate_bytes: crate::config::service::DEFAULT_ROTATE_BYTES,
         rotate_seconds: crate::config::service::DEFAULT_ROTATE_SECONDS,
@@ -163,6 +167,9 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
                         println!("{:>4}  {:>6}  {:>10.2}  {plastic_j:>9.0}  [{bar}] {efficiency:.2}  {}", e.blow, billet, e.v_impact_mps, e.class.as_str());
                     }
                     _ => println!("{:>4}  {:>6}  {:>10.2}  {:>9}  {:<31}  {} ({:.1} ms lost)", e.blow, billet, e.v_impact_mps, "-", "(not estimated: samples lost)", e.class.as_str(), e.gap_s * 1e3),
+                }
+                if let Some(j) = e.judgement.as_ref().filter(|j| !j.ok) {
+                    println!("      NOK against recipe '{}': {}", j.recipe, j.reasons.join("; "));
                 }
                 if let Some(a) = &e.alert {
                     println!("      ALERT {}: {}", a.kind.as_str(), a.reason);

@@ -13,7 +13,7 @@ use clap::Args;
 use super::{parse_process_warn, read_text};
 use crate::config::parse_machine;
 use crate::config::service::parse_tuning;
-use crate::daemon::{CONTROL_SOURCE, NEW_BILLET_STATE, SERVICE_CONFIG_NAME, tuned_config};
+use crate::daemon::{CONTROL_SOURCE, NEW_BILLET_STATE, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, tuned_config};
 use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline, PipelineEvent};
 use crate::record::{BlowBoundary, Payload, RecordReader, RecordWriter, Rotation};
@@ -67,6 +67,8 @@ struct Stored {
     machine: Option<String>,
     process: Option<String>,
     service: Option<String>,
+    /// The recipe the live run judged with (`daemon::RECIPE_CONFIG_NAME`).
+    recipe: Option<String>,
 }
 
 /// A configuration file's text and where it came from (for error messages).
@@ -146,6 +148,11 @@ pub(crate) fn replay_into<W: Write>(
         bail!("internal: a fresh pipeline has recipe '{}'", r.name);
     }
     setup(&mut pipeline);
+    // The recipe the live run judged with, unless the caller gave one.
+    if let (None, Some(text)) = (pipeline.recipe(), &stored.recipe) {
+        let origin = format!("{} (recipe.toml stored in it)", args.input.display());
+        pipeline.set_recipe(Some(crate::config::recipe::parse_recipe(&origin, text)?));
+    }
     if let Some(r) = pipeline.recipe()
         && r.machine != machine.kind().as_str()
     {
@@ -341,7 +348,8 @@ fn open_input(path: &Path) -> anyhow::Result<(Input, Stored)> {
             let p = path.join(name);
             p.exists().then(|| read_text(&p)).transpose()
         };
-        let stored = Stored { machine: read("machine.toml")?, process: read("process.toml")?, service: None };
+        let stored =
+            Stored { machine: read("machine.toml")?, process: read("process.toml")?, service: None, recipe: None };
         return Ok((Input::Files(super::capture_dir_files(path)?), stored));
     }
     let name = path.to_string_lossy();
@@ -359,6 +367,7 @@ fn open_input(path: &Path) -> anyhow::Result<(Input, Stored)> {
                 Payload::Config(c) if c.name == "machine.toml" => stored.machine = Some(c.text),
                 Payload::Config(c) if c.name == "process.toml" => stored.process = Some(c.text),
                 Payload::Config(c) if c.name == SERVICE_CONFIG_NAME => stored.service = Some(c.text),
+                Payload::Config(c) if c.name == RECIPE_CONFIG_NAME => stored.recipe = Some(c.text),
                 _ => {}
             }
         }

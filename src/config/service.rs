@@ -74,6 +74,8 @@ pub struct PlcCoil {
 pub struct ServiceConfig {
     pub machine_path: PathBuf,
     pub process_path: Option<PathBuf>,
+    /// `recipe`: the part's recipe file (CONTRACTS §9) every blow is judged against.
+    pub recipe_path: Option<PathBuf>,
     pub recording_dir: PathBuf,
     pub rotate_bytes: u64,
     pub rotate_seconds: u64,
@@ -101,6 +103,7 @@ pub struct ServiceConfig {
 struct RawService {
     machine: String,
     process: Option<String>,
+    recipe: Option<String>,
     recording: RawRecording,
     http: Option<RawHttp>,
     plc_server: Option<RawListen>,
@@ -182,6 +185,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
     Ok(ServiceConfig {
         machine_path: path(&raw.machine),
         process_path: raw.process.as_deref().map(path),
+        recipe_path: raw.recipe.as_deref().map(path),
         recording_dir: path(&raw.recording.dir),
         rotate_bytes,
         rotate_seconds,
@@ -541,6 +545,10 @@ gain = 0.01
         assert_eq!(c.http_token_file, Some(PathBuf::from("/etc/forgemon/token")));
         assert!(e(&format!("{GOOD}[plc_server]\nlisten = \"plc\"\n")).contains("key 'plc_server.listen'"));
         assert!(e(&format!("{GOOD}[foxglove]\nport = 8765\n")).contains("unknown key 'port'"));
+        // The recipe, relative to the service file's directory.
+        let m = "machine = \"hammer.machine.toml\"\n";
+        let c = ok(&GOOD.replace(m, &format!("{m}recipe = \"flange.recipe.toml\"\n")));
+        assert_eq!(c.recipe_path, Some(PathBuf::from("/etc/forgemon/flange.recipe.toml")));
     }
 
     #[test]

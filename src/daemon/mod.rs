@@ -160,7 +160,24 @@ pub async fn serve(
     // The PLC result image (CONTRACTS §8), when configured; stops when `_plc` drops.
     let _plc = plc_server::start(cfg.plc_listen, status.clone(), &live, control_tx.clone()).await?;
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
-    let feeder = Feeder::new(Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine)));
+    let mut pipeline = Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine));
+    if let Some(path) = &cfg.recipe_path {
+        // Read, checked and recorded (so a replay judges with it), or the start stops here.
+        let text = std::fs::read_to_string(path).with_context(|| format!("recipe {}: cannot read", path.display()))?;
+        let recipe = crate::config::recipe::parse_recipe(&path.display().to_string(), &text)?;
+        if recipe.machine != parts.machine.kind().as_str() {
+            anyhow::bail!(
+                "{}: recipe for a {} but the machine is a {}",
+                path.display(),
+                recipe.machine,
+                parts.machine.kind().as_str()
+            );
+        }
+        writer.write_config(t0, RECIPE_CONFIG_NAME, &text)?;
+        status.lock().map(|mut s| s.recipe = Some(recipe.name.clone())).ok();
+        pipeline.set_recipe(Some(recipe));
+    }
+    let feeder = Feeder::new(pipeline);
     let mut service = service::Service::new(writer, feeder, status, live, sinks, hooks, parts.config_path.clone());
 
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
@@ -212,6 +229,10 @@ pub fn tuned_config(tuning: &PipelineTuning, machine: &Machine) -> PipelineConfi
     p.estimate.idle_new_billet_s = tuning.idle_new_billet_s;
     p
 }
+
+/// Name of the active recipe as a recording stores it (topic `/config`): a replay judges
+/// with it unless given another.
+pub const RECIPE_CONFIG_NAME: &str = "recipe.toml";
 
 /// Name of the service configuration as a recording stores it (topic `/config`), at the
 /// start and again at each SIGHUP reload.

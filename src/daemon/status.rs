@@ -79,6 +79,9 @@ pub struct StatusSnapshot {
     /// The last alert raised, latched until the operator acknowledges it (`POST /ack`, the
     /// PLC's coil 0); `None` when there is none or it was acknowledged.
     pub latched_alert: Option<Alert>,
+    /// The name of the recipe the blows are judged against (`recipe` in `service.toml`),
+    /// `None` without one.
+    pub recipe: Option<String>,
     /// From the host receiving the samples that ended the last blow to its result, ms.
     pub last_result_latency_ms: Option<f64>,
     /// From the host receiving the samples that ended the last alerting blow to the
@@ -113,6 +116,7 @@ impl StatusSnapshot {
             last_class: None,
             last_blow: None,
             latched_alert: None,
+            recipe: None,
             last_result_latency_ms: None,
             last_webhook_latency_ms: None,
             sources: BTreeMap::new(),

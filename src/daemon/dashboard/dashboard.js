@@ -88,6 +88,15 @@ function renderBars(blows) {
   }
 }
 
+// The blow against the active recipe: OK, or NOK with its reasons as the cell's title;
+// empty without a recipe (and on an incomplete blow, never judged).
+function judgementCell(j) {
+  if (!j) return cell("", "jd");
+  const td = cell(j.ok ? "OK" : "NOK", "jd " + (j.ok ? "ok" : "nok"));
+  td.title = j.ok ? "recipe " + j.recipe : j.reasons.join("\n");
+  return td;
+}
+
 function renderBlows(blows) {
   const rows = blows.map((b) => {
     const tr = document.createElement("tr");
@@ -97,7 +106,7 @@ function renderBlows(blows) {
       cell(fmt(b.kinetic_in_J, 0)), cell(fmt(b.plastic_J, 0)), cell(fmt(b.friction_J, 0)),
       cell(fmt(b.damped_J, 0)), cell(fmt(b.elastic_J, 0)), cell(fmt(b.efficiency, 3), "eff"),
       cell(fmt(b.final_load_N / 1000, 1)), cell(b.h_end_m === null ? "–" : fmt(1000 * b.h_end_m, 2)),
-      cell(b.class, "cls " + classOf(b.class)), cell(b.alert ? b.alert.kind : "", "al"));
+      cell(b.class, "cls " + classOf(b.class)), judgementCell(b.judgement), cell(b.alert ? b.alert.kind : "", "al"));
     return tr;
   });
   $("blows").tBodies[0].replaceChildren(...rows);
