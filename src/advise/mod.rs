@@ -430,7 +430,13 @@ fn unreachable(mut plan: Plan, req: &PlanRequest, tried: &[f64], adv: &Advisor<'
     plan.why = Some(if overshoots {
         format!("the weakest blow ({weakest} m/s) takes the billet below the target's window")
     } else {
-        format!("the target is not reached within {MAX_BLOWS} blows")
+        match &req.speeds {
+            Speeds::Settings(v) => format!(
+                "no sequence of the settings {v:?} m/s lands within ±{:.1} mm of the target in {MAX_BLOWS} blows",
+                TARGET_TOLERANCE_M * 1e3
+            ),
+            Speeds::UpTo(_) => format!("the target is not reached within {MAX_BLOWS} blows"),
+        }
     });
     plan
 }

@@ -14,6 +14,7 @@ use tokio::sync::{mpsc, watch};
 
 use crate::acquire::serial::driver::{SerialConfig, SerialFormat, run_on_stream, system_clock_ns};
 use crate::acquire::{Backpressure, ChannelSpec};
+use crate::config::advisor::AdvisorConfig;
 use crate::config::service::ServiceConfig;
 use crate::config::{parse_machine, parse_process};
 use crate::daemon::{Control, Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
@@ -55,6 +56,13 @@ pub struct DemoArgs {
     /// Judge every blow against this recipe (`forgemon teach`), OK/NOK.
     #[arg(long, value_name = "PART.recipe.toml")]
     pub recipe: Option<PathBuf>,
+    /// Run the live blow advisor towards this billet height, m: after each blow it plans the
+    /// blows left (`[advisor]` in a service file).
+    #[arg(long, value_name = "M")]
+    pub target: Option<f64>,
+    /// The hammer's impact speeds the advisor may choose from, m/s (its drop heights).
+    #[arg(long, value_name = "V,...", value_delimiter = ',', default_value = "2.6,3.9,4.6,5.3")]
+    pub settings: Vec<f64>,
 }
 
 /// The DAQ's channels: 1 N, 1 µm and 1 mm/s² per count.
@@ -74,6 +82,14 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         anyhow::bail!(
             "--http {a}: the demo serves loopback only (a service file's [http] token_file guards other addresses)"
         );
+    }
+    if let Some(t) = args.target {
+        let limits = crate::config::limits::MEASURED_HEIGHT_M;
+        limits.check(t).map_err(|why| anyhow::anyhow!("--target {t}: {why}"))?;
+        let speed = crate::config::limits::IMPACT_SPEED_MPS;
+        for v in &args.settings {
+            speed.check(*v).map_err(|why| anyhow::anyhow!("--settings {v}: {why}"))?;
+        }
     }
     let machine = parse_machine("hammer-lg1000.machine.toml", MACHINE)?.machine;
     let steel = parse_process("steel-16NiCrMo13.process.toml", STEEL)?;
@@ -102,6 +118,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         new_billet_rise_m: None,
         idle_new_billet_s: crate::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
         sources: Vec::new(),
+        advisor: args.target.map(|target_height_m| AdvisorConfig {
+            target_height_m,
+            speeds: crate::advise::Speeds::Settings(args.settings.clone()),
+        }),
     };
     // No new-billet signal: the service finds each billet from the encoder (issue 22), so it
     // tracks the billet's height and splits plastic from friction work on every billet.
@@ -181,6 +201,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
                 println!("      {b}");
                 let _ = std::io::stdout().flush();
             })),
+            on_advice: Some(Box::new(|a| {
+                println!("      advisor: {}", advice_line(a));
+                let _ = std::io::stdout().flush();
+            })),
         };
         let summary = serve(parts, rx, shutdown_tx, stop_rx, hooks, Some((control_tx, control_rx))).await?;
         let stats = device.await.context("the simulated device task")??;
@@ -198,4 +222,25 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         Ok::<_, anyhow::Error>(())
     })?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// The advisor's plan in one line: the blows left and the next blow's speed, or why not.
+pub fn advice_line(a: &crate::daemon::advisor::Advice) -> String {
+    let Some(p) = &a.plan else { return format!("no plan: {}", a.why_not.as_deref().unwrap_or("unknown")) };
+    let target_mm = p.target_m * 1e3;
+    match (p.reachable, p.plan.first()) {
+        (false, _) => format!("{target_mm:.1} mm not reachable: {}", p.why.as_deref().unwrap_or("")),
+        (true, None) => format!("at the target, {target_mm:.1} mm ± 0.5"),
+        (true, Some(next)) => {
+            let speeds: Vec<String> = p.plan.iter().map(|b| format!("{:.2}", b.v0_mps)).collect();
+            format!(
+                "{} blow(s) from {:.2} mm to {target_mm:.1} mm at [{}] m/s; next {:.1} kJ{}",
+                p.plan.len(),
+                p.h_now_m * 1e3,
+                speeds.join(", "),
+                next.kinetic_j / 1e3,
+                if p.hard_blows > 0 { format!(", {} hard", p.hard_blows) } else { String::new() }
+            )
+        }
+    }
 }

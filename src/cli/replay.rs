@@ -148,7 +148,7 @@ pub(crate) fn replay_into<W: Write>(
     // The recipe the live run judged with, unless the caller gave one.
     if let (None, Some(text)) = (pipeline.recipe(), &stored.recipe) {
         let origin = format!("{} (recipe.toml stored in it)", args.input.display());
-        pipeline.set_recipe(Some(crate::config::recipe::parse_recipe(&origin, text)?));
+        pipeline.set_recipe(crate::daemon::recipe_switch::from_recorded(&origin, text)?);
     }
     if let Some(r) = pipeline.recipe()
         && r.machine != machine.kind().as_str()
@@ -196,6 +196,13 @@ pub(crate) fn replay_into<W: Write>(
                     // A new billet went into the dies here during the live run.
                     Payload::Status(st) if st.source == CONTROL_SOURCE && st.state == NEW_BILLET_STATE => {
                         replay.new_billet(last_log_ns, &st)?;
+                    }
+                    // The live run switched recipes here (`POST /recipe`); a rotated file
+                    // repeats the same text, which changes nothing.
+                    Payload::Config(c) if c.name == RECIPE_CONFIG_NAME && args.recipe.is_none() => {
+                        let origin = format!("{} (recipe.toml stored in it)", args.input.display());
+                        let recipe = crate::daemon::recipe_switch::from_recorded(&origin, &c.text)?;
+                        replay.feeder.pipeline_mut().set_recipe(recipe);
                     }
                     // The live run reloaded its alert rules here (SIGHUP); a rotated file
                     // repeats the same text, which changes nothing.

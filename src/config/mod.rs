@@ -7,6 +7,7 @@
 //! key, and a misspelt key gets "did you mean". Pure code: the caller reads the file and
 //! passes its text and name; nothing here opens a file.
 
+pub mod advisor;
 mod document;
 pub(crate) mod keys;
 pub mod limits;

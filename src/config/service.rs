@@ -96,6 +96,8 @@ pub struct ServiceConfig {
     /// `[billets] idle_s`: the idle gap after which a smaller rise starts a billet, s.
     pub idle_new_billet_s: f64,
     pub sources: Vec<SourceSpec>,
+    /// `[advisor]`: replan the billet's next blows after each one (issue 20).
+    pub advisor: Option<super::advisor::AdvisorConfig>,
 }
 
 #[derive(Deserialize)]
@@ -110,6 +112,7 @@ struct RawService {
     foxglove: Option<RawListen>,
     alerts: Option<RawAlerts>,
     billets: Option<RawBillets>,
+    advisor: Option<super::advisor::RawAdvisor>,
     /// Each read by its `kind` (`source.rs`).
     sources: Vec<IgnoredAny>,
 }
@@ -182,6 +185,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
     };
     let (new_billet_rise_m, idle_new_billet_s) = parse_billets(&doc, raw.billets.as_ref())?;
     let sources = parse_sources(&doc, raw.sources.len(), base)?;
+    let advisor = super::advisor::parse_advisor(&doc, raw.advisor.as_ref())?;
     Ok(ServiceConfig {
         machine_path: path(&raw.machine),
         process_path: raw.process.as_deref().map(path),
@@ -199,6 +203,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         new_billet_rise_m,
         idle_new_billet_s,
         sources,
+        advisor,
     })
 }
 

@@ -277,3 +277,26 @@ fn modbus_and_can_sources_deny_unknown_keys_too() {
     let e = parse_service("c", &dir, &can.replace("sample_rate_hz = 5000", "sample_rate_hz = -5")).unwrap_err();
     assert!(e.to_string().starts_with("c:20:1: key 'sources[1].sample_rate_hz' must be finite and > 0"), "{e}");
 }
+
+/// Issue 20: `[advisor]` takes a target and exactly one of `settings` and `v_max`, each
+/// checked against its physical range, the errors placed at the key.
+#[test]
+fn the_advisor_table_is_checked() {
+    let with = |t: &str| GOOD.replace("[[sources]]", &format!("[advisor]\n{t}\n[[sources]]"));
+    let c = parse_service("s.toml", Path::new("/"), GOOD).unwrap();
+    assert_eq!(c.advisor, None);
+    let c = parse_service("s.toml", Path::new("/"), &with("target_height_m = 0.03\nsettings = [3.9, 5.3]")).unwrap();
+    let a = c.advisor.expect("configured");
+    assert_eq!((a.target_height_m, a.speeds), (0.03, crate::advise::Speeds::Settings(vec![3.9, 5.3])));
+    let c = parse_service("s.toml", Path::new("/"), &with("target_height_m = 0.012\nv_max = 0.45")).unwrap();
+    assert_eq!(c.advisor.map(|a| a.speeds), Some(crate::advise::Speeds::UpTo(0.45)));
+    let e = |t: &str| parse_service("s.toml", Path::new("/"), &with(t)).unwrap_err().to_string();
+    assert!(e("target_height_m = 0.03").contains("settings = [m/s, ...] or v_max"), "{}", e("target_height_m = 0.03"));
+    let both = e("target_height_m = 0.03\nsettings = [3.9]\nv_max = 5.0");
+    assert!(both.contains("advisor.v_max") && both.contains("not both"), "{both}");
+    let fast = e("target_height_m = 0.03\nsettings = [3.9, 300.0]");
+    assert!(fast.contains("s.toml:") && fast.contains("advisor.settings[2]"), "{fast}");
+    assert!(e("target_height_m = 30\nv_max = 5.0").contains("advisor.target_height_m"));
+    assert!(e("target_height_m = 0.03\nsettings = []").contains("1 to 12 speeds"));
+    assert!(e("target_heigth_m = 0.03\nv_max = 5.0").contains("target_height_m"), "a misspelt key is named");
+}

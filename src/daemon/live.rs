@@ -23,6 +23,8 @@ pub enum LiveEvent {
     Billet(Arc<BilletSummary>),
     /// A new billet is in the dies.
     NewBillet,
+    /// The advisor replanned the billet's next blows (`advisor.rs`).
+    Advice(Arc<super::advisor::Advice>),
     /// The latched alert was acknowledged (`POST /ack`, the PLC's coil 0).
     Acknowledged,
 }

@@ -7,11 +7,13 @@
 //! The sources are spawned by the caller and speak `acquire::SourceEvent` on one channel,
 //! so the service neither knows nor cares which transport (or simulated device) feeds it.
 
+pub mod advisor;
 pub mod dashboard;
 pub mod foxglove;
 pub mod live;
 pub mod plc_server;
 pub mod queue;
+pub mod recipe_switch;
 mod service;
 pub mod sinks;
 pub mod status;
@@ -81,6 +83,9 @@ pub type RejectHook = Box<dyn FnMut(&str) + Send>;
 /// A front end's callback for each billet's summary.
 pub type BilletHook = Box<dyn FnMut(&BilletSummary) + Send>;
 
+/// A front end's callback for each plan of the live advisor.
+pub type AdviceHook = Box<dyn FnMut(&advisor::Advice) + Send>;
+
 /// Callbacks for a front end (the demo prints each blow).
 #[derive(Default)]
 pub struct Hooks {
@@ -90,6 +95,8 @@ pub struct Hooks {
     pub on_rejected: Option<RejectHook>,
     /// Called with each billet's summary, when the next starts and at the end of the run.
     pub on_billet: Option<BilletHook>,
+    /// Called with each plan of the live advisor (`[advisor]`).
+    pub on_advice: Option<AdviceHook>,
 }
 
 /// What the service did, when it stops.
@@ -151,7 +158,10 @@ pub async fn serve(
     }
     let live = live::Live::default();
     let token = dashboard::auth::Token::read(cfg.http_token_file.as_deref())?;
-    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone(), live.clone(), token));
+    let (recipe_tx, mut recipe_rx) = mpsc::channel::<recipe_switch::RecipeChange>(4);
+    let recipes = recipe_switch::routes(recipe_tx, parts.machine.kind().as_str());
+    let http =
+        tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone(), live.clone(), token, recipes));
     // The Foxglove live view: the recorder's tap feeds it; it stops when `serve` returns.
     let _foxglove = match cfg.foxglove_listen {
         Some(addr) => Some(foxglove::start(addr, &mut writer).await?),
@@ -159,6 +169,16 @@ pub async fn serve(
     };
     // The PLC result image (CONTRACTS §8), when configured; stops when `_plc` drops.
     let _plc = plc_server::start(cfg.plc_listen, status.clone(), &live, control_tx.clone()).await?;
+    // The live advisor (`[advisor]`), when configured; stops when `_advisor` drops.
+    let _advisor = advisor::start(
+        cfg.advisor.as_ref(),
+        &parts.machine,
+        &parts.machine_text,
+        parts.process.as_ref(),
+        status.clone(),
+        &live,
+        hooks.on_advice.take(),
+    )?;
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
     let mut pipeline = Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine));
     if let Some(path) = &cfg.recipe_path {
@@ -196,6 +216,7 @@ pub async fn serve(
                 Some(queue::Received::Dropped(n)) => service.on_dropped(n),
             },
             Some(c) = control_rx.recv() => service.on_control(c),
+            Some(r) = recipe_rx.recv() => service.switch_recipe(r),
             _ = sigterm.recv() => { tracing::info!("SIGTERM: finishing the recording"); break; }
             _ = tokio::signal::ctrl_c() => { tracing::info!("interrupted: finishing the recording"); break; }
             _ = stop.changed() => if *stop.borrow() { break },

@@ -69,7 +69,8 @@ pub mod bit {
     pub const SENSOR: u16 = 1 << 6;
 }
 
-/// Register 17 when the blows still needed are not known (no advisor yet, issue 20).
+/// Register 17 when the blows still needed are not known (no advisor, no measured height,
+/// or no plan reaches the target).
 pub const BLOWS_TO_TARGET_UNKNOWN: u16 = 0xFFFF;
 
 /// The warnings the image keeps from the blows' alerts until the operator acknowledges
@@ -130,7 +131,7 @@ pub fn class_code(class: Option<BlowClass>) -> u16 {
 /// carried it; the counters, the sources and the latched alert come from `status`. A value
 /// that is not known (an incomplete blow's energies, a height without a process sheet) is
 /// 0; register 16 is the last blow's judgement against the active recipe, registers 17–19
-/// serve "unknown" and "none" until the live advisor exists (issue 20).
+/// the live advisor's plan (`status.advice`): "unknown" and "none" without one.
 pub fn encode(
     heartbeat: u16,
     status: &StatusSnapshot,
@@ -165,8 +166,12 @@ pub fn encode(
         Some(j) if j.ok => 1,
         Some(_) => 2,
     };
-    w[reg::BLOWS_TO_TARGET] = BLOWS_TO_TARGET_UNKNOWN;
-    put_u32(&mut w, reg::ADVISED_KINETIC_J, 0);
+    // Registers 17–19: the live advisor's plan (`[advisor]`), unknown and none without one.
+    let advice = status.advice.as_ref();
+    w[reg::BLOWS_TO_TARGET] = advice
+        .and_then(|a| a.blows_to_target())
+        .map_or(BLOWS_TO_TARGET_UNKNOWN, |n| u16::try_from(n).unwrap_or(BLOWS_TO_TARGET_UNKNOWN - 1));
+    put_u32(&mut w, reg::ADVISED_KINETIC_J, sat_u32(advice.and_then(|a| a.next_kinetic_j()).unwrap_or(0.0)));
     w
 }
 
@@ -356,7 +361,7 @@ async fn update(
                     last = Some(b);
                 }
                 Ok(LiveEvent::Acknowledged) => warn = Warnings::default(),
-                Ok(LiveEvent::Billet(_) | LiveEvent::NewBillet) => {}
+                Ok(LiveEvent::Billet(_) | LiveEvent::NewBillet | LiveEvent::Advice(_)) => {}
                 Err(broadcast::error::RecvError::Lagged(n)) => {
                     // Fell behind: the snapshot has the last blow and the latched alert.
                     tracing::warn!(events = n, "PLC image fell behind the live feed");
@@ -377,11 +382,12 @@ async fn update(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::estimate::result::Alert;
 
-    fn blow() -> BlowEstimate {
+    /// A blow with every field set (the advisor's tests use it too).
+    pub(crate) fn blow() -> BlowEstimate {
         BlowEstimate {
             judgement: None,
             blow: 7,
@@ -432,6 +438,37 @@ mod tests {
         assert_eq!(u32_at(&w, reg::PEAK_LOAD_100N), 12_346);
         assert_eq!(w[reg::HEIGHT_10UM], 4012);
         assert_eq!((w[16], w[17], w[18], w[19]), (0, 0xFFFF, 0, 0), "no recipe, unknown, none");
+        // The advisor's plan: blows left, and the next blow's energy (70 123.6 J rounds to
+        // 70 124 = 0x0001_11EC).
+        let step = |kinetic_j| crate::advise::PlannedBlow {
+            blow: 1,
+            v0_mps: 4.6,
+            kinetic_j,
+            h_end_m: 0.05,
+            efficiency: 0.9,
+            class: "soft",
+        };
+        let plan = crate::advise::Plan {
+            h_now_m: 0.08,
+            target_m: 0.03,
+            reachable: true,
+            blows_to_target: Some(2),
+            hard_blows: 0,
+            plan: vec![step(70_123.6), step(5_000.0)],
+            why: None,
+        };
+        let advice =
+            |plan| super::super::advisor::Advice { billet: 1, after_blow: 3, plan, why_not: None, planned_ms: 30.0 };
+        s.advice = Some(advice(Some(plan.clone())));
+        let w = encode(41, &s, Some(&blow()), Warnings::default());
+        assert_eq!((w[17], w[18], w[19]), (2, 0x0001, 0x11EC));
+        // Not reachable, or no plan (an incomplete blow's height is not known): unknown, none.
+        s.advice = Some(advice(Some(crate::advise::Plan { reachable: false, blows_to_target: None, ..plan })));
+        let w = encode(41, &s, Some(&blow()), Warnings::default());
+        assert_eq!((w[17], w[18], w[19]), (0xFFFF, 0, 0));
+        s.advice = Some(advice(None));
+        let w = encode(41, &s, Some(&blow()), Warnings::default());
+        assert_eq!((w[17], w[18], w[19]), (0xFFFF, 0, 0));
     }
 
     #[test]

@@ -135,6 +135,17 @@ impl Service {
         }
     }
 
+    /// `POST /recipe`, `DELETE /recipe`: judge the following blows against another recipe
+    /// (already checked), recorded where it took effect so that a replay switches there too.
+    pub fn switch_recipe(&mut self, change: super::recipe_switch::RecipeChange) {
+        let name = change.recipe.as_ref().map(|r| r.name.clone());
+        self.feeder.pipeline_mut().set_recipe(change.recipe);
+        let r = self.writer.write_config(host_now_ns(), super::RECIPE_CONFIG_NAME, &change.text);
+        self.recorded("the new recipe", r);
+        tracing::info!(recipe = name.as_deref().unwrap_or("none"), "recipe switched");
+        self.status.lock().map(|mut s| s.recipe = name).ok();
+    }
+
     /// SIGHUP: read the service file again and take its alert rules; a bad file keeps the
     /// old ones. The new file is recorded where it took effect, so that a replay changes the
     /// rules at the same point.
@@ -228,10 +239,12 @@ impl Service {
             self.recorded("an alert", r);
             self.sinks.fire(alert, log_time_ns, &self.status);
         }
-        self.live.publish(LiveEvent::Blow(Arc::new(estimate.clone())));
+        // The hook first: a front end's line for the blow comes before what the live feed's
+        // listeners (the advisor's plan after it) make of it.
         if let Some(f) = self.hooks.on_blow.as_mut() {
             f(estimate);
         }
+        self.live.publish(LiveEvent::Blow(Arc::new(estimate.clone())));
     }
 
     fn on_billet(&mut self, b: &BilletSummary, log_time_ns: i64) {

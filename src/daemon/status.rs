@@ -82,6 +82,9 @@ pub struct StatusSnapshot {
     /// The name of the recipe the blows are judged against (`recipe` in `service.toml`),
     /// `None` without one.
     pub recipe: Option<String>,
+    /// The live advisor's plan for the billet's next blows (`[advisor]`), `None` without
+    /// one.
+    pub advice: Option<super::advisor::Advice>,
     /// From the host receiving the samples that ended the last blow to its result, ms.
     pub last_result_latency_ms: Option<f64>,
     /// From the host receiving the samples that ended the last alerting blow to the
@@ -117,6 +120,7 @@ impl StatusSnapshot {
             last_blow: None,
             latched_alert: None,
             recipe: None,
+            advice: None,
             last_result_latency_ms: None,
             last_webhook_latency_ms: None,
             sources: BTreeMap::new(),
@@ -320,15 +324,16 @@ async fn new_billet(State(tx): State<tokio::sync::mpsc::Sender<super::Control>>)
     }
 }
 
-/// Serve `GET /status`, `GET /metrics`, `POST /billet` and the dashboard (`GET /`, its
-/// state and events, `POST /ack`) on an already bound listener; with a token, only to
-/// requests that present it.
+/// Serve `GET /status`, `GET /metrics`, `POST /billet`, the dashboard (`GET /`, its state
+/// and events, `POST /ack`) and `more` (`POST /recipe`) on an already bound listener; with a
+/// token, only to requests that present it.
 pub async fn serve_http(
     listener: tokio::net::TcpListener,
     status: SharedStatus,
     control: tokio::sync::mpsc::Sender<super::Control>,
     live: Live,
     token: Option<Token>,
+    more: Router,
 ) {
     let app = Router::new()
         .route("/status", get(status_json))
@@ -336,6 +341,7 @@ pub async fn serve_http(
         .with_state(status.clone())
         .merge(Router::new().route("/billet", post(new_billet)).with_state(control.clone()))
         .merge(super::dashboard::routes(status, control, live))
+        .merge(more)
         .layer(axum::middleware::from_fn_with_state(token, require_token));
     if let Err(e) = axum::serve(listener, app).await {
         tracing::error!("status endpoint stopped: {e}");

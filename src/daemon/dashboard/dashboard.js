@@ -144,8 +144,37 @@ function renderHeader(status) {
   $("height").textContent = h === null || h === undefined ? "–" : fmt(1000 * h, 2) + " mm";
 }
 
+// The live advisor's plan (`[advisor]`): blows left to the target and the next blow's
+// speed and energy; the whole plan as the title. Hidden without an advisor.
+function renderAdvice(a) {
+  $("advice-kv").hidden = !a;
+  if (!a) return;
+  const p = a.plan;
+  let text, title;
+  if (!p) {
+    text = "unknown";
+    title = a.why_not || "";
+  } else if (!p.reachable) {
+    text = "target " + fmt(1000 * p.target_m, 1) + " mm not reachable";
+    title = p.why || "";
+  } else if (p.blows_to_target === 0) {
+    text = "at target " + fmt(1000 * p.target_m, 1) + " mm";
+    title = "";
+  } else {
+    const next = p.plan[0];
+    text = p.blows_to_target + " blow" + (p.blows_to_target === 1 ? "" : "s") + " to " + fmt(1000 * p.target_m, 1) +
+      " mm; next " + fmt(next.v0_mps, 2) + " m/s (" + fmt(next.kinetic_J / 1000, 1) + " kJ)" +
+      (p.hard_blows > 0 ? ", " + p.hard_blows + " hard" : "");
+    title = p.plan.map((b) => "blow " + b.blow + ": " + fmt(b.v0_mps, 2) + " m/s → " + fmt(1000 * b.h_end_m, 2) +
+      " mm, " + b.class).join("\n");
+  }
+  $("advice").textContent = text;
+  $("advice").title = title;
+}
+
 function render(st) {
   renderHeader(st.status);
+  renderAdvice(st.status.advice);
   renderLast(st.status.last_blow);
   renderAlert(st.status.latched_alert, st.acknowledged_alert);
   renderBars(st.billet_blows);
@@ -270,7 +299,7 @@ function connect() {
     // The browser retries by itself unless the server refused the stream outright.
     if (es.readyState === EventSource.CLOSED) setTimeout(connect, 3000);
   };
-  for (const name of ["blow", "billet", "new_billet", "ack", "resync"]) {
+  for (const name of ["blow", "billet", "new_billet", "ack", "resync", "advice"]) {
     es.addEventListener(name, () => { refresh(); if (name === "blow" || name === "resync") refreshCurve(); });
   }
 }

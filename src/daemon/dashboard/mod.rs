@@ -105,6 +105,7 @@ fn sse_event(e: &LiveEvent) -> Event {
     match e {
         LiveEvent::Blow(b) => named("blow", serde_json::to_string(&**b)),
         LiveEvent::Billet(b) => named("billet", serde_json::to_string(&**b)),
+        LiveEvent::Advice(a) => named("advice", serde_json::to_string(&**a)),
         LiveEvent::NewBillet => Event::default().event("new_billet").data("{}"),
         LiveEvent::Acknowledged => Event::default().event("ack").data("{}"),
     }
