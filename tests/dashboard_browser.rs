@@ -36,6 +36,7 @@ fn the_page_shows_the_first_blow_live_and_the_acknowledged_alert() {
     // whose alert stays latched for 4 s, until blow 16 raises the next.
     let mut demo = Command::new(env!("CARGO_BIN_EXE_forgemon"))
         .args(["demo", "--billets", "2", "--interval", "0.5", "--http", &format!("127.0.0.1:{port}")])
+        .args(["--target", "0.03"])
         .args(["--dir", dir.to_str().unwrap()])
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
@@ -103,6 +104,10 @@ fn the_page_shows_the_first_blow_live_and_the_acknowledged_alert() {
     assert!(before["cls"].as_str().unwrap().contains("latched"), "{before}");
     assert!(before["kind"].as_str().unwrap().starts_with("elastic_blow"), "{before}");
     assert_eq!(before["button_hidden"], false);
+    // The live advisor (`--target 0.03`) shows its plan, or why there is none, for 30 mm.
+    let advice = &seen["advice"];
+    assert_eq!(advice["hidden"], false, "{advice}");
+    assert!(advice["text"].as_str().unwrap().contains("30.0 mm"), "{advice}");
     let after = &seen["alert_after"];
     assert!(after["cls"].as_str().unwrap().contains("acked"), "{after}");
     assert!(after["kind"].as_str().unwrap().starts_with("acknowledged: elastic_blow"), "{after}");

@@ -139,6 +139,8 @@ def main():
             p.wait("!!document.querySelector('#alert.latched')", "the latched alert")
             curve_points = p.eval("curve ? [curve.blow, curve.measured.t_s.length, curve.model.t_s.length] : null")
             before = p.eval(ALERT)
+            advice = p.eval("({hidden: document.getElementById('advice-kv').hidden, "
+                            "text: document.getElementById('advice').textContent})")
             png = p.call("Page.captureScreenshot", format="png")["data"]
             with open(shot, "wb") as f:
                 f.write(base64.b64decode(png))
@@ -148,7 +150,7 @@ def main():
             base = url.split("?")[0].rstrip("/")
             status = json.load(urllib.request.urlopen(base + "/status"))
             print(json.dumps({"first_row": first, "blows_at_load": blows_at_load, "curve": curve_points,
-                              "alert_before": before, "alert_after": after,
+                              "alert_before": before, "alert_after": after, "advice": advice,
                               "status_latched_alert": status["latched_alert"]}))
         finally:
             proc.kill()
