@@ -12,6 +12,8 @@
 //! that. The test asserts on other seeds, never used in tuning: taught on 11–16, judged 17–20.
 //! Also taught from a recording the service made (`forgemon demo`), through the CLI.
 
+mod common;
+
 use forgemon::config::{parse_machine, parse_process};
 use forgemon::daq::{DaqSpec, daq_blows};
 use forgemon::physics::EffectSet;
@@ -147,28 +149,7 @@ fn a_good_billet_passes_and_colder_slower_or_stickier_ones_do_not() {
 fn teach_from_a_service_recording_and_replay_judges_with_it() {
     let bin = env!("CARGO_BIN_EXE_forgemon");
     let dir = tempfile::tempdir().expect("tempdir");
-    let rec = dir.path().join("rec");
-    let out = std::process::Command::new(bin)
-        .args(["demo", "--fast", "--billets", "3", "--dir"])
-        .arg(&rec)
-        .output()
-        .expect("demo runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let mcap = std::fs::read_dir(&rec)
-        .expect("recorded")
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
-        .expect("an mcap file");
-    let recipe = dir.path().join("flange.recipe.toml");
-    let machine = concat!(env!("CARGO_MANIFEST_DIR"), "/config/hammer-lg1000.machine.toml");
-    let out = std::process::Command::new(bin)
-        .args(["teach", "--machine", machine, "--reference"])
-        .arg(&mcap)
-        .arg("-o")
-        .arg(&recipe)
-        .output()
-        .expect("teach runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (mcap, recipe) = common::demo_and_teach(dir.path(), "rec", 3);
     let text = std::fs::read_to_string(&recipe).expect("written");
     let r = forgemon::config::recipe::parse_recipe("flange.recipe.toml", &text).expect("reads back");
     assert_eq!((r.name.as_str(), r.billets, r.blows.len()), ("flange", 3, 8));

@@ -59,27 +59,7 @@ fn http(addr: std::net::SocketAddr, method: &str, path: &str, body: &str) -> (u1
 
 /// A recipe taught by the CLI from a demo recording of three billets.
 fn taught_recipe(dir: &Path) -> String {
-    let bin = env!("CARGO_BIN_EXE_forgemon");
-    let rec = dir.join("demo");
-    let out = std::process::Command::new(bin)
-        .args(["demo", "--fast", "--billets", "3", "--dir"])
-        .arg(&rec)
-        .output()
-        .expect("demo runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let mcap = common::files_in(&rec).into_iter().find(|p| p.extension().is_some_and(|x| x == "mcap")).expect("mcap");
-    let recipe = dir.join("flange.recipe.toml");
-    let machine = common::root().join("config/hammer-lg1000.machine.toml");
-    let out = std::process::Command::new(bin)
-        .args(["teach", "--machine"])
-        .arg(&machine)
-        .arg("--reference")
-        .arg(&mcap)
-        .arg("-o")
-        .arg(&recipe)
-        .output()
-        .expect("teach runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (_, recipe) = common::demo_and_teach(dir, "demo", 3);
     std::fs::read_to_string(&recipe).expect("written")
 }
 

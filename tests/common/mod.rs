@@ -99,3 +99,29 @@ pub fn root() -> std::path::PathBuf {
 pub fn read(rel: &str) -> String {
     std::fs::read_to_string(root().join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
 }
+
+/// `forgemon demo --fast --billets N` recorded into `dir/name`, then `forgemon teach` on that
+/// recording: the recording and the recipe file written next to it (`dir/flange.recipe.toml`).
+pub fn demo_and_teach(dir: &std::path::Path, name: &str, billets: usize) -> (std::path::PathBuf, std::path::PathBuf) {
+    let bin = env!("CARGO_BIN_EXE_forgemon");
+    let rec = dir.join(name);
+    let out = std::process::Command::new(bin)
+        .args(["demo", "--fast", "--billets", &billets.to_string(), "--dir"])
+        .arg(&rec)
+        .output()
+        .expect("demo runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mcap = files_in(&rec).into_iter().find(|p| p.extension().is_some_and(|x| x == "mcap")).expect("an mcap file");
+    let recipe = dir.join("flange.recipe.toml");
+    let out = std::process::Command::new(bin)
+        .args(["teach", "--machine"])
+        .arg(root().join("config/hammer-lg1000.machine.toml"))
+        .arg("--reference")
+        .arg(&mcap)
+        .arg("-o")
+        .arg(&recipe)
+        .output()
+        .expect("teach runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    (mcap, recipe)
+}
