@@ -58,30 +58,41 @@ fn billet(m: &Machine, sheet: &str, height_factor: f64, v0s: &[f64], seed: u64) 
     (refs, Setting::Billet(p))
 }
 
-/// CPU time, ns: of the benchmarking thread (`/proc/thread-self/schedstat`'s first field,
-/// ns), or of the whole process, every thread (`/proc/self/stat`'s utime + stime, in ticks of
-/// 1/100 s, `getconf CLK_TCK` on this machine: the diagnosis runs for seconds).
+/// CPU time, ns: of the benchmarking thread, or of the whole process (every thread), by
+/// POSIX `clock_gettime` (`/proc`'s counters only move at scheduler ticks, too coarse for a
+/// blow). std has no CPU clock and the crate no `libc` dependency, so the call is declared
+/// here; the ids are Linux's (`<linux/time.h>`).
 #[derive(Debug, Clone, Copy)]
 enum Cpu {
     Thread,
     Process,
 }
 
+/// `struct timespec` on 64-bit Linux.
+#[repr(C)]
+struct Timespec {
+    tv_sec: i64,
+    tv_nsec: i64,
+}
+
+unsafe extern "C" {
+    fn clock_gettime(clock_id: i32, tp: *mut Timespec) -> i32;
+}
+
+const CLOCK_PROCESS_CPUTIME_ID: i32 = 2;
+const CLOCK_THREAD_CPUTIME_ID: i32 = 3;
+
 impl Cpu {
     fn now_ns(self) -> f64 {
-        match self {
-            Cpu::Thread => {
-                let s = std::fs::read_to_string("/proc/thread-self/schedstat").unwrap();
-                s.split_whitespace().next().unwrap().parse().unwrap()
-            }
-            Cpu::Process => {
-                let s = std::fs::read_to_string("/proc/self/stat").unwrap();
-                // Fields 14 and 15 (utime, stime); the command name before ')' may hold spaces.
-                let after = &s[s.rfind(')').unwrap() + 1..];
-                let f: Vec<f64> = after.split_whitespace().skip(11).take(2).map(|x| x.parse().unwrap()).collect();
-                (f[0] + f[1]) * 1e7
-            }
-        }
+        let id = match self {
+            Cpu::Thread => CLOCK_THREAD_CPUTIME_ID,
+            Cpu::Process => CLOCK_PROCESS_CPUTIME_ID,
+        };
+        let mut ts = Timespec { tv_sec: 0, tv_nsec: 0 };
+        // SAFETY: `ts` is a valid, writable `timespec`; the call writes only into it.
+        let rc = unsafe { clock_gettime(id, &mut ts) };
+        assert_eq!(rc, 0, "clock_gettime({id})");
+        ts.tv_sec as f64 * 1e9 + ts.tv_nsec as f64
     }
 }
 
