@@ -14,7 +14,7 @@
 //! contact sample nor a few samples of trigger jitter enter the fit.
 
 use crate::identify::model::default_prior;
-use crate::physics::blow::{SimOptions, simulate_blow};
+use crate::physics::blow::{SimOptions, simulate_blow_sensor};
 use crate::physics::effects::EffectSet;
 use crate::physics::integrator::Method;
 use crate::physics::machine::{Machine, MachineKind};
@@ -397,9 +397,8 @@ impl Objective {
                 post_s: r.duration_s(),
                 trace_dt_s: Some(r.dt_s),
             };
-            let res = simulate_blow(&plant, r.v0_mps, &opts).ok()?;
+            let (res, trace) = simulate_blow_sensor(&plant, r.v0_mps, &opts).ok()?;
             h = res.forming.map(|f| f.h_end_m).or(h);
-            let trace: Vec<f64> = res.trace.iter().map(|p| p.out.sensor_n).collect();
             let threshold = ALIGN_FRACTION * r.peak_n;
             // The first sample at or above the threshold (the damper's share of the load
             // jumps at first contact, so it may be the very first).

@@ -128,6 +128,9 @@ pub struct BilletLaw {
     r0sq_h0_m3: f64,
     /// Whether the flow stress depends on strain (else `ln` is skipped in the hot path).
     strain_dependent: bool,
+    /// Hansel–Spittel's `A exp(m1 T)`, the first factor of `FlowStress::sigma_pa`'s
+    /// product, computed once per blow instead of per evaluation (the same value).
+    hs_prefactor_pa: f64,
 }
 
 impl BilletLaw {
@@ -142,7 +145,21 @@ impl BilletLaw {
         let thermal_factor = (effects.thermal_q_dt * (blow_index.saturating_sub(1)) as f64).exp();
         let r0sq_h0_m3 = (0.5 * geometry.diameter_m).powi(2) * geometry.height_m;
         let strain_dependent = matches!(material, FlowStress::HanselSpittel { .. }) || effects.hardening_n != 0.0;
-        Self { geometry, material, mu0: friction, effects, thermal_factor, r0sq_h0_m3, strain_dependent }
+        let hs_prefactor_pa = match material {
+            FlowStress::HanselSpittel { a_pa, m1, temperature_c, .. } => a_pa * (m1 * temperature_c).exp(),
+            // Unused; 0 rather than NaN keeps the derived `PartialEq` reflexive.
+            FlowStress::Constant { .. } => 0.0,
+        };
+        Self {
+            geometry,
+            material,
+            mu0: friction,
+            effects,
+            thermal_factor,
+            r0sq_h0_m3,
+            strain_dependent,
+            hs_prefactor_pa,
+        }
     }
 
     pub fn geometry(&self) -> &BilletGeometry {
@@ -166,7 +183,17 @@ impl BilletLaw {
     /// Flow stress at height `h_m` and strain rate `epsdot_per_s`, with the load effects.
     pub fn sigma_pa(&self, h_m: f64, epsdot_per_s: f64) -> f64 {
         let eps = if self.strain_dependent { self.geometry.strain_at(h_m) } else { 0.0 };
-        let mut sigma = self.material.sigma_pa(eps, epsdot_per_s) * self.thermal_factor;
+        let material = match self.material {
+            FlowStress::Constant { sigma0_pa } => sigma0_pa,
+            // `FlowStress::sigma_pa` with its constant first factor taken from `new`: the
+            // product is evaluated left to right, so the result is the same to the bit.
+            FlowStress::HanselSpittel { m2, m3, m4, .. } => {
+                let eps = eps.max(STRAIN_FLOOR);
+                let rate = epsdot_per_s.max(STRAIN_RATE_FLOOR_PER_S);
+                self.hs_prefactor_pa * eps.powf(m2) * rate.powf(m3) * (m4 / eps).exp()
+            }
+        };
+        let mut sigma = material * self.thermal_factor;
         let e = &self.effects;
         if e.rate_m != 0.0 {
             sigma *= (epsdot_per_s.max(STRAIN_RATE_FLOOR_PER_S) / e.rate_ref_per_s).powf(e.rate_m);
@@ -264,5 +291,28 @@ mod tests {
         assert!((s / 333e6 - 1.0).abs() < 0.005, "{s}");
         // Floors keep the law finite at zero strain and rate.
         assert!(hs.sigma_pa(0.0, 0.0).is_finite());
+    }
+
+    #[test]
+    fn the_laws_hansel_spittel_is_the_flow_stress_to_the_bit() {
+        // `BilletLaw` keeps A exp(m1 T) from its constructor; the simulator's fixtures are
+        // compared to 1e-12, so the product must be the same to the last bit, not merely close.
+        let hs = FlowStress::HanselSpittel {
+            a_pa: 411.19e6,
+            m1: -0.00121,
+            m2: 0.21554,
+            m3: 0.01472,
+            m4: -0.00935,
+            temperature_c: 20.0,
+        };
+        let geometry = BilletGeometry { diameter_m: 0.035, height_m: 0.050 };
+        let law = BilletLaw::new(geometry.clone(), hs.clone(), 0.1, LoadEffects::NEUTRAL, 1);
+        for h_m in [0.050, 0.049_999, 0.041, 0.030, 0.012] {
+            for rate in [0.0, 1e-3, 0.7, 12.0, 95.0] {
+                let direct = hs.sigma_pa(geometry.strain_at(h_m), rate);
+                assert_eq!(law.sigma_pa(h_m, rate).to_bits(), direct.to_bits(), "h {h_m} rate {rate}");
+            }
+        }
+        assert_eq!(law, BilletLaw::new(geometry, hs, 0.1, LoadEffects::NEUTRAL, 1));
     }
 }

@@ -2,9 +2,9 @@
 //! open for the post window, recording the indicators of the hammer paper (§3.1.3), the
 //! energy ledger and, when asked, a sampled trace.
 
-use super::integrator::{self, IntegrationError, Limits, Method, Observer, Stats};
+use super::integrator::{self, Hybrid, IntegrationError, Limits, Method, Observer, Stats};
 use super::ledger::Ledger;
-use super::plant::{Contact, Mode, N, Outputs, Plant, V3, VL, VR, VU, WD, WF, WP, Z};
+use super::plant::{BaseHammer, Contact, Mode, N, NB, Outputs, Plant, V3, VL, VR, VU, WD, WF, WP, Z};
 
 /// Simulated time after the contact ends that a blow keeps running (CONTRACTS.md §6 `post`).
 pub const POST_WINDOW_S: f64 = 5e-3;
@@ -95,9 +95,75 @@ pub enum BlowError {
     Integration(#[from] IntegrationError),
 }
 
-/// Records indicators while the integrator runs.
-struct Recorder<'a> {
-    plant: &'a Plant,
+/// What a traced blow keeps at each sample.
+enum Trace {
+    /// Every output (`Plant::outputs`).
+    Outputs(Vec<TracePoint>),
+    /// The sensor's load alone, N: all a fit compares, and it needs no billet law.
+    Sensor(Vec<f64>),
+}
+
+/// A plant the blow is integrated on: the general `Plant`, or its specialisation on a
+/// smaller state (`BaseHammer`), which hands its states back in the general layout.
+trait Integrated<const M: usize>: Hybrid<M, Mode = Mode> {
+    fn sensor_at(&self, y: &[f64; M], mode: Mode) -> f64;
+    fn sensor_rate(&self, y: &[f64; M], dy: &[f64; M], mode: Mode) -> f64;
+    /// The state in the general plant's layout.
+    fn full(&self, y: &[f64; M]) -> [f64; N];
+    /// The sensor on the step's cubic Hermite interpolant at `theta`.
+    #[allow(clippy::too_many_arguments)]
+    fn sensor_within(
+        &self,
+        y0: &[f64; M],
+        dy0: &[f64; M],
+        y1: &[f64; M],
+        dy1: &[f64; M],
+        h: f64,
+        theta: f64,
+        mode: Mode,
+    ) -> f64 {
+        self.sensor_at(&integrator::hermite(y0, dy0, y1, dy1, h, theta), mode)
+    }
+}
+
+impl Integrated<N> for Plant {
+    fn sensor_at(&self, y: &[f64; N], mode: Mode) -> f64 {
+        Plant::sensor_at(self, y, mode)
+    }
+    fn sensor_rate(&self, y: &[f64; N], dy: &[f64; N], mode: Mode) -> f64 {
+        Plant::sensor_rate(self, y, dy, mode)
+    }
+    fn full(&self, y: &[f64; N]) -> [f64; N] {
+        *y
+    }
+}
+
+impl Integrated<NB> for BaseHammer<'_> {
+    fn sensor_at(&self, y: &[f64; NB], _mode: Mode) -> f64 {
+        BaseHammer::sensor_at(self, y)
+    }
+    fn sensor_rate(&self, y: &[f64; NB], dy: &[f64; NB], _mode: Mode) -> f64 {
+        BaseHammer::sensor_rate(self, y, dy)
+    }
+    fn full(&self, y: &[f64; NB]) -> [f64; N] {
+        self.expand(y)
+    }
+    fn sensor_within(
+        &self,
+        y0: &[f64; NB],
+        dy0: &[f64; NB],
+        y1: &[f64; NB],
+        dy1: &[f64; NB],
+        h: f64,
+        theta: f64,
+        _mode: Mode,
+    ) -> f64 {
+        BaseHammer::sensor_within(self, y0, dy0, y1, dy1, h, theta)
+    }
+}
+
+/// What a blow records while the integrator runs.
+struct Record {
     post_s: f64,
     peak_n: f64,
     /// Every exit from plastic flow: (t, h, sensor load).
@@ -107,60 +173,74 @@ struct Recorder<'a> {
     separation: Option<(f64, [f64; N], Mode)>,
     trace_dt: Option<f64>,
     next_sample: f64,
-    trace: Vec<TracePoint>,
+    trace: Trace,
     /// Sensor load and its rate at the end of the last step, reused as the next step's start.
     last_end: Option<(f64, f64, f64)>,
 }
 
-impl Observer<N, Mode> for Recorder<'_> {
+/// Records indicators while `sys` (`plant` or its specialisation) is integrated.
+struct Recorder<'a, S> {
+    plant: &'a Plant,
+    sys: &'a S,
+    r: Record,
+}
+
+impl<const M: usize, S: Integrated<M>> Observer<M, Mode> for Recorder<'_, S> {
     fn on_step(
         &mut self,
         t0: f64,
-        y0: &[f64; N],
-        dy0: &[f64; N],
+        y0: &[f64; M],
+        dy0: &[f64; M],
         t1: f64,
-        y1: &[f64; N],
-        dy1: &[f64; N],
+        y1: &[f64; M],
+        dy1: &[f64; M],
         mode: Mode,
     ) -> Option<f64> {
+        let (sys, r) = (self.sys, &mut self.r);
         let h = t1 - t0;
         // Peak of the sensor load within the step: the cubic through both ends.
-        let (s0, rate0) = match self.last_end {
-            Some((t, s, r)) if t == t0 => (s, r),
-            _ => (self.plant.sensor(y0, &self.plant.eval(y0, mode)), self.plant.sensor_rate(y0, dy0, mode)),
+        let (s0, rate0) = match r.last_end {
+            Some((t, s, rate)) if t == t0 => (s, rate),
+            _ => (sys.sensor_at(y0, mode), sys.sensor_rate(y0, dy0, mode)),
         };
-        let s1 = self.plant.sensor(y1, &self.plant.eval(y1, mode));
-        let rate1 = self.plant.sensor_rate(y1, dy1, mode);
-        self.last_end = Some((t1, s1, rate1));
+        let s1 = sys.sensor_at(y1, mode);
+        let rate1 = sys.sensor_rate(y1, dy1, mode);
+        r.last_end = Some((t1, s1, rate1));
         let (r0, r1) = (rate0 * h, rate1 * h);
-        self.peak_n = self.peak_n.max(s0).max(s1);
+        r.peak_n = r.peak_n.max(s0).max(s1);
         if h > 0.0 {
             for theta in cubic_extrema(s0, r0, s1, r1) {
                 let s = hermite_scalar(s0, r0, s1, r1, theta);
-                self.peak_n = self.peak_n.max(s);
+                r.peak_n = r.peak_n.max(s);
             }
         }
-        if let Some(dt) = self.trace_dt {
-            while self.next_sample <= t1 && h > 0.0 {
-                let theta = ((self.next_sample - t0) / h).clamp(0.0, 1.0);
-                let y = integrator::hermite(y0, dy0, y1, dy1, h, theta);
-                self.trace.push(TracePoint { t_s: self.next_sample, out: self.plant.outputs(&y, mode) });
-                self.next_sample += dt;
+        if let Some(dt) = r.trace_dt {
+            while r.next_sample <= t1 && h > 0.0 {
+                let theta = ((r.next_sample - t0) / h).clamp(0.0, 1.0);
+                match r.trace {
+                    Trace::Outputs(ref mut v) => {
+                        let y = sys.full(&integrator::hermite(y0, dy0, y1, dy1, h, theta));
+                        v.push(TracePoint { t_s: r.next_sample, out: self.plant.outputs(&y, mode) })
+                    }
+                    Trace::Sensor(ref mut v) => v.push(sys.sensor_within(y0, dy0, y1, dy1, h, theta, mode)),
+                }
+                r.next_sample += dt;
             }
         }
-        self.separation.map(|(ts, _, _)| ts + self.post_s)
+        r.separation.map(|(ts, _, _)| ts + r.post_s)
     }
 
-    fn on_event(&mut self, t: f64, y: &[f64; N], from: Mode, to: Mode, _guard: u8) {
+    fn on_event(&mut self, t: f64, y: &[f64; M], from: Mode, to: Mode, _guard: u8) {
+        let y = &self.sys.full(y);
+        let r = &mut self.r;
         // The mode (and possibly the state) changed: the cached step end is stale.
-        self.last_end = None;
+        r.last_end = None;
         if from.contact == Contact::Plastic && to.contact != Contact::Plastic {
             let o = self.plant.outputs(y, to);
-            self.plastic_exits.push((t, o.h_m, o.sensor_n));
+            r.plastic_exits.push((t, o.h_m, o.sensor_n));
         }
-        if to.contact != Contact::Plastic && !self.plastic_exits.is_empty() && self.plant.outputs(y, to).sensor_n <= 0.0
-        {
-            self.sensor_zeros.push(t);
+        if to.contact != Contact::Plastic && !r.plastic_exits.is_empty() && self.plant.outputs(y, to).sensor_n <= 0.0 {
+            r.sensor_zeros.push(t);
         }
         // The blow has ended when the tools part with the support path closed: with a
         // clearance, ram and lower tool can fly apart together before the gap has closed.
@@ -170,9 +250,9 @@ impl Observer<N, Mode> for Recorder<'_> {
         let parted = to.contact == Contact::Free && from.contact != Contact::Free;
         let lifted = to.contact == Contact::Free && from.engaged && !to.engaged;
         if (parted || lifted) && (to.engaged || self.plant.support_opening(y)) {
-            self.separation = Some((t, *y, to));
+            r.separation = Some((t, *y, to));
         } else if from.contact == Contact::Free && to.contact != Contact::Free {
-            self.separation = None;
+            r.separation = None;
         }
     }
 }
@@ -263,6 +343,37 @@ pub fn simulate_blow_traced_from(
     opts: &SimOptions,
     trace_t0_s: f64,
 ) -> Result<BlowResult, BlowError> {
+    let (res, _) = run(plant, v0_mps, opts, trace_t0_s, Trace::Outputs(Vec::new()), false)?;
+    Ok(res)
+}
+
+/// `simulate_blow` keeping only the sensor's load at each trace sample (from first contact,
+/// every `opts.trace_dt_s`), N; the result's `trace` is empty. The samples are the
+/// `sensor_n` of the full trace, bit for bit, without evaluating the billet law for the
+/// outputs a fit does not compare.
+pub fn simulate_blow_sensor(
+    plant: &Plant,
+    v0_mps: f64,
+    opts: &SimOptions,
+) -> Result<(BlowResult, Vec<f64>), BlowError> {
+    let (res, trace) = run(plant, v0_mps, opts, 0.0, Trace::Sensor(Vec::new()), false)?;
+    let sensor = match trace {
+        Trace::Sensor(v) => v,
+        Trace::Outputs(v) => v.iter().map(|p| p.out.sensor_n).collect(),
+    };
+    Ok((res, sensor))
+}
+
+/// Integrate one blow, recording `trace`'s kind of samples; the trace is handed back apart.
+/// A base hammer (`BaseHammer::of`) runs on its specialised plant unless `general`.
+fn run(
+    plant: &Plant,
+    v0_mps: f64,
+    opts: &SimOptions,
+    trace_t0_s: f64,
+    trace: Trace,
+    general: bool,
+) -> Result<(BlowResult, Trace), BlowError> {
     if !(v0_mps.is_finite() && v0_mps > 0.0) {
         return Err(BlowError::BadSpeed { v0_mps });
     }
@@ -271,8 +382,7 @@ pub fn simulate_blow_traced_from(
     }
     let (y0, mode0) = plant.initial_state(v0_mps);
     let kinetic_in_j = plant.kinetic_in(&y0);
-    let mut rec = Recorder {
-        plant,
+    let r = Record {
         post_s: opts.post_s,
         peak_n: 0.0,
         plastic_exits: Vec::new(),
@@ -280,7 +390,7 @@ pub fn simulate_blow_traced_from(
         separation: None,
         trace_dt: opts.trace_dt_s,
         next_sample: trace_t0_s.max(0.0),
-        trace: Vec::new(),
+        trace,
         last_end: None,
     };
     let limits = Limits {
@@ -289,8 +399,19 @@ pub fn simulate_blow_traced_from(
         initial_step_s: 1e-3 / plant.f_max_hz.max(1.0),
         max_steps: MAX_STEPS,
     };
-    let stats =
-        integrator::integrate(plant, opts.method, &scales(plant, v0_mps, kinetic_in_j), y0, mode0, limits, &mut rec)?;
+    let scale = scales(plant, v0_mps, kinetic_in_j);
+    let (stats, rec) = match BaseHammer::of(plant).filter(|_| !general) {
+        Some(b) => {
+            let mut obs = Recorder { plant, sys: &b, r };
+            let stats =
+                integrator::integrate(&b, opts.method, &b.reduce(&scale), b.reduce(&y0), mode0, limits, &mut obs)?;
+            (stats, obs.r)
+        }
+        None => {
+            let mut obs = Recorder { plant, sys: plant, r };
+            (integrator::integrate(plant, opts.method, &scale, y0, mode0, limits, &mut obs)?, obs.r)
+        }
+    };
     let (t_sep, y_sep, mode_sep) = rec.separation.ok_or(IntegrationError::NoEnd { t_max_s: MAX_BLOW_S })?;
     let energy = Ledger {
         kinetic_in_j,
@@ -303,7 +424,11 @@ pub fn simulate_blow_traced_from(
         .billet
         .as_ref()
         .map(|_| forming_indicators(&rec.plastic_exits, &rec.sensor_zeros, plant.h_start_m, t_sep));
-    Ok(BlowResult {
+    let (trace, kept) = match rec.trace {
+        Trace::Outputs(v) => (v, Trace::Outputs(Vec::new())),
+        sensor @ Trace::Sensor(_) => (Vec::new(), sensor),
+    };
+    let res = BlowResult {
         v0_mps,
         h_start_m: plant.h_start_m,
         forming,
@@ -311,6 +436,124 @@ pub fn simulate_blow_traced_from(
         contact_time_s: t_sep,
         energy,
         stats,
-        trace: rec.trace,
-    })
+        trace,
+    };
+    Ok((res, kept))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{parse_machine, parse_process};
+    use crate::physics::effects::{Effect, EffectSet};
+    use crate::physics::machine::Machine;
+    use crate::physics::process::Process;
+    use crate::physics::sequence::blow_plant;
+
+    fn machine(text: &str) -> Machine {
+        parse_machine("m", text).unwrap().machine
+    }
+    fn paper_hammer() -> Machine {
+        machine(include_str!("../../config/hammer-lg1000.machine.toml"))
+    }
+    fn steel() -> Process {
+        parse_process("steel", include_str!("../../config/steel-16NiCrMo13.process.toml")).unwrap()
+    }
+    fn effects(spec: &str) -> EffectSet {
+        EffectSet::from_effects(&[Effect::parse_spec(spec).unwrap()])
+    }
+
+    /// Blows `v0s` in sequence on both paths; asserts each result (indicators, ledger, work
+    /// counts and the trace) and each sensor trace equal, and returns how many blows ran on
+    /// the specialised plant.
+    fn both_paths(m: &Machine, fx: &EffectSet, p: &Process, v0s: &[f64], opts: &SimOptions) -> usize {
+        let mut h = p.billet.height_m;
+        let mut specialised = 0;
+        for (i, &v0) in v0s.iter().enumerate() {
+            let plant = blow_plant(m, fx, p, i + 1, h);
+            specialised += usize::from(BaseHammer::of(&plant).is_some());
+            let outputs = || Trace::Outputs(Vec::new());
+            let (fast, _) = run(&plant, v0, opts, 0.0, outputs(), false).unwrap();
+            let (general, _) = run(&plant, v0, opts, 0.0, outputs(), true).unwrap();
+            // Equal, not close: the specialisation drops only terms that are exactly zero,
+            // so any difference is a bug in it (the fits' fixtures compare to 1e-12).
+            assert_eq!(fast, general, "blow {} at {v0} m/s", i + 1);
+            let (_, Trace::Sensor(fast_s)) = run(&plant, v0, opts, 0.0, Trace::Sensor(Vec::new()), false).unwrap()
+            else {
+                panic!("a sensor trace")
+            };
+            let general_s: Vec<f64> = general.trace.iter().map(|p| p.out.sensor_n).collect();
+            assert_eq!(fast_s, general_s, "sensor trace of blow {} at {v0} m/s", i + 1);
+            h = general.forming.map_or(h, |f| f.h_end_m);
+        }
+        specialised
+    }
+
+    #[test]
+    fn the_base_hammer_blow_is_the_general_plants_to_the_bit() {
+        let traced =
+            SimOptions { method: Method::Dopri5 { rtol: 1e-6 }, trace_dt_s: Some(1e-5), ..SimOptions::default() };
+        // The paper's hammer and steel billet (seed 000 §3.2: 3.9 m/s, then up to 5.3 m/s),
+        // at the default and the fits' tolerances; RK4 as well (the same driver).
+        let v0s = [3.9, 4.5, 5.3, 5.3, 5.3];
+        for opts in [SimOptions::default(), traced] {
+            assert_eq!(both_paths(&paper_hammer(), &EffectSet::NONE, &steel(), &v0s, &opts), v0s.len());
+        }
+        let rk4 = SimOptions { method: Method::Rk4 { dt_s: 2e-7 }, trace_dt_s: Some(1e-5), ..SimOptions::default() };
+        assert_eq!(both_paths(&paper_hammer(), &EffectSet::NONE, &steel(), &[4.0], &rk4), 1);
+        // The load-side effects live in the billet law, which the specialised plant shares.
+        for spec in [
+            "friction_rise:exponent=1.0",
+            "strain_rate:m=0.1,rate_ref_per_s=1",
+            "strain_hardening:n=0.3,eps_ref=0.1",
+            "thermal:q_dT=0.3",
+        ] {
+            assert_eq!(both_paths(&paper_hammer(), &effects(spec), &steel(), &v0s[..3], &traced), 3, "{spec}");
+        }
+        // A light, soft hammer whose tools stick and part again (the diagnosis suite's).
+        let small = machine("kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n");
+        assert_eq!(both_paths(&small, &EffectSet::NONE, &steel(), &[4.0, 4.5, 5.0], &traced), 3);
+    }
+
+    #[test]
+    fn only_a_base_hammer_on_a_billet_is_specialised() {
+        let p = steel();
+        let plant = |m: &Machine, fx: &EffectSet| blow_plant(m, fx, &p, 1, p.billet.height_m);
+        let m = paper_hammer();
+        assert!(BaseHammer::of(&plant(&m, &EffectSet::NONE)).is_some());
+        for spec in [
+            "clearance:gap_m=3e-4",
+            "elastic_recovery:k_contact_N_per_m=1e9",
+            "foundation:m3_kg=20000,k3_N_per_m=2e9,c3_Ns_per_m=2e5",
+            "sensor_highpass:tau_s=2e-3",
+        ] {
+            assert!(BaseHammer::of(&plant(&m, &effects(spec))).is_none(), "{spec}");
+        }
+        assert!(BaseHammer::of(&Plant::new(&m, &EffectSet::NONE, None, 0.0)).is_none(), "bare strike");
+        let press = machine(include_str!("../../config/screw-press-spr400.machine.toml"));
+        assert!(BaseHammer::of(&plant(&press, &EffectSet::NONE)).is_none(), "press");
+    }
+
+    #[test]
+    fn the_sensor_trace_is_the_full_traces_sensor() {
+        // The general plant (a press on copper, press paper Table 1's 0.346 m/s, and a hammer
+        // with a machine-side effect) skips the billet law for the sensor; it must not move it.
+        let opts =
+            SimOptions { method: Method::Dopri5 { rtol: 1e-6 }, trace_dt_s: Some(1e-5), ..SimOptions::default() };
+        let copper = parse_process("cu", include_str!("../../config/copper-cu99.process.toml")).unwrap();
+        let press = machine(include_str!("../../config/screw-press-spr400.machine.toml"));
+        let cases = [
+            (press, EffectSet::NONE, copper, 0.346),
+            (paper_hammer(), effects("elastic_recovery:k_contact_N_per_m=1e9"), steel(), 3.9),
+        ];
+        for (m, fx, p, v0) in cases {
+            let plant = blow_plant(&m, &fx, &p, 1, p.billet.height_m);
+            assert!(BaseHammer::of(&plant).is_none());
+            let full = simulate_blow(&plant, v0, &opts).unwrap();
+            let (res, sensor) = simulate_blow_sensor(&plant, v0, &opts).unwrap();
+            assert!(sensor.len() > 100, "{} samples", sensor.len());
+            assert_eq!(sensor, full.trace.iter().map(|p| p.out.sensor_n).collect::<Vec<_>>());
+            assert_eq!(res, BlowResult { trace: Vec::new(), ..full });
+        }
+    }
 }

@@ -10,7 +10,10 @@
 //! `Free`, `Elastic` and `Plastic`, and the plastic rate follows from the consistency
 //! condition. `integrator` locates every switch.
 
+mod base_hammer;
 mod hybrid;
+
+pub use base_hammer::{BaseHammer, NB};
 
 use super::billet::{BilletLaw, STRAIN_RATE_FLOOR_PER_S};
 use super::effects::{EffectSet, Foundation};
@@ -230,7 +233,13 @@ impl Plant {
         }
     }
 
-    pub(super) fn eval(&self, y: &[f64; N], mode: Mode) -> Eval {
+    /// The geometry and the forces that follow from positions and velocities alone: all of
+    /// `eval` but the upsetting load and what depends on it (a rigid contact's force while
+    /// flowing, the accelerations, the plastic rate, the frictionless share). The guards
+    /// and the hammer's or a compliant contact's sensor need no more, and the billet law is
+    /// the costly part of `eval` (its `expm1`, and `pow`s with Hansel–Spittel). The values it
+    /// sets are those `eval` computes, bit for bit: `eval` starts from them.
+    pub(super) fn kinematics(&self, y: &[f64; N], mode: Mode) -> Eval {
         let mut e = Eval::default();
         let (x3, v3) = if self.foundation.is_some() { (y[X3], y[V3]) } else { (0.0, 0.0) };
         e.link_n = match self.ram {
@@ -266,6 +275,28 @@ impl Plant {
             };
             e.ddelta_mps = y[VU] - v_lower;
         }
+        e.sensor_raw_n = match self.lower {
+            Lower::Mass { .. } => e.support_n,
+            Lower::Chain { .. } => e.contact_n,
+        };
+        e
+    }
+
+    /// Whether the sensor's load follows from `kinematics` alone: it does unless it is the
+    /// force of a rigid contact (a press without compliance, which `new` never builds).
+    pub(super) fn sensor_is_kinematic(&self) -> bool {
+        matches!(self.lower, Lower::Mass { .. }) || !self.rigid()
+    }
+
+    /// Sensor output at a state, without the billet law where it is not needed.
+    pub(super) fn sensor_at(&self, y: &[f64; N], mode: Mode) -> f64 {
+        let e = if self.sensor_is_kinematic() { self.kinematics(y, mode) } else { self.eval(y, mode) };
+        self.sensor(y, &e)
+    }
+
+    /// Forces and rates at a state: `kinematics`, then the billet law and the dynamics.
+    pub(super) fn eval(&self, y: &[f64; N], mode: Mode) -> Eval {
+        let mut e = self.kinematics(y, mode);
         // The upsetting load is needed only while the billet flows.
         let (total, frictionless) = if mode.contact == Contact::Plastic {
             self.upset(e.h_m, e.ddelta_mps)

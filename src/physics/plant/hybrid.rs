@@ -6,15 +6,15 @@ use super::*;
 
 // Guard identities.
 pub(super) const G_TOUCH: u8 = 0;
-const G_REL_VEL_ZERO: u8 = 1;
-const G_STICK_ZERO: u8 = 2;
-const G_STICK_YIELD: u8 = 3;
-const G_OPEN: u8 = 4;
-const G_YIELD: u8 = 5;
-const G_UNLOAD: u8 = 6;
-const G_ENGAGE: u8 = 7;
-const G_DISENGAGE: u8 = 8;
-const G_SENSOR_ZERO: u8 = 9;
+pub(super) const G_REL_VEL_ZERO: u8 = 1;
+pub(super) const G_STICK_ZERO: u8 = 2;
+pub(super) const G_STICK_YIELD: u8 = 3;
+pub(super) const G_OPEN: u8 = 4;
+pub(super) const G_YIELD: u8 = 5;
+pub(super) const G_UNLOAD: u8 = 6;
+pub(super) const G_ENGAGE: u8 = 7;
+pub(super) const G_DISENGAGE: u8 = 8;
+pub(super) const G_SENSOR_ZERO: u8 = 9;
 
 impl Plant {
     /// Where the rigid contact goes when the billet touches or the bodies stop approaching.
@@ -150,7 +150,9 @@ impl Hybrid<N> for Plant {
     }
 
     fn guards(&self, y: &[f64; N], dy: &[f64; N], mode: Mode, out: &mut Guards) {
-        let e = self.eval(y, mode);
+        // Every guard is a function of the kinematics (and of `dy`); the flow load enters
+        // only the yield guards, computed there.
+        let e = self.kinematics(y, mode);
         if self.rigid() {
             match mode.contact {
                 Contact::Free | Contact::Elastic => out.push(G_TOUCH, e.delta_m - y[P], Crossing::Rising),
@@ -185,7 +187,8 @@ impl Hybrid<N> for Plant {
             }
         }
         if mode.contact != Contact::Plastic {
-            out.push(G_SENSOR_ZERO, self.sensor(y, &e), Crossing::Falling);
+            let sensor = if self.sensor_is_kinematic() { self.sensor(y, &e) } else { self.sensor_at(y, mode) };
+            out.push(G_SENSOR_ZERO, sensor, Crossing::Falling);
         }
     }
 
