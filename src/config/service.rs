@@ -96,6 +96,8 @@ pub struct ServiceConfig {
     /// `[billets] idle_s`: the idle gap after which a smaller rise starts a billet, s.
     pub idle_new_billet_s: f64,
     pub sources: Vec<SourceSpec>,
+    /// `[uplink.mqtt]`: publish Sparkplug B to this broker (CONTRACTS §10, `uplink.rs`).
+    pub uplink_mqtt: Option<super::uplink::MqttUplink>,
 }
 
 #[derive(Deserialize)]
@@ -112,6 +114,9 @@ struct RawService {
     billets: Option<RawBillets>,
     /// Each read by its `kind` (`source.rs`).
     sources: Vec<IgnoredAny>,
+    /// Read by `uplink.rs`.
+    #[serde(rename = "uplink")]
+    _uplink: Option<IgnoredAny>,
 }
 
 #[derive(Deserialize)]
@@ -199,6 +204,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         new_billet_rise_m,
         idle_new_billet_s,
         sources,
+        uplink_mqtt: super::uplink::parse_uplink(&doc)?,
     })
 }
 

@@ -14,6 +14,7 @@ pub mod plc_server;
 pub mod queue;
 mod service;
 pub mod sinks;
+pub mod sparkplug;
 pub mod status;
 
 use std::path::PathBuf;
@@ -159,6 +160,8 @@ pub async fn serve(
     };
     // The PLC result image (CONTRACTS §8), when configured; stops when `_plc` drops.
     let _plc = plc_server::start(cfg.plc_listen, status.clone(), &live, control_tx.clone()).await?;
+    // The Sparkplug B uplink (CONTRACTS §10), when configured; flushed after the service.
+    let uplink = sparkplug::start(cfg.uplink_mqtt.as_ref(), &cfg.recording_dir, &live)?;
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
     let mut pipeline = Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine));
     if let Some(path) = &cfg.recipe_path {
@@ -211,6 +214,9 @@ pub async fn serve(
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
     let _ = shutdown.send(true);
     let summary = service.finish()?;
+    if let Some(u) = uplink {
+        u.finish().await;
+    }
     http.abort();
     Ok(summary)
 }
