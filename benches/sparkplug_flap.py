@@ -26,7 +26,7 @@ import threading
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-FORGEMON = os.path.join(ROOT, "target", "release", "forgemon")
+FORGEMON = os.environ.get("FORGEMON_BIN", os.path.join(ROOT, "target", "release", "forgemon"))
 SUBSCRIBER = os.path.join(ROOT, "tests", "python", "sparkplug_subscriber.py")
 BLOWS_PER_BILLET = 8
 
@@ -44,7 +44,7 @@ class Broker:
         with open(self.conf, "w") as f:
             f.write(f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence true\n"
                     f"persistence_location {tmp}/\nqueue_qos0_messages true\nmax_queued_messages 0\n"
-                    "log_dest none\n")
+                    "log_dest none\nuser root\n")
         self.proc = None
 
     def start(self):

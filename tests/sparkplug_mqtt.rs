@@ -44,7 +44,8 @@ impl Broker {
         let text = format!(
             "listener {port} 127.0.0.1\nallow_anonymous true\npersistence true\npersistence_location {}/\n\
              # A persistent session also gets the QoS 0 births sent while it was away.\nqueue_qos0_messages true\n\
-             max_queued_messages 0\nlog_dest none\n",
+             max_queued_messages 0\nlog_dest none\n\
+             # Started as root, mosquitto would switch to its own user, who cannot write here.\nuser root\n",
             dir.display()
         );
         std::fs::write(&conf, text).expect("write mosquitto.conf");
@@ -200,6 +201,11 @@ fn metric<'a>(msg: &'a Value, name: &str) -> &'a Value {
     &msg["metrics"][name]
 }
 
+/// A double metric's bits as the subscriber read them (`None`: null).
+fn bits(msg: &Value, name: &str) -> Option<u64> {
+    metric(msg, name)["bits"].as_u64()
+}
+
 fn u(v: &Value) -> u64 {
     v.as_u64().unwrap_or_else(|| panic!("not a whole number: {v}"))
 }
@@ -232,9 +238,32 @@ fn every_blow_reaches_a_historian_through_broker_and_service_restarts() {
     let msgs = sub.finish();
     broker.stop();
 
+    // The broker kept the historian's session across its restarts (else what was published
+    // before the subscriber came back is lost to it, whatever the node does).
+    let reconnects: Vec<&Value> = msgs.iter().filter(|m| m["event"] == "connected").collect();
+    assert!(reconnects.iter().all(|m| m["session_present"] == true), "session lost by the broker: {reconnects:?}");
     let results = recorded(&rec);
     assert_eq!(results.len(), 32, "three billets and one, eight blows each");
-    let node: Vec<&Value> = msgs.iter().filter(|m| m.get("type").is_some()).collect();
+    // MQTT's own redeliveries (QoS 1, DUP set: the broker stopped before the subscriber's
+    // PUBACK reached it) of a message already received are dropped, as a host drops a
+    // `seq` it has seen; a DUP the subscriber had not received counts as received.
+    let mut node: Vec<&Value> = Vec::new();
+    for m in msgs.iter().filter(|m| m.get("type").is_some()) {
+        let same = |o: &&Value| o["type"] == m["type"] && o["seq"] == m["seq"] && o["timestamp"] == m["timestamp"];
+        if m["dup"] == true && node.iter().any(same) {
+            continue;
+        }
+        node.push(m);
+    }
+    // What the subscriber saw, one word a message, for the failure messages.
+    let trace: Vec<String> = msgs
+        .iter()
+        .map(|m| match m["type"].as_str() {
+            Some(t) => format!("{t}:{}{}", m["seq"], if m["dup"] == true { "(dup)" } else { "" }),
+            None => m.get("event").map_or_else(|| "?".into(), |e| e.to_string()),
+        })
+        .collect();
+    let trace = trace.join(" ");
 
     // Birth sequences: each NBIRTH starts one; seq counts 0, 1, 2 … within it.
     let mut sequences: Vec<Vec<&Value>> = Vec::new();
@@ -258,7 +287,7 @@ fn every_blow_reaches_a_historian_through_broker_and_service_restarts() {
             assert!(dbirth["metrics"].get(f).is_some(), "DBIRTH lacks {f}");
         }
         for (i, m) in seq.iter().enumerate() {
-            assert_eq!(u(&m["seq"]), i as u64 % 256, "seq within a birth sequence: {}", m["type"]);
+            assert_eq!(u(&m["seq"]), i as u64 % 256, "seq within a birth sequence: {}\n{trace}", m["type"]);
         }
     }
     // A rebirth on the subscriber's NCMD keeps bdSeq; a new connection takes the next.
@@ -269,52 +298,53 @@ fn every_blow_reaches_a_historian_through_broker_and_service_restarts() {
     let last_death = node.iter().rev().find(|m| m["type"] == "NDEATH").expect("an NDEATH after demo 2");
     assert_eq!(u(&metric(last_death, "bdSeq")["value"]), *bd_seqs.last().expect("a birth"));
 
-    // Each recorded blow, by its device time of contact (unique across both demos).
-    let by_contact: BTreeMap<u64, &BlowEstimate> = results.iter().map(|r| (r.t_contact_s.to_bits(), r)).collect();
-    let mut seen: BTreeMap<u64, u64> = BTreeMap::new();
+    // Each blow's DDATA, checked within its birth sequence; a blow is known by its
+    // timestamp (when the service made it: a republished copy keeps it). The two demos'
+    // device times both start near 0, so the time of contact alone does not tell them apart.
+    let mut first: BTreeMap<u64, &Value> = BTreeMap::new();
     let mut historical = 0;
     for seq in &sequences {
         let birth_ms = u(&seq[0]["timestamp"]);
         let mut last_ms = 0;
-        let mut in_this: Vec<u64> = Vec::new();
         for m in seq.iter().filter(|m| m["type"] == "DDATA") {
-            let t = metric(m, "blow/t_contact_s")["value"].as_f64().expect("t_contact_s");
-            let r = by_contact.get(&t.to_bits()).unwrap_or_else(|| panic!("DDATA for no recorded blow: {m}"));
-            assert!(!in_this.contains(&t.to_bits()), "blow at {t} twice in one birth sequence");
-            in_this.push(t.to_bits());
-            // The recorded values, bit for bit (doubles travel exactly in both formats).
-            assert_eq!(u(&metric(m, "blow/blow")["value"]), u64::from(r.blow));
-            assert_eq!(metric(m, "blow/plastic_J")["value"].as_f64(), r.plastic_j);
-            assert_eq!(metric(m, "blow/efficiency")["value"].as_f64(), r.efficiency);
-            assert_eq!(metric(m, "blow/v_impact_mps")["value"].as_f64(), Some(r.v_impact_mps));
-            assert_eq!(metric(m, "blow/class")["value"].as_str(), Some(r.class.as_str()));
-            assert_eq!(u(&metric(m, "blow/billet")["value"]), u64::from(r.billet.billet));
-            for kind in ["elastic_blow", "low_efficiency", "model_health", "sensor", "nok"] {
-                let raised = r.alert.as_ref().is_some_and(|a| a.kind.as_str() == kind);
-                assert_eq!(
-                    m["metrics"].get(format!("alert/{kind}")).is_some(),
-                    raised,
-                    "blow {}: alert/{kind}",
-                    r.blow
-                );
-            }
-            // Its own timestamp, the same on every metric, in blow order; made before this
-            // birth exactly when flagged historical.
+            // Its own timestamp, on every metric too, in order; made before this birth
+            // exactly when flagged historical.
             let t_ms = u(&m["timestamp"]);
-            assert!(t_ms > last_ms, "DDATA out of order in a birth sequence");
+            assert!(t_ms > last_ms, "DDATA repeated or out of order in a birth sequence: {t_ms} after {last_ms}");
             last_ms = t_ms;
             let is_hist = metric(m, "blow/plastic_J")["historical"].as_bool() == Some(true);
-            assert_eq!(is_hist, t_ms < birth_ms, "blow {}: historical flag against its birth", r.blow);
+            assert_eq!(is_hist, t_ms < birth_ms, "DDATA at {t_ms}: historical flag against its birth at {birth_ms}");
             historical += usize::from(is_hist);
-            assert_eq!(u(&metric(m, "blow/plastic_J")["timestamp"]), t_ms);
-            // The same blow published again (after an unacknowledged send) keeps its time.
-            let first = *seen.entry(t.to_bits()).or_insert(t_ms);
-            assert_eq!(first, t_ms, "blow {} republished with another timestamp", r.blow);
+            for (name, v) in m["metrics"].as_object().expect("metrics") {
+                assert_eq!(u(&v["timestamp"]), t_ms, "{name}: the blow's timestamp");
+            }
+            // The same blow published again (its ack lost to an outage) is the same blow.
+            let again = first.entry(t_ms).or_insert(m);
+            assert_eq!(again["metrics"], m["metrics"], "blow made at {t_ms} republished with other values");
         }
     }
-    let missing: Vec<u32> =
-        results.iter().filter(|r| !seen.contains_key(&r.t_contact_s.to_bits())).map(|r| r.blow).collect();
-    assert!(missing.is_empty(), "blows never published: {missing:?}");
-    // Blows 5..=10 and 17..=24 of demo 1 and 1..=3 of demo 2 were made with the broker down.
-    assert!(historical >= 6 + 8 + 2, "historical DDATA: {historical}");
+    // Every recorded blow, once, in the order made, with its recorded values bit for bit
+    // (doubles travel exactly in both formats).
+    let published: Vec<&Value> = first.values().copied().collect();
+    let numbers: Vec<u64> = published.iter().map(|m| u(&metric(m, "blow/blow")["value"])).collect();
+    assert_eq!(published.len(), results.len(), "blows published vs recorded; published: {numbers:?}");
+    for (m, r) in published.iter().zip(&results) {
+        assert_eq!(u(&metric(m, "blow/blow")["value"]), u64::from(r.blow), "published {numbers:?}");
+        assert_eq!(bits(m, "blow/t_contact_s"), Some(r.t_contact_s.to_bits()));
+        assert_eq!(bits(m, "blow/plastic_J"), r.plastic_j.map(f64::to_bits));
+        assert_eq!(bits(m, "blow/efficiency"), r.efficiency.map(f64::to_bits));
+        assert_eq!(bits(m, "blow/kinetic_in_J"), r.kinetic_in_j.map(f64::to_bits));
+        assert_eq!(bits(m, "blow/v_impact_mps"), Some(r.v_impact_mps.to_bits()));
+        assert_eq!(bits(m, "blow/peak_load_N"), Some(r.peak_load_n.to_bits()));
+        assert_eq!(bits(m, "blow/h_end_m"), r.h_end_m.map(f64::to_bits));
+        assert_eq!(metric(m, "blow/class")["value"].as_str(), Some(r.class.as_str()));
+        assert_eq!(u(&metric(m, "blow/billet")["value"]), u64::from(r.billet.billet));
+        for kind in ["elastic_blow", "low_efficiency", "model_health", "sensor", "nok"] {
+            let raised = r.alert.as_ref().is_some_and(|a| a.kind.as_str() == kind);
+            assert_eq!(m["metrics"].get(format!("alert/{kind}")).is_some(), raised, "blow {}: alert/{kind}", r.blow);
+        }
+    }
+    // Blows 5..=10 and 17..=24 of demo 1 and 1..=3 of demo 2 were made with the broker down
+    // (a blow or two either side may still have caught the broker up or gone by the queue).
+    assert!(historical >= 4 + 6 + 2, "historical DDATA: {historical}");
 }

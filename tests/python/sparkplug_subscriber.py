@@ -8,7 +8,9 @@ subscribes to spBv1.0/#, and prints one JSON line per message received:
 
   {"topic": ..., "type": "NBIRTH", "seq": 0, "timestamp": ms, "dup": false, "rx_ms": ms,
    "metrics": {"bdSeq": {"value": 3, "datatype": 8, "timestamp": ms, "historical": false,
-                         "null": false}, ...}}
+                         "null": false, "bits": null}, ...}}
+
+("bits": a double's IEEE 754 bits as an integer, to compare exactly.)
 
 After the DDATA count reaches REBIRTH_AFTER (if > 0) it sends one NCMD
 `Node Control/Rebirth` to every node it has seen born. It stops when its standard input
@@ -19,6 +21,7 @@ usage: sparkplug_subscriber.py HOST PORT CLIENT_ID TIMEOUT_S REBIRTH_AFTER
 
 import json
 import os
+import struct
 import subprocess
 import sys
 import tempfile
@@ -51,6 +54,12 @@ def metric_value(m):
     return None if which is None else getattr(m, which)
 
 
+def double_bits(v):
+    if isinstance(v, float):
+        return struct.unpack("<Q", struct.pack("<d", v))[0]
+    return None
+
+
 def main():
     host, port, client_id = sys.argv[1], int(sys.argv[2]), sys.argv[3]
     timeout_s, rebirth_after = float(sys.argv[4]), int(sys.argv[5])
@@ -81,6 +90,8 @@ def main():
                 "timestamp": m.timestamp if m.HasField("timestamp") else None,
                 "historical": m.is_historical,
                 "null": m.is_null,
+                # A double's bits, exactly (a JSON reader may round the text by an ulp).
+                "bits": double_bits(metric_value(m)),
             }
             for m in p.metrics
         }
