@@ -114,7 +114,7 @@ async fn session(cfg: &MqttUplink, ids: &NodeIds, bd_seq: u64, shared: &SharedSt
 pub(super) fn pump(s: &mut super::Shared) {
     let Some(live) = s.session.as_mut() else { return };
     while s.store.in_flight() < WINDOW {
-        let record = match s.store.next() {
+        let record = match s.store.take_next() {
             Ok(Some(r)) => r,
             Ok(None) => return,
             Err(e) => {

@@ -138,7 +138,7 @@ impl Store {
     }
 
     /// The next record not yet handed out, marked in flight.
-    pub fn next(&mut self) -> Result<Option<Record>, StoreError> {
+    pub fn take_next(&mut self) -> Result<Option<Record>, StoreError> {
         let Some(e) = self.waiting.get(self.in_flight).copied() else { return Ok(None) };
         let path = self.dir.join("queue.bin");
         let mut payload = vec![0; e.len as usize];
@@ -158,7 +158,7 @@ impl Store {
         self.in_flight = 0;
     }
 
-    /// Drop the record `next` handed out last (it could not be sent and never will be).
+    /// Drop the record `take_next` handed out last (it could not be sent and never will be).
     pub fn discard_last(&mut self) {
         if self.in_flight > 0 {
             self.in_flight -= 1;
@@ -292,7 +292,7 @@ mod tests {
 
     fn drain(s: &mut Store) -> Vec<u64> {
         let mut ts = Vec::new();
-        while let Some(r) = s.next().expect("read") {
+        while let Some(r) = s.take_next().expect("read") {
             ts.push(r.t_ms);
             s.ack_oldest().expect("ack");
         }
@@ -307,11 +307,11 @@ mod tests {
             for t in 1..=5 {
                 s.push(&rec(t), t).expect("push");
             }
-            let first = s.next().expect("read").expect("a record");
+            let first = s.take_next().expect("read").expect("a record");
             assert_eq!(first.t_ms, 1);
             s.ack_oldest().expect("ack");
             // Record 2 is in flight but not acknowledged when the service stops.
-            assert!(s.next().expect("read").is_some());
+            assert!(s.take_next().expect("read").is_some());
         }
         let mut s = Store::open(dir.path(), LIMITS, 10).expect("reopen");
         assert_eq!(drain(&mut s), vec![2, 3, 4, 5]);
@@ -325,8 +325,8 @@ mod tests {
         for t in 1..=3 {
             s.push(&rec(t), t).expect("push");
         }
-        s.next().expect("read");
-        s.next().expect("read");
+        s.take_next().expect("read");
+        s.take_next().expect("read");
         s.rewind();
         assert_eq!(drain(&mut s), vec![1, 2, 3]);
     }
