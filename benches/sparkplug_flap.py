@@ -3,7 +3,8 @@
 the broker flaps (10 s up, 10 s down) for 10 minutes. Reports, does not assert:
 
 - blows made (the demo's printed blow lines) against distinct blows published (DDATA the
-  independent subscriber received, by blow time of contact);
+  independent subscriber received, by blow time of contact), and what was left in the
+  node's queue on disk when it stopped;
 - the median end-to-end latency, from the moment the service made the result (the DDATA
   timestamp) to the subscriber's receipt, for blows published live and from the queue;
 - the queue's high-water mark, measured from outside: the most blows made and not yet
@@ -19,6 +20,7 @@ import json
 import os
 import socket
 import statistics
+import struct
 import subprocess
 import sys
 import tempfile
@@ -64,6 +66,24 @@ class Broker:
             self.proc.terminate()
             self.proc.wait()
             self.proc = None
+
+
+def queued_records(qdir):
+    """Records still waiting in the node's queue on disk (from `queue.head` on)."""
+    try:
+        data = open(os.path.join(qdir, "queue.bin"), "rb").read()
+    except OSError:
+        return 0
+    try:
+        at = struct.unpack("<Q", open(os.path.join(qdir, "queue.head"), "rb").read())[0]
+    except (OSError, struct.error):
+        at = 0
+    n = 0
+    while at + 8 <= len(data):
+        (length,) = struct.unpack("<I", data[at:at + 4])
+        at += 8 + length
+        n += 1
+    return n
 
 
 def main():
@@ -114,8 +134,12 @@ def main():
         flaps += 1
     if not broker.proc:
         broker.start()
-    demo.terminate()  # SIGTERM: the service finishes its recording and flushes the queue
+    # The broker stays up a last period so the node reconnects and drains its queue, then
+    # SIGTERM: the service finishes its recording and flushes what is left.
+    time.sleep(args.period)
+    demo.terminate()
     demo.wait()
+    left = queued_records(os.path.join(tmp, "rec", "sparkplug-queue"))
     time.sleep(5)
     sub.stdin.close()
     sub.wait()
@@ -146,6 +170,7 @@ def main():
         "blows_made": len(made),
         "blows_published_distinct": len(first_rx),
         "ddata_received": len(ddata),
+        "left_in_queue_on_disk": left,
         "median_latency_ms_all": statistics.median([r - t for t, r in first_rx.values()]) if first_rx else None,
         "median_latency_ms_live": statistics.median(live_lat) if live_lat else None,
         "median_latency_ms_from_queue": statistics.median(hist_lat) if hist_lat else None,

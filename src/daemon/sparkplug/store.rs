@@ -75,6 +75,8 @@ pub struct Store {
 pub enum StoreError {
     #[error("{path}: {source}")]
     Io { path: PathBuf, source: std::io::Error },
+    #[error("a record of {len} bytes is over the queue's {MAX_RECORD}-byte limit")]
+    TooLarge { len: usize },
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
@@ -122,11 +124,14 @@ impl Store {
     /// over its limits. The record is on disk (synced) when this returns.
     pub fn push(&mut self, payload: &[u8], t_ms: u64) -> Result<(), StoreError> {
         let path = self.dir.join("queue.bin");
-        let len = u32::try_from(payload.len()).unwrap_or(u32::MAX).min(MAX_RECORD);
+        let len = u32::try_from(payload.len())
+            .ok()
+            .filter(|l| *l <= MAX_RECORD)
+            .ok_or(StoreError::TooLarge { len: payload.len() })?;
         let mut rec = Vec::with_capacity(payload.len() + HEADER as usize);
         rec.extend_from_slice(&len.to_le_bytes());
-        rec.extend_from_slice(&CRC.checksum(&payload[..len as usize]).to_le_bytes());
-        rec.extend_from_slice(&payload[..len as usize]);
+        rec.extend_from_slice(&CRC.checksum(payload).to_le_bytes());
+        rec.extend_from_slice(payload);
         self.file.seek(SeekFrom::Start(self.end)).map_err(io(&path))?;
         self.file.write_all(&rec).map_err(io(&path))?;
         self.file.sync_data().map_err(io(&path))?;
@@ -388,6 +393,16 @@ mod tests {
         drop(s);
         let mut s = Store::open(dir.path(), limits, 101).expect("reopen");
         assert_eq!(drain(&mut s), vec![97, 98, 99, 100]);
+    }
+
+    #[test]
+    fn oversized_record_is_refused_and_the_queue_unchanged() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let mut s = Store::open(dir.path(), LIMITS, 0).expect("open");
+        let big = vec![0u8; MAX_RECORD as usize + 1];
+        assert!(matches!(s.push(&big, 1), Err(StoreError::TooLarge { .. })));
+        s.push(&rec(2), 2).expect("push");
+        assert_eq!(drain(&mut s), vec![2]);
     }
 
     #[test]
