@@ -177,6 +177,25 @@ mod tests {
         assert_eq!(u.queue_max_age_s, DEFAULT_QUEUE_MAX_AGE_S);
     }
 
+    /// The table through the whole service file: read into `ServiceConfig`, and a misspelt
+    /// table under `[uplink]` refused there too.
+    #[test]
+    fn service_file_carries_the_uplink() {
+        let service = |extra: &str| {
+            let text = format!(
+                "machine = \"m.toml\"\n[recording]\ndir = \"rec\"\n[[sources]]\nname = \"daq\"\nkind = \"serial\"\n\
+                 path = \"/dev/ttyUSB0\"\n[[sources.channels]]\nrole = \"load_N\"\ngain = 1.0\n{extra}"
+            );
+            crate::config::service::parse_service("service.toml", std::path::Path::new("/"), &text)
+        };
+        let c = service("[uplink.mqtt]\nurl = \"mqtt://broker:1884\"\ndevice_id = \"press-2\"\n").expect("valid");
+        let u = c.uplink_mqtt.expect("the uplink");
+        assert_eq!((u.port, u.device_id.as_str()), (1884, "press-2"));
+        assert_eq!(service("").expect("valid").uplink_mqtt, None);
+        let e = service("[uplink.mqtt]\nurl = \"mqtt://b\"\n[uplink.mqqt]\nurl = \"x\"\n").expect_err("typo");
+        assert!(e.to_string().contains("mqqt"), "{e}");
+    }
+
     #[test]
     fn no_table_is_no_uplink() {
         assert_eq!(parse("x = 1\n").expect("valid"), None);
