@@ -31,7 +31,8 @@ use std::time::Duration;
 use anyhow::Context;
 use prost::Message;
 use tokio::sync::Notify;
-use tokio::sync::broadcast::{self, error::RecvError};
+use tokio::sync::broadcast;
+use tokio::sync::broadcast::error::{RecvError, TryRecvError};
 use tokio::task::JoinHandle;
 
 use super::live::{Live, LiveEvent};
@@ -151,25 +152,28 @@ async fn feed(mut rx: broadcast::Receiver<LiveEvent>, shared: SharedState, stop:
         let event = tokio::select! {
             ev = rx.recv() => ev,
             _ = stop.notified() => {
-                while let Ok(ev) = rx.try_recv() {
-                    queue_event(&shared, ev);
+                loop {
+                    match rx.try_recv() {
+                        Ok(ev) => queue_event(&shared, ev),
+                        Err(TryRecvError::Lagged(n)) => count_lagged(&shared, n),
+                        Err(_) => return,
+                    }
                 }
-                return;
             }
         };
         match event {
             Ok(ev) => queue_event(&shared, ev),
-            Err(RecvError::Lagged(n)) => {
-                tracing::warn!(
-                    events = n,
-                    "sparkplug: the live feed ran ahead; its oldest events are lost to the uplink"
-                );
-                if let Ok(mut s) = shared.lock() {
-                    s.lagged += n;
-                }
-            }
+            Err(RecvError::Lagged(n)) => count_lagged(&shared, n),
             Err(RecvError::Closed) => return,
         }
+    }
+}
+
+/// The live feed dropped `n` events before the feeder took them.
+fn count_lagged(shared: &SharedState, n: u64) {
+    tracing::warn!(events = n, "sparkplug: the live feed ran ahead; its oldest events are lost to the uplink");
+    if let Ok(mut s) = shared.lock() {
+        s.lagged += n;
     }
 }
 
@@ -184,4 +188,72 @@ fn queue_event(shared: &SharedState, ev: LiveEvent) {
         tracing::error!(blow = e.blow, "sparkplug: blow not queued, lost to the uplink: {err}");
     }
     session::pump(&mut s);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimate::BlowClass;
+    use crate::estimate::BlowEstimate;
+
+    fn estimate(blow: u32) -> BlowEstimate {
+        BlowEstimate {
+            judgement: None,
+            blow,
+            t_contact_s: 0.12 * f64::from(blow),
+            v_impact_mps: 3.9,
+            kinetic_in_j: Some(5711.0),
+            plastic_j: Some(5320.0),
+            friction_j: None,
+            damped_j: Some(150.0),
+            elastic_j: Some(15.0),
+            efficiency: Some(0.931),
+            final_load_n: 3.25e5,
+            h_end_m: Some(0.0929),
+            class: BlowClass::Soft,
+            alert: None,
+            t_end_s: 0.14,
+            peak_load_n: 1.16e6,
+            residual: Some(0.004),
+            sensor_check: Some(0.012),
+            method: None,
+            gap_s: 0.0,
+            h_start_m: None,
+            height_check: None,
+            billet: Default::default(),
+        }
+    }
+
+    /// The metric names are the replay's JSON keys (CONTRACTS §5): a renamed field fails here.
+    #[test]
+    fn every_blow_metric_is_a_key_of_the_replay_json() {
+        let json = serde_json::to_value(estimate(1)).expect("serialises");
+        for (field, _) in payload::BLOW_FIELDS {
+            assert!(json.get(*field).is_some(), "blow/{field} is not a key of the blow's JSON");
+        }
+    }
+
+    /// A feeder that fell more than the channel's capacity behind counts what it missed and
+    /// queues the rest, also when told to stop with the lag still unread.
+    #[tokio::test]
+    async fn a_lagging_feeder_counts_what_it_missed_and_queues_the_rest() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let limits = StoreLimits { max_bytes: 1 << 20, max_age_ms: 3_600_000 };
+        let store = Store::open(dir.path(), limits, now_ms()).expect("open");
+        let shared = Arc::new(Mutex::new(Shared { store, session: None, lagged: 0, published: 0, store_errors: 0 }));
+        let (tx, rx) = broadcast::channel(2);
+        for b in 1..=5 {
+            tx.send(LiveEvent::Blow(Arc::new(estimate(b)))).expect("a receiver");
+        }
+        let stop = Arc::new(Notify::new());
+        stop.notify_one();
+        feed(rx, shared.clone(), stop).await;
+        let mut s = shared.lock().expect("lock");
+        assert_eq!(s.lagged, 3, "5 blows into a channel of 2");
+        assert_eq!(s.store.len(), 2);
+        let first = s.store.take_next().expect("read").expect("a record");
+        let p = proto::Payload::decode(first.payload.as_slice()).expect("decodes");
+        let blow = p.metrics.iter().find(|m| m.name.as_deref() == Some("blow/blow")).and_then(|m| m.value.clone());
+        assert_eq!(blow, Some(proto::payload::metric::Value::IntValue(4)), "the oldest kept is blow 4");
+    }
 }
