@@ -3,6 +3,8 @@
 //! It also writes the FileDescriptorSet, without source info, to
 //! `$OUT_DIR/forgemon.fds.bin`; `src/record/schema.rs` embeds it so every MCAP schema record
 //! carries the complete schema (DESIGN.md §3, "MCAP layout").
+//! `proto/sparkplug_b.proto` (the Sparkplug B payload, `src/daemon/sparkplug`) is compiled
+//! the same way, apart, so the embedded forgemon schema stays as it was.
 
 use std::path::PathBuf;
 
@@ -10,10 +12,12 @@ use prost::Message;
 
 const PROTO_DIR: &str = "proto";
 const PROTO_FILE: &str = "proto/forgemon.proto";
+const SPARKPLUG_FILE: &str = "proto/sparkplug_b.proto";
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("cargo:rerun-if-changed={PROTO_FILE}");
     println!("cargo:rerun-if-changed=build.rs");
+    println!("cargo:rerun-if-changed={SPARKPLUG_FILE}");
 
     let out_dir = PathBuf::from(std::env::var("OUT_DIR")?);
 
@@ -32,5 +36,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .btree_map(["."])
         .out_dir(&out_dir)
         .compile_fds(fds)?;
+    prost_build::Config::new().out_dir(&out_dir).compile_fds(protox::compile([SPARKPLUG_FILE], [PROTO_DIR])?)?;
     Ok(())
 }

@@ -67,6 +67,7 @@ fn parts(dir: &std::path::Path, foxglove: std::net::SocketAddr) -> ServiceParts 
             idle_new_billet_s: forgemon::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
             sources: Vec::new(),
             advisor: None,
+            uplink_mqtt: None,
         },
         config_path: dir.join("service.toml"),
         config_text: String::new(),

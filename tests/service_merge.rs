@@ -98,6 +98,7 @@ fn roles_from_two_daqs_on_their_own_clocks_are_merged() {
             idle_new_billet_s: forgemon::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
             sources: Vec::new(),
             advisor: None,
+            uplink_mqtt: None,
         },
         config_path: dir.join("service.toml"),
         config_text: String::new(),

@@ -84,6 +84,7 @@ fn parts(dir: &Path) -> ServiceParts {
             idle_new_billet_s: forgemon::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
             sources: Vec::new(),
             advisor: Some(AdvisorConfig { target_height_m: TARGET_M, speeds: Speeds::Settings(SETTINGS.to_vec()) }),
+            uplink_mqtt: None,
         },
         config_path: dir.join("service.toml"),
         config_text: String::new(),

@@ -16,6 +16,7 @@ use crate::acquire::serial::driver::{SerialConfig, SerialFormat, run_on_stream, 
 use crate::acquire::{Backpressure, ChannelSpec};
 use crate::config::advisor::AdvisorConfig;
 use crate::config::service::ServiceConfig;
+use crate::config::uplink::MqttUplink;
 use crate::config::{parse_machine, parse_process};
 use crate::daemon::{Control, Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
 use crate::physics::effects::EffectSet;
@@ -53,6 +54,10 @@ pub struct DemoArgs {
     /// Serve the Foxglove WebSocket protocol here.
     #[arg(long, value_name = "ADDR")]
     pub foxglove: Option<std::net::SocketAddr>,
+    /// Publish Sparkplug B to this MQTT broker (`mqtt://host:port`, CONTRACTS §10), as
+    /// group `forge`, node `forgemon`, device `machine`; queued under `--dir` while it is down.
+    #[arg(long, value_name = "URL")]
+    pub mqtt: Option<String>,
     /// Judge every blow against this recipe (`forgemon teach`), OK/NOK.
     #[arg(long, value_name = "PART.recipe.toml")]
     pub recipe: Option<PathBuf>,
@@ -101,6 +106,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         CaptureSpec::hammer(7),
         args.interval,
     );
+    let uplink = match args.mqtt.as_deref() {
+        Some(url) => Some(MqttUplink::for_url(url).map_err(|e| anyhow::anyhow!("--mqtt: {e}"))?),
+        None => None,
+    };
     let config = ServiceConfig {
         machine_path: PathBuf::from("hammer-lg1000.machine.toml"),
         process_path: None,
@@ -122,6 +131,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
             target_height_m,
             speeds: crate::advise::Speeds::Settings(args.settings.clone()),
         }),
+        uplink_mqtt: uplink,
     };
     // No new-billet signal: the service finds each billet from the encoder (issue 22), so it
     // tracks the billet's height and splits plastic from friction work on every billet.
@@ -164,7 +174,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         };
         tokio::spawn(run_on_stream(cfg, slave, system_clock_ns, tx, shutdown_rx));
         let dir = args.dir.clone();
-        let (plc, foxglove) = (args.plc, args.foxglove);
+        let (plc, foxglove, mqtt) = (args.plc, args.foxglove, args.mqtt.clone());
         let hooks = Hooks {
             on_listening: Some(Box::new(move |addr| {
                 println!("forgemon demo: a simulated MONTBARD LG1000 drop hammer (paper Table 1) forges {} steel billets, 60 x 112 mm,", args.billets.max(1));
@@ -175,6 +185,9 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
                 }
                 if let Some(fox) = foxglove {
                     println!("  Foxglove live view on ws://{fox}");
+                }
+                if let Some(url) = &mqtt {
+                    println!("  Sparkplug B to {url} as spBv1.0/forge/DDATA/forgemon/machine");
                 }
                 println!("blow  billet  impact m/s  plastic J  efficiency                    class");
             })),

@@ -16,6 +16,7 @@ pub mod process;
 pub mod recipe;
 pub mod service;
 mod source;
+pub mod uplink;
 
 pub use machine::{MachineFile, parse_machine};
 pub use process::{parse_process, parse_process_sheet};

@@ -98,6 +98,8 @@ pub struct ServiceConfig {
     pub sources: Vec<SourceSpec>,
     /// `[advisor]`: replan the billet's next blows after each one (issue 20).
     pub advisor: Option<super::advisor::AdvisorConfig>,
+    /// `[uplink.mqtt]`: publish Sparkplug B to this broker (CONTRACTS §10, `uplink.rs`).
+    pub uplink_mqtt: Option<super::uplink::MqttUplink>,
 }
 
 #[derive(Deserialize)]
@@ -115,6 +117,9 @@ struct RawService {
     advisor: Option<super::advisor::RawAdvisor>,
     /// Each read by its `kind` (`source.rs`).
     sources: Vec<IgnoredAny>,
+    /// Read by `uplink.rs`.
+    #[serde(rename = "uplink")]
+    _uplink: Option<IgnoredAny>,
 }
 
 #[derive(Deserialize)]
@@ -204,6 +209,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         idle_new_billet_s,
         sources,
         advisor,
+        uplink_mqtt: super::uplink::parse_uplink(&doc)?,
     })
 }
 

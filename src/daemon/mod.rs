@@ -16,6 +16,7 @@ pub mod queue;
 pub mod recipe_switch;
 mod service;
 pub mod sinks;
+pub mod sparkplug;
 pub mod status;
 
 use std::path::PathBuf;
@@ -179,6 +180,8 @@ pub async fn serve(
         &live,
         hooks.on_advice.take(),
     )?;
+    // The Sparkplug B uplink (CONTRACTS §10), when configured; flushed after the service.
+    let uplink = sparkplug::start(cfg.uplink_mqtt.as_ref(), &cfg.recording_dir, &live)?;
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
     let mut pipeline = Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine));
     if let Some(path) = &cfg.recipe_path {
@@ -232,6 +235,9 @@ pub async fn serve(
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
     let _ = shutdown.send(true);
     let summary = service.finish()?;
+    if let Some(u) = uplink {
+        u.finish().await;
+    }
     http.abort();
     Ok(summary)
 }
