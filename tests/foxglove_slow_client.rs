@@ -60,6 +60,7 @@ fn parts(dir: &std::path::Path, foxglove: std::net::SocketAddr) -> ServiceParts 
             http_token_file: None,
             plc_listen: None,
             foxglove_listen: Some(foxglove),
+            opcua: None,
             alerts: forgemon::alert::AlertConfig::default(),
             webhook: None,
             plc_coil: None,

@@ -91,6 +91,7 @@ fn roles_from_two_daqs_on_their_own_clocks_are_merged() {
             http_token_file: None,
             plc_listen: None,
             foxglove_listen: None,
+            opcua: None,
             alerts: forgemon::alert::AlertConfig::default(),
             webhook: None,
             plc_coil: None,

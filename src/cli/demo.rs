@@ -52,6 +52,10 @@ pub struct DemoArgs {
     /// Serve the Foxglove WebSocket protocol here.
     #[arg(long, value_name = "ADDR")]
     pub foxglove: Option<std::net::SocketAddr>,
+    /// Serve the OPC UA Metal Forming server here (`opc.tcp://127.0.0.1:4840`; loopback
+    /// only: the demo's sessions are anonymous).
+    #[arg(long, value_name = "URL")]
+    pub opcua: Option<String>,
     /// Judge every blow against this recipe (`forgemon teach`), OK/NOK.
     #[arg(long, value_name = "PART.recipe.toml")]
     pub recipe: Option<PathBuf>,
@@ -75,6 +79,12 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
             "--http {a}: the demo serves loopback only (a service file's [http] token_file guards other addresses)"
         );
     }
+    let opcua = args
+        .opcua
+        .as_deref()
+        .map(crate::config::opcua::OpcuaConfig::anonymous)
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("--opcua {e}"))?;
     let machine = parse_machine("hammer-lg1000.machine.toml", MACHINE)?.machine;
     let steel = parse_process("steel-16NiCrMo13.process.toml", STEEL)?;
     let plan = BilletPlan { process: steel, v0s_mps: vec![3.9, 5.3, 5.3, 5.3, 5.3, 5.3, 5.3, 5.3] };
@@ -96,6 +106,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         http_token_file: None,
         plc_listen: args.plc,
         foxglove_listen: args.foxglove,
+        opcua: opcua.clone(),
         alerts: crate::alert::AlertConfig::default(),
         webhook: None,
         plc_coil: None,
@@ -145,6 +156,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         tokio::spawn(run_on_stream(cfg, slave, system_clock_ns, tx, shutdown_rx));
         let dir = args.dir.clone();
         let (plc, foxglove) = (args.plc, args.foxglove);
+        let opcua_url = opcua.map(|o| o.url);
         let hooks = Hooks {
             on_listening: Some(Box::new(move |addr| {
                 println!("forgemon demo: a simulated MONTBARD LG1000 drop hammer (paper Table 1) forges {} steel billets, 60 x 112 mm,", args.billets.max(1));
@@ -152,6 +164,9 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
                 println!("  dashboard on http://{addr}/");
                 if let Some(plc) = plc {
                     println!("  PLC result image (Modbus TCP, unit 1) on {plc}");
+                }
+                if let Some(url) = &opcua_url {
+                    println!("  OPC UA server (Metal Forming, anonymous) on {url}");
                 }
                 if let Some(fox) = foxglove {
                     println!("  Foxglove live view on ws://{fox}");

@@ -87,6 +87,8 @@ pub struct ServiceConfig {
     pub plc_listen: Option<SocketAddr>,
     /// `[foxglove] listen`: serve the Foxglove WebSocket protocol here.
     pub foxglove_listen: Option<SocketAddr>,
+    /// `[opcua]`: the OPC UA Metal Forming server (`config/opcua.rs`).
+    pub opcua: Option<super::opcua::OpcuaConfig>,
     pub alerts: AlertConfig,
     pub webhook: Option<String>,
     pub plc_coil: Option<PlcCoil>,
@@ -108,6 +110,7 @@ struct RawService {
     http: Option<RawHttp>,
     plc_server: Option<RawListen>,
     foxglove: Option<RawListen>,
+    opcua: Option<super::opcua::RawOpcua>,
     alerts: Option<RawAlerts>,
     billets: Option<RawBillets>,
     /// Each read by its `kind` (`source.rs`).
@@ -193,6 +196,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         http_token_file,
         plc_listen,
         foxglove_listen,
+        opcua: super::opcua::parse_opcua(&doc, raw.opcua.as_ref(), base)?,
         alerts,
         webhook,
         plc_coil,

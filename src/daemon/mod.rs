@@ -10,6 +10,7 @@
 pub mod dashboard;
 pub mod foxglove;
 pub mod live;
+pub mod opcua;
 pub mod plc_server;
 pub mod queue;
 mod service;
@@ -159,6 +160,8 @@ pub async fn serve(
     };
     // The PLC result image (CONTRACTS §8), when configured; stops when `_plc` drops.
     let _plc = plc_server::start(cfg.plc_listen, status.clone(), &live, control_tx.clone()).await?;
+    let _opcua =
+        opcua::start(cfg.opcua.as_ref(), parts.machine.kind(), status.clone(), &live, control_tx.clone()).await?;
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
     let mut pipeline = Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine));
     if let Some(path) = &cfg.recipe_path {
