@@ -162,7 +162,7 @@ mod tests {
         assert_eq!(c.access, OpcuaAccess::Anonymous);
         assert_eq!(c.listen.port(), 4840);
         let e = err("[opcua]\nlisten = \"opc.tcp://0.0.0.0:4840\"\n");
-        assert!(e.contains("service.toml:2:1") && e.contains("'opcua.user'") && e.contains("not loopback"), "{e}");
+        assert!(e.contains("service.toml:1:") && e.contains("'opcua.user'") && e.contains("not loopback"), "{e}");
         assert!(OpcuaConfig::anonymous("opc.tcp://192.0.2.1:4840").is_err());
         assert!(OpcuaConfig::anonymous("opc.tcp://127.0.0.1:0").is_ok());
     }

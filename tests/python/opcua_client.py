@@ -57,10 +57,24 @@ class Handler:
         self.queue = queue
 
     def event_notification(self, event):
-        self.queue.put_nowait(("event", event.get_event_props_as_fields_dict()))
+        fields = event.get_event_props_as_fields_dict()
+        self.queue.put_nowait(("event", {k: v.Value for k, v in fields.items()}))
 
     def datachange_notification(self, node, val, data):
         self.queue.put_nowait(("data", val))
+
+
+async def event_filter(event_type):
+    """asyncua's filter for `event_type`, with two changes for async-opcua 0.19: the
+    where clause is `OfType(event_type)` (the standard form; async-opcua does not match the
+    `InList(EventType, ...)` asyncua generates), and asyncua's ConditionId clause (no
+    browse path) is left out (async-opcua drops it, which would shift every field)."""
+    f = await get_filter_from_event_type([event_type])
+    f.SelectClauses = [c for c in f.SelectClauses if c.BrowsePath]
+    where = ua.ContentFilterElement(FilterOperator=ua.FilterOperator.OfType)
+    where.FilterOperands.append(ua.LiteralOperand(Value=ua.Variant(event_type.nodeid)))
+    f.WhereClause = ua.ContentFilter(Elements=[where])
+    return f
 
 
 async def connect(client, deadline):
@@ -105,13 +119,9 @@ async def demo(url, seconds):
         queue = asyncio.Queue()
         sub = await client.create_subscription(20, Handler(queue))
         blow_type = client.get_node(ua.NodeId("BlowCompletedEventType", fm))
-        await sub.subscribe_events(machine, blow_type, queuesize=100)
-        # asyncua adds a ConditionId clause (the NodeId of ConditionType itself, no browse
-        # path) that async-opcua does not evaluate; its field would be missing from every
-        # event, so it is left out here (the condition is found by ConditionName).
-        alarm_filter = await get_filter_from_event_type([client.get_node(ua.ObjectIds.AlarmConditionType)])
-        alarm_filter.SelectClauses = [c for c in alarm_filter.SelectClauses if c.BrowsePath]
-        await sub.subscribe_events(machine, evfilter=alarm_filter, queuesize=100)
+        await sub.subscribe_events(machine, evfilter=await event_filter(blow_type), queuesize=100)
+        alarm_type = client.get_node(ua.ObjectIds.AlarmConditionType)
+        await sub.subscribe_events(machine, evfilter=await event_filter(alarm_type), queuesize=100)
         await sub.subscribe_data_change(value_nodes[0], queuesize=100)
         result["subscribed_at"] = plain(await value_nodes[0].read_value())
         cond_node, pending_ack = None, None

@@ -90,7 +90,10 @@ fn builder(cfg: &OpcuaConfig) -> anyhow::Result<ServerBuilder> {
     Ok(match &cfg.access {
         OpcuaAccess::Anonymous => b
             .add_endpoint("none", ServerEndpoint::new_none(ENDPOINT_PATH, &[ANONYMOUS_USER_TOKEN_ID.to_string()]))
-            .create_sample_keypair(false),
+            .create_sample_keypair(false)
+            // No certificate is used, but async-opcua makes its PKI folders all the same
+            // (by default in the working directory): keep them out of the way.
+            .pki_dir(std::env::temp_dir().join("forgemon-opcua-pki")),
         OpcuaAccess::User { name, password_file, pki_dir } => {
             let password = std::fs::read_to_string(password_file).with_context(|| {
                 format!("{}: cannot read the OPC UA password ([opcua] password_file)", password_file.display())
@@ -132,6 +135,17 @@ pub async fn start(
     let Some(cfg) = cfg else { return Ok(None) };
     let (server, handle) =
         builder(cfg)?.build().map_err(|e| anyhow::anyhow!("opcua: the server's configuration is not valid: {e}"))?;
+    if let OpcuaAccess::User { pki_dir, .. } = &cfg.access {
+        // async-opcua logs a certificate it could not make and serves on without it.
+        let cert = pki_dir.join("own/cert.der");
+        if !cert.is_file() {
+            anyhow::bail!(
+                "opcua.pki_dir {}: cannot make the server's certificate {}",
+                pki_dir.display(),
+                cert.display()
+            );
+        }
+    }
     let manager = handle
         .node_managers()
         .get_of_type::<SimpleNodeManager>()
