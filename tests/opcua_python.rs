@@ -73,9 +73,9 @@ fn an_asyncua_client_browses_reads_and_receives_every_blow_of_the_demo() {
     let url = format!("opc.tcp://127.0.0.1:{}", free_port());
     // The client first: it connects as soon as the server is up, before the first blow.
     let py = client(&["demo", &url, "40"]).spawn().unwrap_or_else(|e| panic!("cannot run python3 ({e}): {INSTALL}"));
-    // Real time, 2 billets of 8 blows 0.3 s apart: about 6 s.
+    // Real time, 2 billets of 8 blows 0.4 s apart: about 7 s.
     let demo = Command::new(env!("CARGO_BIN_EXE_forgemon"))
-        .args(["demo", "--billets", "2", "--interval", "0.3", "--opcua", &url, "--dir"])
+        .args(["demo", "--billets", "2", "--interval", "0.4", "--opcua", &url, "--dir"])
         .arg(dir.path().join("rec"))
         .output()
         .expect("run the demo");

@@ -144,3 +144,83 @@ pub fn condition_event(place: &ConditionPlace, state: &ConditionState) -> AlarmC
 pub fn as_dyn(e: &impl Event) -> &dyn Event {
     e
 }
+
+#[cfg(test)]
+mod tests {
+    use opcua::types::{AttributeId, NumericRange, QualifiedName, Variant};
+
+    use super::*;
+    use crate::estimate::BlowClass;
+
+    fn field(e: &dyn Event, path: &[(u16, &str)]) -> Variant {
+        let path: Vec<QualifiedName> = path.iter().map(|(ns, n)| QualifiedName::new(*ns, *n)).collect();
+        e.get_field(&ObjectTypeId::BaseEventType.into(), AttributeId::Value, &NumericRange::None, &path)
+    }
+
+    fn complete_blow() -> BlowEstimate {
+        BlowEstimate {
+            judgement: None,
+            blow: 7,
+            t_contact_s: 1.0,
+            v_impact_mps: 5.2996,
+            kinetic_in_j: Some(10_280.4),
+            plastic_j: Some(7_195.6),
+            friction_j: Some(900.0),
+            damped_j: Some(500.0),
+            elastic_j: Some(100.0),
+            efficiency: Some(0.699_95),
+            final_load_n: 1.0e6,
+            h_end_m: Some(0.040_123),
+            class: BlowClass::Intermediate,
+            alert: None,
+            t_end_s: 1.02,
+            peak_load_n: 1_234_567.0,
+            residual: Some(0.0),
+            sensor_check: None,
+            method: None,
+            gap_s: 0.0,
+            h_start_m: None,
+            height_check: None,
+            billet: Default::default(),
+        }
+    }
+
+    /// Every property the event type declares (`model.rs` builds them from
+    /// `BLOW_EVENT_FIELDS`) is a field the event answers; a name it does not declare is empty.
+    #[test]
+    fn the_blow_event_answers_every_declared_field() {
+        let b = complete_blow();
+        let e = BlowCompletedEvent::of(&b, 3, &NodeId::new(2, "unit"), "Hammer");
+        for name in BLOW_EVENT_FIELDS {
+            assert_ne!(field(&e, &[(3, name)]), Variant::Empty, "{name}");
+        }
+        assert_eq!(field(&e, &[(3, "PlasticEnergy")]), Variant::from(7_195.6));
+        assert_eq!(field(&e, &[(3, "BlowNumber")]), Variant::from(7u32));
+        assert_eq!(field(&e, &[(0, "EventType")]), Variant::from(NodeId::new(3, "BlowCompletedEventType")));
+        assert_eq!(field(&e, &[(3, "NoSuchField")]), Variant::Empty);
+        // An incomplete blow has no energies: empty, not zero.
+        let e = BlowCompletedEvent::of(&BlowEstimate { plastic_j: None, ..b }, 3, &NodeId::null(), "Hammer");
+        assert_eq!(field(&e, &[(3, "PlasticEnergy")]), Variant::Empty);
+    }
+
+    /// OPC 10000-9 §5.5: a condition is retained while active or unacknowledged.
+    #[test]
+    fn condition_events_carry_their_states_and_retain() {
+        let place = ConditionPlace {
+            node: NodeId::new(3, "ElasticBlowAlarm"),
+            name: "ElasticBlowAlarm".into(),
+            source: NodeId::new(2, "unit"),
+            source_name: "Hammer".into(),
+            input_node: NodeId::new(3, "Efficiency"),
+        };
+        for (active, acked, retain) in [(true, false, true), (false, true, false), (false, false, true)] {
+            let s = ConditionState { event_id: event_id(), active, acked, message: "m".into(), severity: 700 };
+            let e = condition_event(&place, &s);
+            assert_eq!(field(&e, &[(0, "ActiveState"), (0, "Id")]), Variant::from(active));
+            assert_eq!(field(&e, &[(0, "AckedState"), (0, "Id")]), Variant::from(acked));
+            assert_eq!(field(&e, &[(0, "Retain")]), Variant::from(retain));
+            assert_eq!(field(&e, &[(0, "EventId")]), Variant::from(s.event_id.clone()));
+            assert_eq!(field(&e, &[(0, "ConditionName")]), Variant::from("ElasticBlowAlarm"));
+        }
+    }
+}
