@@ -50,24 +50,8 @@ fn parts(dir: &std::path::Path, foxglove: std::net::SocketAddr) -> ServiceParts 
     let machine = parse_machine("m", MACHINE).expect("machine").machine;
     ServiceParts {
         config: ServiceConfig {
-            machine_path: PathBuf::from("hammer-lg1000.machine.toml"),
-            process_path: None,
-            recipe_path: None,
-            recording_dir: dir.to_path_buf(),
-            rotate_bytes: forgemon::config::service::DEFAULT_ROTATE_BYTES,
-            rotate_seconds: forgemon::config::service::DEFAULT_ROTATE_SECONDS,
-            http_listen: "127.0.0.1:0".parse().expect("address"),
-            http_token_file: None,
-            plc_listen: None,
             foxglove_listen: Some(foxglove),
-            alerts: forgemon::alert::AlertConfig::default(),
-            webhook: None,
-            plc_coil: None,
-            new_billet_rise_m: None,
-            idle_new_billet_s: forgemon::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
-            sources: Vec::new(),
-            advisor: None,
-            uplink_mqtt: None,
+            ..ServiceConfig::minimal(PathBuf::from("hammer-lg1000.machine.toml"), dir.to_path_buf())
         },
         config_path: dir.join("service.toml"),
         config_text: String::new(),

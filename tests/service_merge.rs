@@ -80,26 +80,7 @@ fn roles_from_two_daqs_on_their_own_clocks_are_merged() {
     let encoder_channels = vec![ChannelSpec { role: Role::Disp, gain: 1e-6, offset: 0.0 }];
     let machine = parse_machine("m", MACHINE).unwrap().machine;
     let parts = ServiceParts {
-        config: ServiceConfig {
-            machine_path: PathBuf::from(HAMMER),
-            process_path: None,
-            recipe_path: None,
-            recording_dir: dir.clone(),
-            rotate_bytes: forgemon::config::service::DEFAULT_ROTATE_BYTES,
-            rotate_seconds: forgemon::config::service::DEFAULT_ROTATE_SECONDS,
-            http_listen: "127.0.0.1:0".parse().unwrap(),
-            http_token_file: None,
-            plc_listen: None,
-            foxglove_listen: None,
-            alerts: forgemon::alert::AlertConfig::default(),
-            webhook: None,
-            plc_coil: None,
-            new_billet_rise_m: None,
-            idle_new_billet_s: forgemon::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
-            sources: Vec::new(),
-            advisor: None,
-            uplink_mqtt: None,
-        },
+        config: ServiceConfig { ..ServiceConfig::minimal(PathBuf::from(HAMMER), dir.clone()) },
         config_path: dir.join("service.toml"),
         config_text: String::new(),
         machine,

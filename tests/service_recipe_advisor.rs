@@ -67,24 +67,8 @@ fn parts(dir: &Path) -> ServiceParts {
     let machine = parse_machine("m", MACHINE).expect("machine").machine;
     ServiceParts {
         config: ServiceConfig {
-            machine_path: PathBuf::from("hammer-lg1000.machine.toml"),
-            process_path: None,
-            recipe_path: None,
-            recording_dir: dir.to_path_buf(),
-            rotate_bytes: forgemon::config::service::DEFAULT_ROTATE_BYTES,
-            rotate_seconds: forgemon::config::service::DEFAULT_ROTATE_SECONDS,
-            http_listen: "127.0.0.1:0".parse().expect("address"),
-            http_token_file: None,
-            plc_listen: None,
-            foxglove_listen: None,
-            alerts: forgemon::alert::AlertConfig::default(),
-            webhook: None,
-            plc_coil: None,
-            new_billet_rise_m: None,
-            idle_new_billet_s: forgemon::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
-            sources: Vec::new(),
             advisor: Some(AdvisorConfig { target_height_m: TARGET_M, speeds: Speeds::Settings(SETTINGS.to_vec()) }),
-            uplink_mqtt: None,
+            ..ServiceConfig::minimal(PathBuf::from("hammer-lg1000.machine.toml"), dir.to_path_buf())
         },
         config_path: dir.join("service.toml"),
         config_text: String::new(),
@@ -237,11 +221,17 @@ fn the_recipe_switches_over_http_judges_a_cold_billet_nok_and_the_advisor_replan
     let first = advice.first().expect("a plan before the first blow");
     assert_eq!((first.billet, first.after_blow), (0, 0));
     assert_eq!(first.plan.as_ref().map(|p| p.h_now_m), Some(sheet_h));
-    for b in &blows {
-        let a = advice
+    // Every plan after a blow is made from exactly the height the service reported for it,
+    // in the order of the blows. A blow that ends while the advisor is still planning is not
+    // planned for (the next one is), and the plan after the run's last blow stops with the
+    // service; so each billet's blows are planned for, not necessarily every one.
+    let planned: Vec<(u32, u32)> = advice.iter().skip(1).map(|a| (a.billet, a.after_blow)).collect();
+    assert!(planned.windows(2).all(|w| w[0] < w[1]), "in order: {planned:?}");
+    for a in advice.iter().skip(1) {
+        let b = blows
             .iter()
-            .find(|a| a.billet == b.billet.billet && a.after_blow == b.billet.billet_blow)
-            .unwrap_or_else(|| panic!("no plan after billet {} blow {}", b.billet.billet, b.billet.billet_blow));
+            .find(|b| (b.billet.billet, b.billet.billet_blow) == (a.billet, a.after_blow))
+            .unwrap_or_else(|| panic!("a plan after a blow that was not made: {a:?}"));
         let p = a.plan.as_ref().expect("a measured height gives a plan");
         assert_eq!(Some(p.h_now_m), b.h_end_m);
         assert_eq!(p.target_m, TARGET_M);
@@ -251,6 +241,10 @@ fn the_recipe_switches_over_http_judges_a_cold_billet_nok_and_the_advisor_replan
             _ => assert!(p.reachable == p.why.is_none(), "{p:?}"),
         }
     }
+    for billet in 1..=3 {
+        assert!(planned.iter().filter(|(b, _)| *b == billet).count() >= V0S.len() / 2, "billet {billet}: {planned:?}");
+    }
+    println!("{} of {} blows planned after", planned.len(), blows.len());
     // The billet's first plan (112 mm down to 30 mm) is a plan, not a refusal.
     assert!(first.plan.as_ref().is_some_and(|p| p.reachable && !p.plan.is_empty()), "{first:?}");
 }

@@ -58,6 +58,10 @@ pub struct DemoArgs {
     /// group `forge`, node `forgemon`, device `machine`; queued under `--dir` while it is down.
     #[arg(long, value_name = "URL")]
     pub mqtt: Option<String>,
+    /// Serve the OPC UA Metal Forming server here (`opc.tcp://127.0.0.1:4840`; loopback
+    /// only: the demo's sessions are anonymous).
+    #[arg(long, value_name = "URL")]
+    pub opcua: Option<String>,
     /// Judge every blow against this recipe (`forgemon teach`), OK/NOK.
     #[arg(long, value_name = "PART.recipe.toml")]
     pub recipe: Option<PathBuf>,
@@ -96,6 +100,12 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
             speed.check(*v).map_err(|why| anyhow::anyhow!("--settings {v}: {why}"))?;
         }
     }
+    let opcua = args
+        .opcua
+        .as_deref()
+        .map(crate::config::opcua::OpcuaConfig::anonymous)
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("--opcua {e}"))?;
     let machine = parse_machine("hammer-lg1000.machine.toml", MACHINE)?.machine;
     let steel = parse_process("steel-16NiCrMo13.process.toml", STEEL)?;
     let plan = BilletPlan { process: steel, v0s_mps: vec![3.9, 5.3, 5.3, 5.3, 5.3, 5.3, 5.3, 5.3] };
@@ -111,27 +121,17 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         None => None,
     };
     let config = ServiceConfig {
-        machine_path: PathBuf::from("hammer-lg1000.machine.toml"),
-        process_path: None,
         recipe_path: args.recipe.clone(),
-        recording_dir: args.dir.clone(),
-        rotate_bytes: crate::config::service::DEFAULT_ROTATE_BYTES,
-        rotate_seconds: crate::config::service::DEFAULT_ROTATE_SECONDS,
         http_listen: args.http.unwrap_or_else(|| "127.0.0.1:0".parse().expect("a valid address")),
-        http_token_file: None,
         plc_listen: args.plc,
         foxglove_listen: args.foxglove,
-        alerts: crate::alert::AlertConfig::default(),
-        webhook: None,
-        plc_coil: None,
-        new_billet_rise_m: None,
-        idle_new_billet_s: crate::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
-        sources: Vec::new(),
+        opcua: opcua.clone(),
         advisor: args.target.map(|target_height_m| AdvisorConfig {
             target_height_m,
             speeds: crate::advise::Speeds::Settings(args.settings.clone()),
         }),
         uplink_mqtt: uplink,
+        ..ServiceConfig::minimal(PathBuf::from("hammer-lg1000.machine.toml"), args.dir.clone())
     };
     // No new-billet signal: the service finds each billet from the encoder (issue 22), so it
     // tracks the billet's height and splits plastic from friction work on every billet.
@@ -175,6 +175,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         tokio::spawn(run_on_stream(cfg, slave, system_clock_ns, tx, shutdown_rx));
         let dir = args.dir.clone();
         let (plc, foxglove, mqtt) = (args.plc, args.foxglove, args.mqtt.clone());
+        let opcua_url = opcua.map(|o| o.url);
         let hooks = Hooks {
             on_listening: Some(Box::new(move |addr| {
                 println!("forgemon demo: a simulated MONTBARD LG1000 drop hammer (paper Table 1) forges {} steel billets, 60 x 112 mm,", args.billets.max(1));
@@ -182,6 +183,9 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
                 println!("  dashboard on http://{addr}/");
                 if let Some(plc) = plc {
                     println!("  PLC result image (Modbus TCP, unit 1) on {plc}");
+                }
+                if let Some(url) = &opcua_url {
+                    println!("  OPC UA server (Metal Forming, anonymous) on {url}");
                 }
                 if let Some(fox) = foxglove {
                     println!("  Foxglove live view on ws://{fox}");

@@ -12,6 +12,7 @@ mod document;
 pub(crate) mod keys;
 pub mod limits;
 pub mod machine;
+pub mod opcua;
 pub mod process;
 pub mod recipe;
 pub mod service;

@@ -87,6 +87,8 @@ pub struct ServiceConfig {
     pub plc_listen: Option<SocketAddr>,
     /// `[foxglove] listen`: serve the Foxglove WebSocket protocol here.
     pub foxglove_listen: Option<SocketAddr>,
+    /// `[opcua]`: the OPC UA Metal Forming server (`config/opcua.rs`).
+    pub opcua: Option<super::opcua::OpcuaConfig>,
     pub alerts: AlertConfig,
     pub webhook: Option<String>,
     pub plc_coil: Option<PlcCoil>,
@@ -102,6 +104,36 @@ pub struct ServiceConfig {
     pub uplink_mqtt: Option<super::uplink::MqttUplink>,
 }
 
+impl ServiceConfig {
+    /// A service on `machine_path` recording to `recording_dir` with every other key at its
+    /// default and nothing optional configured: the status endpoint on a free loopback port,
+    /// no process sheet, no front end but the dashboard, no sources (the caller feeds it, as
+    /// `forgemon demo` and the tests do). Set the rest with struct update syntax.
+    pub fn minimal(machine_path: PathBuf, recording_dir: PathBuf) -> Self {
+        ServiceConfig {
+            machine_path,
+            process_path: None,
+            recipe_path: None,
+            recording_dir,
+            rotate_bytes: DEFAULT_ROTATE_BYTES,
+            rotate_seconds: DEFAULT_ROTATE_SECONDS,
+            http_listen: SocketAddr::from(([127, 0, 0, 1], 0)),
+            http_token_file: None,
+            plc_listen: None,
+            foxglove_listen: None,
+            opcua: None,
+            alerts: AlertConfig::default(),
+            webhook: None,
+            plc_coil: None,
+            new_billet_rise_m: None,
+            idle_new_billet_s: crate::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
+            sources: Vec::new(),
+            advisor: None,
+            uplink_mqtt: None,
+        }
+    }
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawService {
@@ -112,6 +144,7 @@ struct RawService {
     http: Option<RawHttp>,
     plc_server: Option<RawListen>,
     foxglove: Option<RawListen>,
+    opcua: Option<super::opcua::RawOpcua>,
     alerts: Option<RawAlerts>,
     billets: Option<RawBillets>,
     advisor: Option<super::advisor::RawAdvisor>,
@@ -202,6 +235,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         http_token_file,
         plc_listen,
         foxglove_listen,
+        opcua: super::opcua::parse_opcua(&doc, raw.opcua.as_ref(), base)?,
         alerts,
         webhook,
         plc_coil,

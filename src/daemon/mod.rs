@@ -11,6 +11,7 @@ pub mod advisor;
 pub mod dashboard;
 pub mod foxglove;
 pub mod live;
+pub mod opcua;
 pub mod plc_server;
 pub mod queue;
 pub mod recipe_switch;
@@ -182,6 +183,8 @@ pub async fn serve(
     )?;
     // The Sparkplug B uplink (CONTRACTS §10), when configured; flushed after the service.
     let uplink = sparkplug::start(cfg.uplink_mqtt.as_ref(), &cfg.recording_dir, &live)?;
+    let _opcua =
+        opcua::start(cfg.opcua.as_ref(), parts.machine.kind(), status.clone(), &live, control_tx.clone()).await?;
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
     let mut pipeline = Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine));
     if let Some(path) = &cfg.recipe_path {

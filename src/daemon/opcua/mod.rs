@@ -1,0 +1,229 @@
+//! The OPC UA server (issue 21 §2): the machine modelled after OPC 40503-1 "OPC UA for
+//! Metal Forming" (`model.rs`), fed blow by blow from the service's live feed (`feed.rs`)
+//! with a cyclic event per blow and the alerts as acknowledgeable conditions
+//! (`events.rs`), served by async-opcua on `[opcua] listen`. Anonymous sessions on a
+//! loopback address only; elsewhere one user with a password, over a signed and encrypted
+//! channel (Basic256Sha256) with a self-signed server certificate kept under `pki_dir`.
+//! README "OPC UA server" documents the node layout for a plant's clients.
+
+pub mod events;
+pub mod feed;
+pub mod model;
+
+use std::net::SocketAddr;
+
+use anyhow::Context;
+use opcua::nodes::{ImportedItem, NodeSetImport, NodeSetNamespaceMapper};
+use opcua::server::node_manager::memory::{SimpleNodeManager, simple_node_manager_imports};
+use opcua::server::{ANONYMOUS_USER_TOKEN_ID, ServerBuilder, ServerEndpoint, ServerHandle, ServerUserToken};
+use opcua::types::{BuildInfo, DateTime, MessageSecurityMode};
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+
+use super::Control;
+use super::live::Live;
+use super::status::SharedStatus;
+use crate::config::opcua::{OpcuaAccess, OpcuaConfig};
+use crate::physics::machine::MachineKind;
+
+/// The user token id of the configured user.
+const USER_TOKEN_ID: &str = "forgemon_user";
+/// The endpoint path: the server serves the root (`opc.tcp://HOST:PORT/`).
+const ENDPOINT_PATH: &str = "/";
+
+/// The running server; dropping it stops the server and its feed.
+pub struct OpcuaServer {
+    pub addr: SocketAddr,
+    handle: ServerHandle,
+    tasks: [JoinHandle<()>; 2],
+}
+
+impl Drop for OpcuaServer {
+    fn drop(&mut self) {
+        self.handle.cancel();
+        for t in &self.tasks {
+            t.abort();
+        }
+    }
+}
+
+/// The two namespaces of forgemon's nodes, owned by one node manager (an import that adds
+/// namespaces and no nodes: the nodes are built by `model.rs`).
+struct Namespaces;
+
+impl NodeSetImport for Namespaces {
+    fn register_namespaces(&self, namespaces: &mut NodeSetNamespaceMapper) {
+        namespaces.add_namespace(model::MODEL_NS, 1);
+        namespaces.add_namespace(model::FORGEMON_NS, 2);
+    }
+
+    fn get_own_namespaces(&self) -> Vec<String> {
+        vec![model::MODEL_NS.to_string(), model::FORGEMON_NS.to_string()]
+    }
+
+    fn load<'a>(&'a self, _: &'a NodeSetNamespaceMapper) -> Box<dyn Iterator<Item = ImportedItem> + 'a> {
+        Box::new(std::iter::empty())
+    }
+}
+
+/// The server's builder for `cfg`: its endpoint and who may use it.
+fn builder(cfg: &OpcuaConfig) -> anyhow::Result<ServerBuilder> {
+    let b = ServerBuilder::new()
+        .application_name("forgemon")
+        .application_uri("urn:forgemon")
+        .product_uri("urn:forgemon")
+        .build_info(BuildInfo {
+            product_uri: "urn:forgemon".into(),
+            manufacturer_name: "forgemon".into(),
+            product_name: "forgemon".into(),
+            software_version: env!("CARGO_PKG_VERSION").into(),
+            build_number: "".into(),
+            build_date: DateTime::now(),
+        })
+        .host(cfg.listen.ip().to_string())
+        .port(cfg.listen.port())
+        .discovery_urls(vec![ENDPOINT_PATH.to_string()])
+        .with_node_manager(simple_node_manager_imports(
+            vec![Box::new(Namespaces) as Box<dyn NodeSetImport>],
+            "forgemon",
+        ));
+    Ok(match &cfg.access {
+        OpcuaAccess::Anonymous => b
+            .add_endpoint("none", ServerEndpoint::new_none(ENDPOINT_PATH, &[ANONYMOUS_USER_TOKEN_ID.to_string()]))
+            .create_sample_keypair(false)
+            // No certificate is used, but async-opcua makes its PKI folders all the same
+            // (by default in the working directory): keep them out of the way.
+            .pki_dir(std::env::temp_dir().join("forgemon-opcua-pki")),
+        OpcuaAccess::User { name, password_file, pki_dir } => {
+            let password = std::fs::read_to_string(password_file).with_context(|| {
+                format!("{}: cannot read the OPC UA password ([opcua] password_file)", password_file.display())
+            })?;
+            let password = password.trim_end_matches(['\r', '\n']);
+            if password.is_empty() {
+                anyhow::bail!("{}: the OPC UA password file ([opcua] password_file) is empty", password_file.display());
+            }
+            let token = ServerUserToken::user_pass(name.as_str(), password);
+            b.add_user_token(USER_TOKEN_ID, token)
+                .add_endpoint(
+                    "basic256sha256_sign_encrypt",
+                    ServerEndpoint::new(
+                        ENDPOINT_PATH,
+                        opcua::crypto::SecurityPolicy::Basic256Sha256,
+                        MessageSecurityMode::SignAndEncrypt,
+                        &[USER_TOKEN_ID.to_string()],
+                    ),
+                )
+                .pki_dir(pki_dir.clone())
+                .create_sample_keypair(true)
+                .certificate_path("own/cert.der")
+                .private_key_path("private/private.pem")
+                // The channel is encrypted for any client; the session needs the password.
+                .trust_client_certs(true)
+        }
+    })
+}
+
+/// Serve the machine on `cfg` when it is set (`[opcua]`); `None` otherwise. Fails when
+/// the password cannot be read or the address cannot be listened on.
+pub async fn start(
+    cfg: Option<&OpcuaConfig>,
+    kind: MachineKind,
+    status: SharedStatus,
+    live: &Live,
+    control: mpsc::Sender<Control>,
+) -> anyhow::Result<Option<OpcuaServer>> {
+    let Some(cfg) = cfg else { return Ok(None) };
+    let (server, handle) =
+        builder(cfg)?.build().map_err(|e| anyhow::anyhow!("opcua: the server's configuration is not valid: {e}"))?;
+    if let OpcuaAccess::User { pki_dir, .. } = &cfg.access {
+        // async-opcua logs a certificate it could not make and serves on without it.
+        let cert = pki_dir.join("own/cert.der");
+        if !cert.is_file() {
+            anyhow::bail!(
+                "opcua.pki_dir {}: cannot make the server's certificate {}",
+                pki_dir.display(),
+                cert.display()
+            );
+        }
+    }
+    let manager = handle
+        .node_managers()
+        .get_of_type::<SimpleNodeManager>()
+        .context("opcua: the server has no node manager of forgemon's")?;
+    let (Some(model_ns), Some(forgemon_ns)) =
+        (handle.get_namespace_index(model::MODEL_NS), handle.get_namespace_index(model::FORGEMON_NS))
+    else {
+        anyhow::bail!("opcua: forgemon's namespaces were not registered");
+    };
+    let nodes = model::build(&mut manager.address_space().write(), model_ns, forgemon_ns, kind);
+    let conditions = feed::quiet_conditions(&nodes);
+    for (i, c) in nodes.conditions.iter().enumerate() {
+        let (conditions, control) = (conditions.clone(), control.clone());
+        manager
+            .inner()
+            .add_method_callback(c.acknowledge.clone(), move |args| feed::acknowledge(&conditions, i, &control, args));
+    }
+    let listener = tokio::net::TcpListener::bind(cfg.listen)
+        .await
+        .with_context(|| format!("opcua.listen {}: cannot listen", cfg.url))?;
+    let addr = listener.local_addr().with_context(|| format!("opcua.listen {}", cfg.url))?;
+    let feed = feed::Feed { manager, subscriptions: handle.subscriptions().clone(), nodes, conditions };
+    let updater = tokio::spawn(feed.run(live.subscribe(), status));
+    let run = tokio::spawn(async move {
+        if let Err(e) = server.run_with(listener).await {
+            tracing::error!("OPC UA server stopped: {e}");
+        }
+    });
+    tracing::info!(%addr, "OPC UA server listening");
+    Ok(Some(OpcuaServer { addr, handle, tasks: [updater, run] }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Users by token id, as async-opcua's authenticator takes them.
+    fn users(b: &ServerBuilder) -> std::collections::BTreeMap<String, ServerUserToken> {
+        b.config().user_tokens.clone()
+    }
+
+    #[test]
+    fn anonymous_access_has_one_unsecured_endpoint_and_no_users() {
+        let cfg = OpcuaConfig::anonymous("opc.tcp://127.0.0.1:4840").expect("loopback");
+        let b = builder(&cfg).expect("builds");
+        let eps = &b.config().endpoints;
+        assert_eq!(eps.len(), 1);
+        let ep = eps.values().next().expect("one endpoint");
+        assert_eq!(ep.security_policy, "None");
+        assert!(ep.user_token_ids.contains(ANONYMOUS_USER_TOKEN_ID));
+        assert!(users(&b).is_empty());
+    }
+
+    #[test]
+    fn a_user_gets_only_an_encrypted_endpoint_without_anonymous() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let pass = dir.path().join("pass");
+        std::fs::write(&pass, "s3cret\n").expect("write");
+        let cfg = OpcuaConfig {
+            url: "opc.tcp://0.0.0.0:4840".into(),
+            listen: "0.0.0.0:4840".parse().expect("address"),
+            access: OpcuaAccess::User {
+                name: "mes".into(),
+                password_file: pass.clone(),
+                pki_dir: dir.path().join("pki"),
+            },
+        };
+        let b = builder(&cfg).expect("builds");
+        let eps = &b.config().endpoints;
+        assert_eq!(eps.len(), 1);
+        let ep = eps.values().next().expect("one endpoint");
+        assert_eq!((ep.security_policy.as_str(), ep.security_mode.as_str()), ("Basic256Sha256", "SignAndEncrypt"));
+        assert!(!ep.user_token_ids.contains(ANONYMOUS_USER_TOKEN_ID));
+        let u = users(&b);
+        assert_eq!(u[USER_TOKEN_ID].user, "mes");
+        assert_eq!(u[USER_TOKEN_ID].pass.as_deref(), Some("s3cret"), "the newline is not part of the password");
+        std::fs::write(&pass, "\n").expect("write");
+        let e = builder(&cfg).err().expect("an empty password is refused").to_string();
+        assert!(e.contains("password_file") && e.contains("empty"), "{e}");
+    }
+}

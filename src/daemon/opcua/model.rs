@@ -1,0 +1,303 @@
+//! The address space of the OPC UA server: the machine modelled after OPC 40001-1
+//! (Machinery: the `Machines` folder, a machine with its `Identification`) and OPC 40503-1
+//! (Metal Forming: the forming working unit with its cycle counter and process values),
+//! as far as they fit a hammer or a screw press. The companion specifications' NodeSets
+//! cannot be loaded here, so the nodes that follow them keep the specifications' browse
+//! names in a namespace of forgemon's own ([`MODEL_NS`]); the values the specifications
+//! have no place for (energies, efficiency, blow class, billet counter, the per-blow event
+//! type) are in the forgemon namespace ([`FORGEMON_NS`]). README "OPC UA server" lists
+//! which is which. Pure construction: no IO, no clock.
+
+use opcua::nodes::{AccessLevel, EventNotifier, MethodBuilder, ObjectBuilder, ObjectTypeBuilder, VariableBuilder};
+use opcua::server::address_space::AddressSpace;
+use opcua::types::{
+    Argument, DataTypeId, LocalizedText, NodeId, ObjectId, ObjectTypeId, QualifiedName, ReferenceTypeId,
+    VariableTypeId, Variant,
+};
+
+use super::events::BLOW_EVENT_FIELDS;
+use crate::estimate::result::AlertKind;
+use crate::physics::machine::MachineKind;
+
+/// Nodes named after OPC 40001-1 and OPC 40503-1 (the structure the specifications
+/// describe, not their NodeSets).
+pub const MODEL_NS: &str = "urn:forgemon:UA:MetalForming";
+/// forgemon's own nodes, types and event fields.
+pub const FORGEMON_NS: &str = "urn:forgemon:UA";
+
+/// The alert conditions, one per kind of alert, with the browse name of their node and
+/// their severity (OPC 10000-5 §6.4.2: 1–1000).
+pub const CONDITIONS: [(AlertKind, &str, u16); 4] = [
+    (AlertKind::ElasticBlow, "ElasticBlowAlarm", 700),
+    (AlertKind::Nok, "NokAlarm", 600),
+    (AlertKind::ModelHealth, "ModelHealthAlarm", 500),
+    (AlertKind::Sensor, "SensorAlarm", 500),
+];
+
+/// A process value: browse name, namespace (true: forgemon's), data type, unit.
+struct ValueSpec {
+    name: &'static str,
+    forgemon: bool,
+    data_type: DataTypeId,
+    unit: &'static str,
+}
+
+/// The working unit's per-blow values, written on every blow (`feed.rs`).
+const VALUES: [ValueSpec; 11] = [
+    ValueSpec { name: "CycleCounter", forgemon: false, data_type: DataTypeId::UInt32, unit: "blows" },
+    ValueSpec { name: "PeakLoad", forgemon: false, data_type: DataTypeId::Double, unit: "N" },
+    ValueSpec { name: "BilletHeight", forgemon: false, data_type: DataTypeId::Double, unit: "m" },
+    ValueSpec { name: "BilletCounter", forgemon: true, data_type: DataTypeId::UInt32, unit: "billets" },
+    ValueSpec { name: "BlowClass", forgemon: true, data_type: DataTypeId::String, unit: "" },
+    ValueSpec { name: "ImpactVelocity", forgemon: true, data_type: DataTypeId::Double, unit: "m/s" },
+    ValueSpec { name: "ImpactEnergy", forgemon: true, data_type: DataTypeId::Double, unit: "J" },
+    ValueSpec { name: "PlasticEnergy", forgemon: true, data_type: DataTypeId::Double, unit: "J" },
+    ValueSpec { name: "Efficiency", forgemon: true, data_type: DataTypeId::Double, unit: "1" },
+    ValueSpec { name: "LastAlert", forgemon: true, data_type: DataTypeId::String, unit: "" },
+    ValueSpec { name: "AlertLatched", forgemon: true, data_type: DataTypeId::Boolean, unit: "" },
+];
+
+/// The ids of the nodes the feed writes and the events name.
+#[derive(Debug, Clone)]
+pub struct Nodes {
+    pub model_ns: u16,
+    pub forgemon_ns: u16,
+    pub machine: NodeId,
+    pub machine_name: String,
+    pub working_unit: NodeId,
+    /// A process value's node by its browse name.
+    values: Vec<(&'static str, NodeId)>,
+    /// Each condition: kind, node, browse name, severity, its `Acknowledge` method and its
+    /// state variables' `Id` (`ActiveState/Id`, `AckedState/Id`) and `Retain`.
+    pub conditions: Vec<ConditionNodes>,
+}
+
+/// A condition's nodes.
+#[derive(Debug, Clone)]
+pub struct ConditionNodes {
+    pub kind: AlertKind,
+    pub node: NodeId,
+    pub name: &'static str,
+    pub severity: u16,
+    pub acknowledge: NodeId,
+    pub active_state: NodeId,
+    pub acked_state: NodeId,
+    pub active_id: NodeId,
+    pub acked_id: NodeId,
+    pub retain: NodeId,
+}
+
+impl Nodes {
+    /// The node of the process value `name` (one of [`VALUES`]).
+    pub fn value(&self, name: &str) -> Option<&NodeId> {
+        self.values.iter().find(|(n, _)| *n == name).map(|(_, id)| id)
+    }
+}
+
+/// The machine's browse name: what it is.
+fn machine_name(kind: MachineKind) -> &'static str {
+    match kind {
+        MachineKind::Hammer => "Hammer",
+        MachineKind::ScrewPress => "ScrewPress",
+    }
+}
+
+/// A read-only variable `name` (`ns`) with `value`, component or property of `parent`.
+fn variable(
+    space: &mut AddressSpace,
+    id: &NodeId,
+    name: QualifiedName,
+    value: impl Into<Variant>,
+    data_type: DataTypeId,
+    parent: &NodeId,
+    property: bool,
+) {
+    let display = LocalizedText::from(name.name.as_ref());
+    let b = VariableBuilder::new(id, name, display)
+        .value(value)
+        .data_type(data_type)
+        .access_level(AccessLevel::CURRENT_READ)
+        .user_access_level(AccessLevel::CURRENT_READ);
+    if property {
+        b.property_of(parent.clone()).has_type_definition(VariableTypeId::PropertyType).insert(space);
+    } else {
+        b.component_of(parent.clone()).has_type_definition(VariableTypeId::BaseDataVariableType).insert(space);
+    }
+}
+
+/// The value a process value holds before the first blow.
+fn initial(data_type: DataTypeId) -> Variant {
+    match data_type {
+        DataTypeId::UInt32 => Variant::from(0u32),
+        DataTypeId::Boolean => Variant::from(false),
+        DataTypeId::String => Variant::from(""),
+        _ => Variant::Empty,
+    }
+}
+
+/// Build the machine's nodes into `space` (whose namespaces `model_ns` and `forgemon_ns`
+/// are this server's), for a machine of `kind`.
+pub fn build(space: &mut AddressSpace, model_ns: u16, forgemon_ns: u16, kind: MachineKind) -> Nodes {
+    let m = |s: &str| NodeId::new(model_ns, s.to_string());
+    let f = |s: &str| NodeId::new(forgemon_ns, s.to_string());
+    let name = machine_name(kind);
+
+    blow_event_type(space, forgemon_ns);
+    let machines = m("Machines");
+    space.add_folder(&machines, QualifiedName::new(model_ns, "Machines"), "Machines", &ObjectId::ObjectsFolder.into());
+    let machine = m(name);
+    ObjectBuilder::new(&machine, QualifiedName::new(model_ns, name), name)
+        .organized_by(machines.clone())
+        .has_type_definition(ObjectTypeId::BaseObjectType)
+        .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
+        .insert(space);
+    // The Server object is the root notifier: a machine's events reach it too.
+    space.insert_reference(&ObjectId::Server.into(), &machine, ReferenceTypeId::HasNotifier);
+    identification(space, model_ns, &machine, name, kind);
+
+    let unit = m(&format!("{name}.FormingWorkingUnit"));
+    ObjectBuilder::new(&unit, QualifiedName::new(model_ns, "FormingWorkingUnit"), "FormingWorkingUnit")
+        .component_of(machine.clone())
+        .has_type_definition(ObjectTypeId::BaseObjectType)
+        .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
+        .insert(space);
+    space.insert_reference(&machine, &unit, ReferenceTypeId::HasEventSource);
+    let mut values = Vec::new();
+    for v in &VALUES {
+        let (ns, id) = if v.forgemon { (forgemon_ns, f(v.name)) } else { (model_ns, m(v.name)) };
+        variable(space, &id, QualifiedName::new(ns, v.name), initial(v.data_type), v.data_type, &unit, false);
+        if !v.unit.is_empty() {
+            let eu = NodeId::new(ns, format!("{}.Unit", v.name));
+            variable(space, &eu, QualifiedName::new(forgemon_ns, "Unit"), v.unit, DataTypeId::String, &id, true);
+        }
+        values.push((v.name, id));
+    }
+    let input = f("Efficiency");
+    let conditions = CONDITIONS
+        .iter()
+        .map(|&(kind, cname, severity)| condition(space, forgemon_ns, &unit, &input, kind, cname, severity))
+        .collect();
+    Nodes { model_ns, forgemon_ns, machine, machine_name: name.to_string(), working_unit: unit, values, conditions }
+}
+
+/// `Identification` (OPC 40001-1 §8, MachineryItemIdentificationType's properties that
+/// forgemon knows).
+fn identification(space: &mut AddressSpace, ns: u16, machine: &NodeId, name: &str, kind: MachineKind) {
+    let id = NodeId::new(ns, format!("{name}.Identification"));
+    ObjectBuilder::new(&id, QualifiedName::new(ns, "Identification"), "Identification")
+        .component_of(machine.clone())
+        .has_type_definition(ObjectTypeId::BaseObjectType)
+        .insert(space);
+    let props: [(&str, String); 4] = [
+        ("ProductInstanceUri", format!("urn:forgemon:machine:{}", kind.as_str())),
+        ("Model", kind.as_str().to_string()),
+        ("SoftwareRevision", env!("CARGO_PKG_VERSION").to_string()),
+        ("Manufacturer", "unknown (forgemon monitors it)".to_string()),
+    ];
+    for (p, value) in props {
+        let pid = NodeId::new(ns, format!("{name}.Identification.{p}"));
+        variable(space, &pid, QualifiedName::new(ns, p), value.as_str(), DataTypeId::String, &id, true);
+    }
+}
+
+/// `BlowCompletedEventType` (forgemon), a BaseEventType with one property per field.
+fn blow_event_type(space: &mut AddressSpace, ns: u16) {
+    let ty = super::events::BlowCompletedEvent::event_type_id_from_index(ns);
+    ObjectTypeBuilder::new(&ty, QualifiedName::new(ns, "BlowCompletedEventType"), "BlowCompletedEventType")
+        .is_abstract(false)
+        .subtype_of(ObjectTypeId::BaseEventType)
+        .insert(space);
+    for field in BLOW_EVENT_FIELDS {
+        let id = NodeId::new(ns, format!("BlowCompletedEventType.{field}"));
+        VariableBuilder::new(&id, QualifiedName::new(ns, field), field)
+            .data_type(DataTypeId::BaseDataType)
+            .property_of(ty.clone())
+            .has_type_definition(VariableTypeId::PropertyType)
+            .has_modelling_rule(ObjectId::ModellingRule_Mandatory)
+            .insert(space);
+    }
+}
+
+/// One alert condition: an `AlarmConditionType` instance under the working unit
+/// (`HasCondition`), with the state an operator reads and the `Acknowledge` method.
+fn condition(
+    space: &mut AddressSpace,
+    ns: u16,
+    unit: &NodeId,
+    input: &NodeId,
+    kind: AlertKind,
+    name: &'static str,
+    severity: u16,
+) -> ConditionNodes {
+    let id = NodeId::new(ns, name.to_string());
+    let sub = |s: &str| NodeId::new(ns, format!("{name}.{s}"));
+    ObjectBuilder::new(&id, QualifiedName::new(ns, name), name)
+        .component_of(unit.clone())
+        .has_type_definition(ObjectTypeId::AlarmConditionType)
+        .insert(space);
+    space.insert_reference(unit, &id, ReferenceTypeId::HasCondition);
+    let base = |s: &str| QualifiedName::new(0, s);
+    let (active, acked) = (sub("ActiveState"), sub("AckedState"));
+    variable(
+        space,
+        &active,
+        base("ActiveState"),
+        LocalizedText::from("Inactive"),
+        DataTypeId::LocalizedText,
+        &id,
+        false,
+    );
+    variable(
+        space,
+        &acked,
+        base("AckedState"),
+        LocalizedText::from("Acknowledged"),
+        DataTypeId::LocalizedText,
+        &id,
+        false,
+    );
+    let (active_id, acked_id, retain) = (sub("ActiveState.Id"), sub("AckedState.Id"), sub("Retain"));
+    variable(space, &active_id, base("Id"), false, DataTypeId::Boolean, &active, true);
+    variable(space, &acked_id, base("Id"), true, DataTypeId::Boolean, &acked, true);
+    variable(space, &retain, base("Retain"), false, DataTypeId::Boolean, &id, true);
+    variable(space, &sub("ConditionName"), base("ConditionName"), name, DataTypeId::String, &id, true);
+    variable(space, &sub("InputNode"), base("InputNode"), input.clone(), DataTypeId::NodeId, &id, true);
+    let acknowledge = sub("Acknowledge");
+    MethodBuilder::new(&acknowledge, base("Acknowledge"), "Acknowledge")
+        .component_of(id.clone())
+        .executable(true)
+        .user_executable(true)
+        .input_args(
+            space,
+            &sub("Acknowledge.InputArguments"),
+            &[
+                Argument {
+                    name: "EventId".into(),
+                    data_type: DataTypeId::ByteString.into(),
+                    value_rank: -1,
+                    array_dimensions: None,
+                    description: "the event being acknowledged".into(),
+                },
+                Argument {
+                    name: "Comment".into(),
+                    data_type: DataTypeId::LocalizedText.into(),
+                    value_rank: -1,
+                    array_dimensions: None,
+                    description: "the operator's comment".into(),
+                },
+            ],
+        )
+        .insert(space);
+    ConditionNodes {
+        kind,
+        node: id,
+        name,
+        severity,
+        acknowledge,
+        active_state: active,
+        acked_state: acked,
+        active_id,
+        acked_id,
+        retain,
+    }
+}

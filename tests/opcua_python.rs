@@ -1,0 +1,247 @@
+//! The OPC UA Metal Forming server (issue 21 §2) at the process boundary, driven by an
+//! independent client (`tests/python/opcua_client.py`, Python asyncua):
+//! - a real `forgemon demo --opcua URL` run in real time: the client browses the machine,
+//!   reads the counters and values while the demo forges, receives one BlowCompletedEvent
+//!   for every blow since it subscribed, and acknowledges the elastic-blow condition with
+//!   its `Acknowledge` method. What it saw is compared with the demo's MCAP recording,
+//!   another path than the server's.
+//! - `forgemon run` with `[opcua] user`/`password_file` on loopback: anonymous sessions and
+//!   a wrong password are refused, the right password over Basic256Sha256 is served; and a
+//!   non-loopback `listen` without a user stops the service with an error naming the key.
+//!
+//! CI installs asyncua (`.ci/run`); elsewhere the test fails saying how.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+
+use common::free_port;
+use forgemon::estimate::BlowEstimate;
+use forgemon::record::{Payload, read_recording};
+use serde_json::Value;
+
+const INSTALL: &str = "python3 -m pip install asyncua";
+const HAMMER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/hammer-lg1000.machine.toml");
+
+fn client(args: &[&str]) -> Command {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/opcua_client.py");
+    let mut c = Command::new("python3");
+    c.arg(script).args(args).stdout(Stdio::piped()).stderr(Stdio::piped());
+    c
+}
+
+/// The client's JSON, or a failure that says how to install asyncua.
+fn client_json(out: Output) -> Value {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    match out.status.code() {
+        Some(0) => {}
+        Some(3) => panic!("asyncua is missing: run `{INSTALL}`\n{stderr}"),
+        _ => panic!("opcua_client.py failed ({}):\n{stderr}", out.status),
+    }
+    serde_json::from_slice(&out.stdout).expect("the client's JSON")
+}
+
+/// The demo's results as it recorded them.
+fn recorded(dir: &Path) -> Vec<BlowEstimate> {
+    let file = std::fs::read_dir(dir)
+        .expect("the recording directory")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .expect("a finished recording");
+    read_recording(&file)
+        .expect("the recording reads")
+        .messages
+        .into_iter()
+        .filter_map(|m| if let Payload::Result(r) = m.payload { Some(*r) } else { None })
+        .collect()
+}
+
+/// `got` (a JSON number or null) is `want`: the same f64, within 1e-12 relative for the
+/// decimal text the JSON carries it in.
+fn same(got: &Value, want: Option<f64>, what: &str) {
+    match (got.as_f64(), want) {
+        (None, None) => {}
+        (Some(g), Some(w)) => assert!((g - w).abs() <= 1e-12 * w.abs().max(1.0), "{what}: {g} vs recorded {w}"),
+        _ => panic!("{what}: {got} vs recorded {want:?}"),
+    }
+}
+
+#[test]
+fn an_asyncua_client_browses_reads_and_receives_every_blow_of_the_demo() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let url = format!("opc.tcp://127.0.0.1:{}", free_port());
+    // The client first: it connects as soon as the server is up, before the first blow.
+    let py = client(&["demo", &url, "40"]).spawn().unwrap_or_else(|e| panic!("cannot run python3 ({e}): {INSTALL}"));
+    // Real time, 2 billets of 8 blows 0.4 s apart: about 7 s.
+    let demo = Command::new(env!("CARGO_BIN_EXE_forgemon"))
+        .args(["demo", "--billets", "2", "--interval", "0.4", "--opcua", &url, "--dir"])
+        .arg(dir.path().join("rec"))
+        .output()
+        .expect("run the demo");
+    let stdout = String::from_utf8_lossy(&demo.stdout);
+    assert!(demo.status.success(), "demo: {}", String::from_utf8_lossy(&demo.stderr));
+    assert!(stdout.contains(&format!("OPC UA server (Metal Forming, anonymous) on {url}")), "{stdout}");
+    let seen = client_json(py.wait_with_output().expect("the client ends"));
+    let results = recorded(&dir.path().join("rec"));
+    assert_eq!(results.len(), 16, "two billets of eight blows");
+    let result =
+        |n: u64| results.iter().find(|r| u64::from(r.blow) == n).unwrap_or_else(|| panic!("no result for blow {n}"));
+
+    // The address space: the machine, its identification and working unit, and the
+    // values in the namespaces README documents (model: the spec's names; forgemon: ours).
+    let (mf, fm) = (&seen["namespaces"]["model"], &seen["namespaces"]["forgemon"]);
+    let browse = &seen["browse"];
+    let unit = &browse[format!("{mf}:FormingWorkingUnit")];
+    for name in ["CycleCounter", "PeakLoad", "BilletHeight"] {
+        assert!(unit.get(format!("{mf}:{name}")).is_some(), "{mf}:{name} in {unit}");
+    }
+    for name in ["BilletCounter", "ImpactEnergy", "PlasticEnergy", "Efficiency", "ElasticBlowAlarm"] {
+        assert!(unit.get(format!("{fm}:{name}")).is_some(), "{fm}:{name} in {unit}");
+    }
+    assert!(unit[format!("{fm}:ElasticBlowAlarm")].get("0:Acknowledge").is_some(), "{unit}");
+    assert_eq!(seen["identification"]["Model"], "hammer");
+
+    // Every blow since the client subscribed arrived as one event, carrying that blow's
+    // recorded result.
+    let from = seen["subscribed_at"].as_u64().expect("the counter when subscribed");
+    assert!(from <= 8, "the client subscribed late, after blow {from}: the test would show little");
+    let events = seen["events"].as_array().expect("events");
+    let mut numbers: Vec<u64> = events.iter().map(|e| e["BlowNumber"].as_u64().expect("BlowNumber")).collect();
+    let want: Vec<u64> = ((from + 1)..=16).collect();
+    numbers.retain(|n| *n > from);
+    assert_eq!(numbers, want, "one event per blow, in order");
+    for e in events {
+        let r = result(e["BlowNumber"].as_u64().unwrap_or(0));
+        let n = r.blow;
+        assert_eq!(e["BlowClass"], r.class.as_str(), "blow {n}");
+        assert_eq!(e["BilletNumber"].as_u64(), Some(u64::from(r.billet.billet)), "blow {n}");
+        same(&e["ImpactEnergy"], r.kinetic_in_j, &format!("blow {n} impact energy"));
+        same(&e["PlasticEnergy"], r.plastic_j, &format!("blow {n} plastic energy"));
+        same(&e["Efficiency"], r.efficiency, &format!("blow {n} efficiency"));
+        same(&e["PeakLoad"], Some(r.peak_load_n), &format!("blow {n} peak load"));
+        same(&e["BilletHeight"], r.h_end_m, &format!("blow {n} billet height"));
+        assert_eq!(e["Alert"], r.alert.as_ref().map_or("", |a| a.kind.as_str()), "blow {n}");
+    }
+
+    // Each Read (one request for all values) showed one blow's values together.
+    let reads = seen["reads"].as_array().expect("reads");
+    let mut counted = Vec::new();
+    for v in reads {
+        let n = v[0].as_u64().expect("CycleCounter");
+        if n == 0 {
+            continue;
+        }
+        let r = result(n);
+        assert_eq!(v[1].as_u64(), Some(u64::from(r.billet.billet)), "read of blow {n}: billet");
+        same(&v[2], Some(r.peak_load_n), &format!("read of blow {n}: peak load"));
+        same(&v[3], r.h_end_m, &format!("read of blow {n}: height"));
+        same(&v[4], r.kinetic_in_j, &format!("read of blow {n}: impact energy"));
+        same(&v[5], r.plastic_j, &format!("read of blow {n}: plastic energy"));
+        same(&v[6], r.efficiency, &format!("read of blow {n}: efficiency"));
+        counted.push(n);
+    }
+    assert!(counted.windows(2).all(|w| w[0] <= w[1]), "the cycle counter never went back: {counted:?}");
+    counted.dedup();
+    assert!(counted.len() >= 8, "the reads saw at least half the blows: {counted:?}");
+    let changes: Vec<u64> = seen["changes"].as_array().expect("changes").iter().filter_map(Value::as_u64).collect();
+    assert_eq!(changes.last(), Some(&16), "the CycleCounter's data changes reached the last blow: {changes:?}");
+
+    // The elastic blow raised its condition; Acknowledge with another EventId was refused,
+    // with the condition's was taken, and the condition then read and reported acknowledged.
+    let elastic: Vec<u32> = results
+        .iter()
+        .filter(|r| r.alert.as_ref().is_some_and(|a| a.kind.as_str() == "elastic_blow"))
+        .map(|r| r.blow)
+        .collect();
+    assert!(!elastic.is_empty(), "the demo's hard blows raise elastic_blow (README's demo output)");
+    let alarms = seen["alarms"].as_array().expect("alarms");
+    let raised = alarms.iter().find(|a| a["ConditionName"] == "ElasticBlowAlarm" && a["ActiveState/Id"] == true);
+    let raised = raised.unwrap_or_else(|| panic!("no active ElasticBlowAlarm event: {alarms:?}"));
+    assert_eq!(raised["AckedState/Id"], false, "{raised}");
+    assert_eq!(raised["Retain"], true, "{raised}");
+    let ack = &seen["ack"];
+    assert_eq!(ack["condition"], "ElasticBlowAlarm", "{ack}");
+    assert_eq!(ack["wrong_event_id"], "BadEventIdUnknown", "{ack}");
+    assert_eq!(
+        (&ack["acked_before"], &ack["called"], &ack["acked_after"]),
+        (&Value::Bool(false), &Value::Bool(true), &Value::Bool(true)),
+        "{ack}"
+    );
+    assert_ne!(ack["again"], "Good", "a second Acknowledge of the same event is refused: {ack}");
+    assert!(
+        alarms
+            .iter()
+            .any(|a| a["ConditionName"] == "ElasticBlowAlarm" && a["AckedState/Id"] == true && a["Retain"] == false),
+        "the acknowledgement was reported as an event: {alarms:?}"
+    );
+}
+
+/// A service file with one serial source that never opens (the service runs on without
+/// it) and `opcua`'s table.
+fn service_file(dir: &Path, http: u16, opcua: &str) -> std::path::PathBuf {
+    let cfg = format!(
+        r#"machine = "{HAMMER}"
+[recording]
+dir = "rec"
+[http]
+listen = "127.0.0.1:{http}"
+[opcua]
+{opcua}
+[[sources]]
+name = "daq"
+kind = "serial"
+path = "{}"
+[[sources.channels]]
+role = "load_N"
+gain = 1.0
+[[sources.channels]]
+role = "disp_m"
+gain = 1.0
+[[sources.channels]]
+role = "acc_mps2"
+gain = 1.0
+"#,
+        dir.join("no-such-tty").display()
+    );
+    let path = dir.join("service.toml");
+    std::fs::write(&path, cfg).expect("write the service file");
+    path
+}
+
+#[test]
+fn anonymous_sessions_are_loopback_only_and_a_user_needs_the_password() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    // Off loopback without a user: the service does not start, and says which key.
+    let cfg = service_file(dir.path(), free_port(), "listen = \"opc.tcp://0.0.0.0:4840\"");
+    let out = Command::new(env!("CARGO_BIN_EXE_forgemon")).args(["run", "--config"]).arg(&cfg).output().expect("run");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "a non-loopback anonymous server was started");
+    assert!(stderr.contains("opcua.user") && stderr.contains("not loopback"), "{stderr}");
+
+    // A user on loopback: only the encrypted endpoint, only with the password.
+    let password = "hammer-7c1f";
+    std::fs::write(dir.path().join("opcua.pass"), format!("{password}\n")).expect("write the password");
+    let (http, port) = (free_port(), free_port());
+    let table = format!("listen = \"opc.tcp://127.0.0.1:{port}\"\nuser = \"mes\"\npassword_file = \"opcua.pass\"");
+    let mut service = common::spawn_service(&service_file(dir.path(), http, &table), http);
+    let cert = dir.path().join("opcua-pki/own/cert.der");
+    let url = format!("opc.tcp://127.0.0.1:{port}");
+    let out = client(&[
+        "auth",
+        &url,
+        cert.to_str().expect("utf-8 path"),
+        "mes",
+        password,
+        dir.path().to_str().expect("utf-8 path"),
+    ])
+    .output()
+    .unwrap_or_else(|e| panic!("cannot run python3 ({e}): {INSTALL}"));
+    let _ = service.kill();
+    let _ = service.wait();
+    let seen = client_json(out);
+    for refused in ["anonymous_none", "anonymous_encrypted", "wrong_password"] {
+        assert!(seen[refused].get("error").is_some(), "{refused} was served: {seen}");
+    }
+    assert_eq!(seen["right_password"]["ok"], 0, "the right password reads the counter (no blow yet): {seen}");
+}

@@ -1,0 +1,243 @@
+#!/usr/bin/env python3
+"""An independent OPC UA client (asyncua) for forgemon's OPC UA Metal Forming server.
+
+The client of issue 21 §2, for tests/opcua_python.rs. It decodes nothing with forgemon.
+
+  demo URL SECONDS
+      Anonymous session. Browses Objects/Machines/Hammer (Identification, the
+      FormingWorkingUnit and its values and conditions), subscribes to the
+      BlowCompletedEventType events and the AlarmConditionType events of the machine,
+      reads the counters and values in one Read request every 50 ms, and acknowledges the
+      first raised condition with its condition's Acknowledge method (after trying an
+      EventId that is not the condition's). Stops after SECONDS or when the server goes.
+  auth URL SERVER_CERT_DER USER PASSWORD WORKDIR
+      Tries an anonymous session, a wrong password and the right password (over
+      Basic256Sha256 SignAndEncrypt with a self-signed client certificate made in WORKDIR);
+      reads the CycleCounter with the right one.
+
+Prints one JSON object. Exit codes: 0 ok, 2 usage, 3 asyncua missing, 1 anything else.
+"""
+
+import asyncio
+import json
+import sys
+import time
+from pathlib import Path
+
+try:
+    from asyncua import Client, ua
+    from asyncua.common.events import get_filter_from_event_type
+    from asyncua.crypto import security_policies
+    from asyncua.crypto.cert_gen import setup_self_signed_certificate
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+except ImportError as err:  # pragma: no cover - depends on the machine
+    print(f"opcua_client.py: {err}; install it with: python3 -m pip install asyncua", file=sys.stderr)
+    sys.exit(3)
+
+MODEL_NS = "urn:forgemon:UA:MetalForming"
+FORGEMON_NS = "urn:forgemon:UA"
+VALUES = ["CycleCounter", "BilletCounter", "PeakLoad", "BilletHeight", "ImpactEnergy", "PlasticEnergy", "Efficiency"]
+
+
+def plain(v):
+    """A JSON-able form of a value asyncua decoded."""
+    if isinstance(v, (bool, int, float, str)) or v is None:
+        return v
+    if isinstance(v, bytes):
+        return v.hex()
+    if isinstance(v, ua.LocalizedText):
+        return v.Text
+    return str(v)
+
+
+class Handler:
+    """Events and data changes into an asyncio queue, for the main loop."""
+
+    def __init__(self, queue):
+        self.queue = queue
+
+    def event_notification(self, event):
+        fields = event.get_event_props_as_fields_dict()
+        self.queue.put_nowait(("event", {k: v.Value for k, v in fields.items()}))
+
+    def datachange_notification(self, node, val, data):
+        self.queue.put_nowait(("data", val))
+
+
+async def event_filter(event_type):
+    """asyncua's filter for `event_type`, with two changes for async-opcua 0.19: the
+    where clause is `OfType(event_type)` (the standard form; async-opcua does not match the
+    `InList(EventType, ...)` asyncua generates), and asyncua's ConditionId clause (no
+    browse path) is left out (async-opcua drops it, which would shift every field)."""
+    f = await get_filter_from_event_type([event_type])
+    f.SelectClauses = [c for c in f.SelectClauses if c.BrowsePath]
+    where = ua.ContentFilterElement(FilterOperator=ua.FilterOperator.OfType)
+    where.FilterOperands.append(ua.LiteralOperand(Value=ua.Variant(event_type.nodeid)))
+    f.WhereClause = ua.ContentFilter(Elements=[where])
+    return f
+
+
+async def connect(client, deadline):
+    """Connect, retrying while the server is not up yet."""
+    while True:
+        try:
+            await client.connect()
+            return
+        except (OSError, asyncio.TimeoutError, ua.UaError):
+            if time.monotonic() > deadline:
+                raise
+            await asyncio.sleep(0.05)
+
+
+async def browse_names(node, depth):
+    """`{ "ns:Name": children }` below `node`, `depth` levels down."""
+    out = {}
+    for child in await node.get_children():
+        bn = await child.read_browse_name()
+        key = f"{bn.NamespaceIndex}:{bn.Name}"
+        out[key] = await browse_names(child, depth - 1) if depth > 1 else {}
+    return out
+
+
+async def demo(url, seconds):
+    deadline = time.monotonic() + seconds
+    client = Client(url, timeout=4)
+    await connect(client, deadline)
+    result = {"events": [], "alarms": [], "reads": [], "changes": [], "ack": None}
+    try:
+        mf = await client.get_namespace_index(MODEL_NS)
+        fm = await client.get_namespace_index(FORGEMON_NS)
+        result["namespaces"] = {"model": mf, "forgemon": fm}
+        machine = await client.nodes.objects.get_child([f"{mf}:Machines", f"{mf}:Hammer"])
+        unit = await machine.get_child(f"{mf}:FormingWorkingUnit")
+        result["browse"] = await browse_names(machine, 3)
+        ident = await machine.get_child(f"{mf}:Identification")
+        result["identification"] = {
+            (await c.read_browse_name()).Name: plain(await c.read_value()) for c in await ident.get_children()
+        }
+        value_nodes = [await unit.get_child(f"{mf if n in ('CycleCounter', 'PeakLoad', 'BilletHeight') else fm}:{n}") for n in VALUES]
+        queue = asyncio.Queue()
+        sub = await client.create_subscription(20, Handler(queue))
+        blow_type = client.get_node(ua.NodeId("BlowCompletedEventType", fm))
+        await sub.subscribe_events(machine, evfilter=await event_filter(blow_type), queuesize=100)
+        alarm_type = client.get_node(ua.ObjectIds.AlarmConditionType)
+        await sub.subscribe_events(machine, evfilter=await event_filter(alarm_type), queuesize=100)
+        await sub.subscribe_data_change(value_nodes[0], queuesize=100)
+        result["subscribed_at"] = plain(await value_nodes[0].read_value())
+        cond_node, pending_ack = None, None
+        while time.monotonic() < deadline:
+            try:
+                result["reads"].append([plain(v) for v in await client.read_values(value_nodes)])
+            except Exception:  # the demo has stopped: its server is gone
+                break
+            while not queue.empty():
+                kind, item = queue.get_nowait()
+                if kind == "data":
+                    result["changes"].append(plain(item))
+                    continue
+                fields = {k: plain(v) for k, v in item.items()}
+                etype = item.get("EventType")
+                if etype == ua.NodeId(ua.ObjectIds.AlarmConditionType):
+                    result["alarms"].append(fields)
+                    if result["ack"] is None and pending_ack is None and item.get("ActiveState/Id"):
+                        pending_ack = (fields["ConditionName"], item["EventId"])
+                else:
+                    result["events"].append(fields)
+            if pending_ack is not None and result["ack"] is None:
+                name, event_id = pending_ack
+                cond_node = await unit.get_child(f"{fm}:{name}")
+                ack = {"condition": name, "event_id": event_id.hex()}
+                try:
+                    await cond_node.call_method("0:Acknowledge", ua.Variant(b"not-an-event-id", ua.VariantType.ByteString), ua.LocalizedText("wrong"))
+                    ack["wrong_event_id"] = "Good"
+                except ua.UaStatusCodeError as e:
+                    ack["wrong_event_id"] = ua.StatusCode(e.code).name
+                ack["acked_before"] = await (await cond_node.get_child(["0:AckedState", "0:Id"])).read_value()
+                await cond_node.call_method("0:Acknowledge", ua.Variant(event_id, ua.VariantType.ByteString), ua.LocalizedText("seen"))
+                ack["called"] = True
+                result["ack"] = ack
+            elif result["ack"] is not None and "acked_after" not in result["ack"]:
+                acked = await (await cond_node.get_child(["0:AckedState", "0:Id"])).read_value()
+                if acked:
+                    result["ack"]["acked_after"] = acked
+                    try:
+                        await cond_node.call_method("0:Acknowledge", ua.Variant(pending_ack[1], ua.VariantType.ByteString), ua.LocalizedText("again"))
+                        result["ack"]["again"] = "Good"
+                    except ua.UaStatusCodeError as e:
+                        result["ack"]["again"] = ua.StatusCode(e.code).name
+            await asyncio.sleep(0.05)
+    finally:
+        try:
+            await client.disconnect()
+        except Exception:
+            pass
+    return result
+
+
+async def try_session(client):
+    """'ok' and the CycleCounter, or the error's text."""
+    try:
+        await client.connect()
+    except Exception as e:  # the refusal is what is being tested
+        return {"error": f"{type(e).__name__}: {e}"}
+    try:
+        mf = await client.get_namespace_index(MODEL_NS)
+        node = await client.nodes.objects.get_child([f"{mf}:Machines", f"{mf}:Hammer", f"{mf}:FormingWorkingUnit", f"{mf}:CycleCounter"])
+        return {"ok": plain(await node.read_value())}
+    finally:
+        await client.disconnect()
+
+
+async def auth(url, server_cert, user, password, workdir):
+    deadline = time.monotonic() + 20
+    work = Path(workdir)
+    key, cert = work / "client-key.pem", work / "client-cert.der"
+    app_uri = "urn:forgemon:test:opcua_client"
+    await setup_self_signed_certificate(
+        key, cert, app_uri, "localhost", [ExtendedKeyUsageOID.CLIENT_AUTH], {"commonName": "forgemon test client"}
+    )
+
+    async def secure(name, pw):
+        c = Client(url, timeout=4)
+        c.application_uri = app_uri
+        if name is not None:
+            c.set_user(name)
+            c.set_password(pw)
+        await c.set_security(
+            security_policies.SecurityPolicyBasic256Sha256, str(cert), str(key),
+            server_certificate=server_cert, mode=ua.MessageSecurityMode.SignAndEncrypt,
+        )
+        return c
+
+    # Wait for the server: a TCP connection is enough.
+    while True:
+        try:
+            _, w = await asyncio.open_connection(*url.removeprefix("opc.tcp://").rstrip("/").rsplit(":", 1))
+            w.close()
+            break
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            await asyncio.sleep(0.05)
+    return {
+        "anonymous_none": await try_session(Client(url, timeout=4)),
+        "anonymous_encrypted": await try_session(await secure(None, None)),
+        "wrong_password": await try_session(await secure(user, password + "x")),
+        "right_password": await try_session(await secure(user, password)),
+    }
+
+
+def main():
+    args = sys.argv[1:]
+    if len(args) == 3 and args[0] == "demo":
+        out = asyncio.run(demo(args[1], float(args[2])))
+    elif len(args) == 6 and args[0] == "auth":
+        out = asyncio.run(auth(*args[1:]))
+    else:
+        print(__doc__, file=sys.stderr)
+        sys.exit(2)
+    json.dump(out, sys.stdout)
+
+
+if __name__ == "__main__":
+    main()
