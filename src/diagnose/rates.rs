@@ -134,7 +134,8 @@ fn verdict_error_rates() {
         let mut t = Tally::default();
         for &cs in &calib_seeds {
             let (cal, setting) = billet(&m, press, &hidden, cs);
-            let (calib, _, _) = blow_set(cal, setting, &m, &EffectSet::NONE).unwrap();
+            let (calib, calib_loc, _) = blow_set(cal, setting, &m, &EffectSet::NONE).unwrap();
+            let base_calib = mean(&calib_loc.iter().map(|l| l.nrmse).collect::<Vec<_>>());
             let (h0, hs0) = billet(&m, press, &hidden, hold_seeds[0]);
             let (hold0, _, _) = blow_set(h0, hs0, &m, &EffectSet::NONE).unwrap();
             let fits: Vec<Fitted> =
@@ -167,10 +168,11 @@ fn verdict_error_rates() {
                     }
                 }
                 lines.push(format!(
-                    "{{\"case\":\"{name}\",\"calib_seed\":{cs},\"hold_seed\":{hs},\"noise\":{},\"base\":{:?},\"cands\":{{{}}},\"verdict\":\"{chosen}\"}}",
+                    "{{\"case\":\"{name}\",\"calib_seed\":{cs},\"hold_seed\":{hs},\"noise\":{},\"base\":{:?},\"cands\":{{{}}},\"base_calib\":{base_calib},\"calib\":{{{}}},\"verdict\":\"{chosen}\"}}",
                     hold.noise_nrmse(),
                     base,
-                    singles.iter().map(|f| format!("\"{}\":{:?}", f.name, f.holdout_per_blow)).collect::<Vec<_>>().join(",")
+                    singles.iter().map(|f| format!("\"{}\":{:?}", f.name, f.holdout_per_blow)).collect::<Vec<_>>().join(","),
+                    singles.iter().map(|f| format!("\"{}\":{}", f.name, f.calib)).collect::<Vec<_>>().join(",")
                 ));
             }
         }

@@ -376,8 +376,15 @@ pub fn machine(kind: Kind) -> Machine {
 }
 
 /// Render a billet of `height_scale` × the sheet's height struck at `v0s` on `kind`, with
-/// `hidden`; noise from `seed`.
+/// `hidden`; noise from `seed`. Panics if the project refuses a blow (for the CI tests,
+/// whose seeds are fixed); the rates harness uses `try_billet`.
 pub fn billet(kind: Kind, hidden: &Hidden, v0s: &[f64], height_scale: f64, seed: u64) -> Billet {
+    try_billet(kind, hidden, v0s, height_scale, seed).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// `billet`, with the project's refusal of a blow (not segmented, or `localise::reference`'s
+/// error) returned as a message naming the blow and the seed.
+pub fn try_billet(kind: Kind, hidden: &Hidden, v0s: &[f64], height_scale: f64, seed: u64) -> Result<Billet, String> {
     let rig = Rig::new(kind, hidden);
     let mut process = parse_process("p", if kind == Kind::Hammer { STEEL } else { COPPER }).expect("test sheet");
     process.measured_final_heights_m.clear();
@@ -406,14 +413,17 @@ pub fn billet(kind: Kind, hidden: &Hidden, v0s: &[f64], height_scale: f64, seed:
         let kind_m = m.kind();
         let cut = Segmenter::cut_all(SegmentConfig::for_kind(kind_m), [&batch]);
         let fit_s = forgemon::estimate::EstimatorConfig::for_kind(kind_m).fit_s;
-        let b = cut.first().expect("the renderer's blow is segmented");
-        refs.push(forgemon::diagnose::localise::reference("b", b, Some(i + 1), fit_s, &m).expect("a usable blow"));
+        let b = cut.first().ok_or_else(|| format!("seed {seed}, blow {}: not segmented", i + 1))?;
+        refs.push(
+            forgemon::diagnose::localise::reference("b", b, Some(i + 1), fit_s, &m)
+                .map_err(|e| format!("seed {seed}, blow {}: {e}", i + 1))?,
+        );
         h = fine.h_end_m;
         heights.push(h);
         measured.push(h + rng.random_range(-CALIPER_M..=CALIPER_M));
     }
     process.measured_final_heights_m = measured;
-    Billet { refs, setting: Setting::Billet(process), heights_m: heights }
+    Ok(Billet { refs, setting: Setting::Billet(process), heights_m: heights })
 }
 
 /// The speeds of the withheld-effect suite: calibration and holdout billets.
