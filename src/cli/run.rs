@@ -174,8 +174,12 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
 /// `RUST_LOG` overrides `default_level` ("info" for the service, "error" for the demo,
 /// which prints its own lines).
 pub fn init_logging(default_level: &str) {
+    // async-opcua logs an error when its certificate store is empty, which it is on purpose
+    // for anonymous loopback sessions; a secured server that cannot make its certificate
+    // stops the start with forgemon's own error (`daemon::opcua`).
+    let quiet = "opcua_crypto::certificate_store=off";
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_level));
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(format!("{default_level},{quiet}")));
     let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
     let _ = tracing_subscriber::fmt().with_env_filter(filter).with_ansi(ansi).with_writer(std::io::stderr).try_init();
 }
