@@ -388,31 +388,7 @@ pub(crate) mod tests {
 
     /// A blow with every field set (the advisor's tests use it too).
     pub(crate) fn blow() -> BlowEstimate {
-        BlowEstimate {
-            judgement: None,
-            blow: 7,
-            t_contact_s: 1.0,
-            v_impact_mps: 5.2996,
-            kinetic_in_j: Some(10_280.4),
-            plastic_j: Some(7_195.6),
-            friction_j: Some(900.0),
-            damped_j: Some(500.0),
-            elastic_j: Some(100.0),
-            efficiency: Some(0.699_95),
-            final_load_n: 1.0e6,
-            h_end_m: Some(0.040_123),
-            class: BlowClass::Intermediate,
-            alert: None,
-            t_end_s: 1.02,
-            peak_load_n: 1_234_567.0,
-            residual: Some(0.0),
-            sensor_check: None,
-            method: None,
-            gap_s: 0.0,
-            h_start_m: None,
-            height_check: None,
-            billet: Default::default(),
-        }
+        crate::estimate::result::examples::intermediate()
     }
 
     fn u32_at(w: &[u16; IMAGE_WORDS], at: usize) -> u32 {

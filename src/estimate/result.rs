@@ -160,3 +160,68 @@ impl BlowEstimate {
         self.class != BlowClass::Incomplete
     }
 }
+
+/// Blows with every field set, for the unit tests of what carries them (the recorder, the
+/// PLC image, the OPC UA event, the Sparkplug payload, the advisor).
+#[cfg(test)]
+pub(crate) mod examples {
+    use super::*;
+
+    /// An intermediate blow whose figures each round differently in the PLC's units.
+    pub(crate) fn intermediate() -> BlowEstimate {
+        BlowEstimate {
+            judgement: None,
+            blow: 7,
+            t_contact_s: 1.0,
+            v_impact_mps: 5.2996,
+            kinetic_in_j: Some(10_280.4),
+            plastic_j: Some(7_195.6),
+            friction_j: Some(900.0),
+            damped_j: Some(500.0),
+            elastic_j: Some(100.0),
+            efficiency: Some(0.699_95),
+            final_load_n: 1.0e6,
+            h_end_m: Some(0.040_123),
+            class: BlowClass::Intermediate,
+            alert: None,
+            t_end_s: 1.02,
+            peak_load_n: 1_234_567.0,
+            residual: Some(0.0),
+            sensor_check: None,
+            method: None,
+            gap_s: 0.0,
+            h_start_m: None,
+            height_check: None,
+            billet: Default::default(),
+        }
+    }
+
+    /// A soft blow numbered `blow`, like the demo's first.
+    pub(crate) fn soft(blow: u32) -> BlowEstimate {
+        BlowEstimate {
+            judgement: None,
+            blow,
+            t_contact_s: 0.12 * f64::from(blow),
+            v_impact_mps: 3.9,
+            kinetic_in_j: Some(5711.0),
+            plastic_j: Some(5320.0),
+            friction_j: None,
+            damped_j: Some(150.0),
+            elastic_j: Some(15.0),
+            efficiency: Some(0.931),
+            final_load_n: 3.25e5,
+            h_end_m: Some(0.0929),
+            class: BlowClass::Soft,
+            alert: None,
+            t_end_s: 0.14,
+            peak_load_n: 1.16e6,
+            residual: Some(0.004),
+            sensor_check: Some(0.012),
+            method: None,
+            gap_s: 0.0,
+            h_start_m: None,
+            height_check: None,
+            billet: Default::default(),
+        }
+    }
+}

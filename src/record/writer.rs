@@ -288,31 +288,7 @@ mod tests {
     }
 
     fn estimate() -> BlowEstimate {
-        BlowEstimate {
-            judgement: None,
-            blow: 1,
-            t_contact_s: 0.12,
-            v_impact_mps: 3.9,
-            kinetic_in_j: Some(5711.0),
-            plastic_j: Some(5320.0),
-            friction_j: None,
-            damped_j: Some(150.0),
-            elastic_j: Some(15.0),
-            efficiency: Some(0.931),
-            final_load_n: 3.25e5,
-            h_end_m: Some(0.0929),
-            class: BlowClass::Soft,
-            alert: None,
-            t_end_s: 0.14,
-            peak_load_n: 1.16e6,
-            residual: Some(0.004),
-            sensor_check: Some(0.012),
-            method: None,
-            gap_s: 0.0,
-            h_start_m: None,
-            height_check: None,
-            billet: Default::default(),
-        }
+        crate::estimate::result::examples::soft(1)
     }
 
     fn every_payload() -> Vec<(i64, Payload)> {

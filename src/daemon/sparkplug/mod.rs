@@ -197,31 +197,7 @@ mod tests {
     use crate::estimate::BlowEstimate;
 
     fn estimate(blow: u32) -> BlowEstimate {
-        BlowEstimate {
-            judgement: None,
-            blow,
-            t_contact_s: 0.12 * f64::from(blow),
-            v_impact_mps: 3.9,
-            kinetic_in_j: Some(5711.0),
-            plastic_j: Some(5320.0),
-            friction_j: None,
-            damped_j: Some(150.0),
-            elastic_j: Some(15.0),
-            efficiency: Some(0.931),
-            final_load_n: 3.25e5,
-            h_end_m: Some(0.0929),
-            class: BlowClass::Soft,
-            alert: None,
-            t_end_s: 0.14,
-            peak_load_n: 1.16e6,
-            residual: Some(0.004),
-            sensor_check: Some(0.012),
-            method: None,
-            gap_s: 0.0,
-            h_start_m: None,
-            height_check: None,
-            billet: Default::default(),
-        }
+        crate::estimate::result::examples::soft(blow)
     }
 
     /// The metric names are the replay's JSON keys (CONTRACTS §5): a renamed field fails here.
