@@ -268,7 +268,6 @@ mod tests {
 
     use super::*;
     use crate::alert::AlertKind;
-    use crate::estimate::BlowClass;
     use crate::record::reader::read_recording;
     use crate::record::schema::MessageKind;
     use crate::signal::sample::Role;

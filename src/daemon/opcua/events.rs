@@ -150,7 +150,6 @@ mod tests {
     use opcua::types::{AttributeId, NumericRange, QualifiedName, Variant};
 
     use super::*;
-    use crate::estimate::BlowClass;
 
     fn field(e: &dyn Event, path: &[(u16, &str)]) -> Variant {
         let path: Vec<QualifiedName> = path.iter().map(|(ns, n)| QualifiedName::new(*ns, *n)).collect();

@@ -193,7 +193,6 @@ fn queue_event(shared: &SharedState, ev: LiveEvent) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::estimate::BlowClass;
     use crate::estimate::BlowEstimate;
 
     fn estimate(blow: u32) -> BlowEstimate {
