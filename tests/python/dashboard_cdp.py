@@ -123,7 +123,7 @@ def main():
     if sys.argv[1] == "--restart":
         return restart(*sys.argv[2:6])
     chromium, url, shot = sys.argv[1:4]
-    with tempfile.TemporaryDirectory() as profile:
+    with tempfile.TemporaryDirectory(ignore_cleanup_errors=True) as profile:
         proc, ws_url = launch(chromium, profile)
         try:
             p = Page(ws_url)
