@@ -6,12 +6,14 @@
 //! out, and the messages the client could not take must be counted as dropped, not queued
 //! without bound.
 
+mod common;
+
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use forgemon::acquire::{Backpressure, SourceEvent};
+use forgemon::acquire::SourceEvent;
 use forgemon::config::service::ServiceConfig;
 use forgemon::config::{parse_machine, parse_process};
 use forgemon::daemon::{Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
@@ -47,20 +49,11 @@ impl Write for Log {
 }
 
 fn parts(dir: &std::path::Path, foxglove: std::net::SocketAddr) -> ServiceParts {
-    let machine = parse_machine("m", MACHINE).expect("machine").machine;
-    ServiceParts {
-        config: ServiceConfig {
-            foxglove_listen: Some(foxglove),
-            ..ServiceConfig::minimal(PathBuf::from("hammer-lg1000.machine.toml"), dir.to_path_buf())
-        },
-        config_path: dir.join("service.toml"),
-        config_text: String::new(),
-        machine,
-        machine_text: MACHINE.to_string(),
-        process: Some(parse_process("p", STEEL).expect("process")),
-        process_text: Some(STEEL.to_string()),
-        backpressure: Backpressure::Wait,
-    }
+    let config = ServiceConfig {
+        foxglove_listen: Some(foxglove),
+        ..ServiceConfig::minimal(PathBuf::from("hammer-lg1000.machine.toml"), dir.to_path_buf())
+    };
+    common::demo_hammer_parts(dir, config)
 }
 
 /// Connect with a small receive buffer (so the socket soaks up little), read the server's

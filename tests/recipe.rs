@@ -17,7 +17,6 @@ mod common;
 use forgemon::config::{parse_machine, parse_process};
 use forgemon::daq::{DaqSpec, daq_blows};
 use forgemon::physics::EffectSet;
-use forgemon::physics::billet::FlowStress;
 use forgemon::physics::machine::Machine;
 use forgemon::physics::process::Process;
 use forgemon::pipeline::{Pipeline, PipelineConfig, PipelineEvent};
@@ -54,13 +53,7 @@ impl Billet {
 }
 
 fn process(b: Billet) -> Process {
-    let mut p = sheet();
-    p.material = match p.material {
-        FlowStress::Constant { sigma0_pa } => FlowStress::Constant { sigma0_pa: sigma0_pa * b.stress },
-        FlowStress::HanselSpittel { a_pa, m1, m2, m3, m4, temperature_c } => {
-            FlowStress::HanselSpittel { a_pa: a_pa * b.stress, m1, m2, m3, m4, temperature_c }
-        }
-    };
+    let mut p = common::with_flow_stress(sheet(), b.stress);
     p.billet.height_m *= b.height;
     p.friction *= b.friction;
     p

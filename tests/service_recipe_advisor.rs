@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use forgemon::acquire::{Backpressure, SourceEvent};
+use forgemon::acquire::SourceEvent;
 use forgemon::advise::Speeds;
 use forgemon::config::advisor::AdvisorConfig;
 use forgemon::config::service::ServiceConfig;
@@ -24,7 +24,6 @@ use forgemon::config::{parse_machine, parse_process};
 use forgemon::daemon::advisor::Advice;
 use forgemon::daemon::{Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
 use forgemon::estimate::BlowEstimate;
-use forgemon::physics::billet::FlowStress;
 use forgemon::physics::effects::EffectSet;
 use forgemon::record::{Payload, read_recording};
 use forgemon::simdevice::{BilletPlan, SimMachine};
@@ -64,32 +63,17 @@ fn taught_recipe(dir: &Path) -> String {
 }
 
 fn parts(dir: &Path) -> ServiceParts {
-    let machine = parse_machine("m", MACHINE).expect("machine").machine;
-    ServiceParts {
-        config: ServiceConfig {
-            advisor: Some(AdvisorConfig { target_height_m: TARGET_M, speeds: Speeds::Settings(SETTINGS.to_vec()) }),
-            ..ServiceConfig::minimal(PathBuf::from("hammer-lg1000.machine.toml"), dir.to_path_buf())
-        },
-        config_path: dir.join("service.toml"),
-        config_text: String::new(),
-        machine,
-        machine_text: MACHINE.to_string(),
-        process: Some(parse_process("p", STEEL).expect("process")),
-        process_text: Some(STEEL.to_string()),
-        backpressure: Backpressure::Wait,
-    }
+    let config = ServiceConfig {
+        advisor: Some(AdvisorConfig { target_height_m: TARGET_M, speeds: Speeds::Settings(SETTINGS.to_vec()) }),
+        ..ServiceConfig::minimal(PathBuf::from("hammer-lg1000.machine.toml"), dir.to_path_buf())
+    };
+    common::demo_hammer_parts(dir, config)
 }
 
 /// The sheet's billet, its flow stress scaled by `stress`.
 fn billet(stress: f64) -> BilletPlan {
-    let mut p = parse_process("p", STEEL).expect("process");
-    p.material = match p.material {
-        FlowStress::Constant { sigma0_pa } => FlowStress::Constant { sigma0_pa: sigma0_pa * stress },
-        FlowStress::HanselSpittel { a_pa, m1, m2, m3, m4, temperature_c } => {
-            FlowStress::HanselSpittel { a_pa: a_pa * stress, m1, m2, m3, m4, temperature_c }
-        }
-    };
-    BilletPlan { process: p, v0s_mps: V0S.to_vec() }
+    let sheet = parse_process("p", STEEL).expect("process");
+    BilletPlan { process: common::with_flow_stress(sheet, stress), v0s_mps: V0S.to_vec() }
 }
 
 /// Wait until `f` holds, polling.

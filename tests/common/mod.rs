@@ -125,3 +125,35 @@ pub fn demo_and_teach(dir: &std::path::Path, name: &str, billets: usize) -> (std
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     (mcap, recipe)
 }
+
+/// The demo's hammer (LG1000) and steel sheet, as the service gets them (`daemon::serve`):
+/// `config` recording under `dir`, a source that may wait for the service.
+pub fn demo_hammer_parts(
+    dir: &std::path::Path,
+    config: forgemon::config::service::ServiceConfig,
+) -> forgemon::daemon::ServiceParts {
+    let (machine_text, steel) =
+        (read("config/hammer-lg1000.machine.toml"), read("config/steel-16NiCrMo13.process.toml"));
+    forgemon::daemon::ServiceParts {
+        config,
+        config_path: dir.join("service.toml"),
+        config_text: String::new(),
+        machine: parse_machine("m", &machine_text).expect("machine").machine,
+        machine_text,
+        process: Some(parse_process("p", &steel).expect("process")),
+        process_text: Some(steel),
+        backpressure: forgemon::acquire::Backpressure::Wait,
+    }
+}
+
+/// `p` with its flow stress scaled by `factor` (a colder or warmer billet of the same sheet).
+pub fn with_flow_stress(mut p: Process, factor: f64) -> Process {
+    use forgemon::physics::billet::FlowStress;
+    p.material = match p.material {
+        FlowStress::Constant { sigma0_pa } => FlowStress::Constant { sigma0_pa: sigma0_pa * factor },
+        FlowStress::HanselSpittel { a_pa, m1, m2, m3, m4, temperature_c } => {
+            FlowStress::HanselSpittel { a_pa: a_pa * factor, m1, m2, m3, m4, temperature_c }
+        }
+    };
+    p
+}
