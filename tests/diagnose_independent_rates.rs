@@ -22,7 +22,7 @@
 //! (`FORGEMON_RATES_CASES=hammer-none,press-none` for some cases, the hammer's by default;
 //! `FORGEMON_RATES_PAIRS=20` seed pairs per case, the default; `FORGEMON_RATES_OUT=file`
 //! appends one JSON line per run: per-blow holdout errors of the baseline and of every
-//! candidate, the noise, the verdict.)
+//! candidate, each candidate's fitted effects, the noise, the verdict.)
 
 #[path = "independent/mod.rs"]
 mod independent;
@@ -118,6 +118,8 @@ fn independent_verdict_error_rates() {
                     "cands": d.candidates.iter().map(|f| (f.name.clone(), f.holdout_per_blow.clone().into()))
                         .collect::<serde_json::Map<String, serde_json::Value>>(),
                     "n_params": d.candidates.iter().map(|f| (f.name.clone(), f.n_params.into()))
+                        .collect::<serde_json::Map<String, serde_json::Value>>(),
+                    "fitted": d.candidates.iter().map(|f| (f.name.clone(), format!("{:?}", f.effects).into()))
                         .collect::<serde_json::Map<String, serde_json::Value>>(),
                 });
                 writeln!(f, "{line}").unwrap_or_else(|e| panic!("FORGEMON_RATES_OUT: {e}"));

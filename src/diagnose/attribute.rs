@@ -6,7 +6,8 @@
 //! the cost is far from convex, as in a gap or a time constant; a few points where it has
 //! one valley; a damper or a reference searched on the grid in the coordinates the data
 //! determine, a damping ratio or a flow-stress level) and a fine scan of a clearance's gap
-//! from the best grid points (its valley can be narrower than the grid's step), followed by
+//! from the best grid points (its valley can be narrower than the grid's step) and at the gap
+//! the measured closure shows (the ram's contact leading the load's), followed by
 //! Levenberg–Marquardt (`identify::fit`) from the best points found. The residuals are the
 //! load errors over each blow's baseline window, over the peak, so the cost is the mean
 //! nrmse² the contract scores.
@@ -254,6 +255,24 @@ impl BlowSet {
         mean(&v)
     }
 
+    /// The gap a clearance's closure shows on these blows, m: the ram's impact speed times
+    /// how long its own contact (`Reference::t_ram_contact_s`, its accelerometer) led the
+    /// load's rise, median over the blows where the lead is longer than a sample (the
+    /// contact's own uncertainty). None when no blow shows one.
+    pub fn closure_gap_m(&self) -> Option<f64> {
+        let mut gaps: Vec<f64> = self
+            .obj
+            .refs
+            .iter()
+            .filter_map(|r| {
+                let lead = r.measured?.contact_s - r.t_ram_contact_s?;
+                (lead > r.dt_s).then_some(r.v0_mps * lead)
+            })
+            .collect();
+        gaps.sort_by(f64::total_cmp);
+        gaps.get(gaps.len() / 2).copied()
+    }
+
     pub fn len(&self) -> usize {
         self.windows.iter().map(|(a, b)| b - a).sum()
     }
@@ -352,6 +371,15 @@ pub fn fit_candidates(
     );
     costs.extend(fine.par_iter().map(|v| cost(v)).collect::<Vec<_>>());
     points.extend(fine);
+    // And the gaps the measured closure shows, the others again at the best grid points.
+    let closure = closure_points(
+        cands,
+        held.len(),
+        calib,
+        &best(&costs, GRID_STARTS).map(|i| points[i].clone()).collect::<Vec<_>>(),
+    );
+    costs.extend(closure.par_iter().map(|v| cost(v)).collect::<Vec<_>>());
+    points.extend(closure);
     // Levenberg–Marquardt from the best few points (the costs have several valleys),
     // keeping the best.
     let local = |from: &[f64], c: f64| {
@@ -427,6 +455,38 @@ fn fine_points(cands: &[&Candidate], params: &[Param], held: usize, around: &[Ve
                 out.extend((0..FINE).map(|i| {
                     let mut v = pt.clone();
                     v[first] = fine[i];
+                    v
+                }));
+            }
+        }
+        first += c.params.len();
+    }
+    out
+}
+
+/// Multiples of the closure's gap (`BlowSet::closure_gap_m`, the ram's speed times the lead)
+/// the global stage tries: a lower tool struck off a heavier ram as an elastic ball crosses
+/// up to twice that (2), one at the ram's speed all along the whole (1), one accelerated
+/// from rest at a constant rate half (1/2), and one pushed by a load that builds up over the
+/// closure, with the load's rise found at a level above its noise, less: 0.29 on the
+/// independent hammer (`tests/diagnose_independent.rs`), so down to a quarter.
+const CLOSURE_SHARES: [f64; 7] = [0.25, 0.35, 0.5, 0.7, 1.0, 1.4, 2.0];
+
+/// For a clearance not held (the first parameter of a `fine_first` candidate), its gap at
+/// `CLOSURE_SHARES` of the measured closure's, the other parameters as at each of `around`
+/// (issue #17 item 3: "for a clearance, start from the gap the measured impact shows").
+/// None when the calibration blows show no closure.
+fn closure_points(cands: &[&Candidate], held: usize, calib: &BlowSet, around: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let Some(gap) = calib.closure_gap_m() else { return Vec::new() };
+    let mut first = 0;
+    let mut out = Vec::new();
+    for c in cands {
+        if c.fine_first() && first >= held {
+            let p = &c.params[0];
+            for pt in around {
+                out.extend(CLOSURE_SHARES.iter().map(|k| {
+                    let mut v = pt.clone();
+                    v[first] = (k * gap).clamp(p.lo, p.hi);
                     v
                 }));
             }

@@ -145,6 +145,10 @@ pub struct Reference {
     /// motion sensors leave the approach, which may come before the load rises (a clearance
     /// closing under the billet). `None` when they show no clear departure.
     pub t_ram_contact_s: Option<f64>,
+    /// The encoder's reading of the ram at the load's contact sample, m, from the approach's
+    /// fitted parabola (`estimate::approach::ApproachFit::x_contact_m`): consecutive blows on
+    /// a billet meet it lower by the height it lost (`Heights::Encoder`).
+    pub x_contact_m: Option<f64>,
 }
 
 impl Reference {
@@ -155,9 +159,9 @@ impl Reference {
         blow_index: Option<usize>,
         fit_s: f64,
     ) -> Result<Reference, ReferenceError> {
-        let v0 = crate::estimate::approach::fit_impact_speed(&blow.samples, blow.i_contact, fit_s, blow.period_s)
-            .map_err(|e| ReferenceError::NoSpeed { label: label.into(), reason: e.to_string() })?
-            .v_impact_mps;
+        let approach = crate::estimate::approach::fit_impact_speed(&blow.samples, blow.i_contact, fit_s, blow.period_s)
+            .map_err(|e| ReferenceError::NoSpeed { label: label.into(), reason: e.to_string() })?;
+        let v0 = approach.v_impact_mps;
         let load: Vec<f64> = blow.samples.iter().map(|s| s.load_n - blow.load_zero_n).collect();
         let (i_peak, peak) =
             load.iter().copied().enumerate().fold((0, f64::MIN), |a, (i, v)| if v > a.1 { (i, v) } else { a });
@@ -184,6 +188,7 @@ impl Reference {
             peak_n: peak,
             blow_index,
             t_ram_contact_s: ram_contact(blow).map(|t| t - start as f64 * dt),
+            x_contact_m: Some(approach.x_contact_m).filter(|x| x.is_finite()),
         })
     }
 
@@ -289,6 +294,34 @@ pub enum Setting {
     Billet(Process),
 }
 
+/// Where each billet blow's start height comes from, after the first (the sheet's billet).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Heights {
+    /// The sheet's measured height after the blow before, when given; else the model's end
+    /// height of the blow before.
+    #[default]
+    Sheet,
+    /// Where the sheet gives measured heights: the encoder's contact readings
+    /// (`Reference::x_contact_m`) anchored on all of them at once (`encoder_anchor_m`), so
+    /// that each blow's start is as precise as the encoder and the caliper's scatter is
+    /// averaged over the billet's blows instead of landing on each blow (±0.2 mm on issue
+    /// #17's independent renderer). Blows without a reading, and sheets without measured
+    /// heights, as `Sheet`.
+    Encoder,
+}
+
+/// The encoder's reading of the lower die's level, m: the ram meets a billet of height h at
+/// a reading of this less h. From (measured start height, contact reading) of each blow
+/// after the first, the mean of their sums, so the caliper's scatter shrinks by the square
+/// root of their number. The first blow's reading is left out: a fresh billet's load rises
+/// from nothing (copper's flow stress at no strain), so its contact, found at a load level,
+/// comes late by tens of µm, where later blows, strain-hardened, load at once (issue #17,
+/// the independent press: a chain through the first contact put the second blow 118 µm
+/// high). `None` without such a blow.
+pub fn encoder_anchor_m(pairs: &[(f64, f64)]) -> Option<f64> {
+    (!pairs.is_empty()).then(|| pairs.iter().map(|(h, x)| h + x).sum::<f64>() / pairs.len() as f64)
+}
+
 /// Which objective the residuals express.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Fidelity {
@@ -324,6 +357,8 @@ pub struct Objective {
     pub f_max_hz: f64,
     /// Measured spectra, bins 1..=m of each reference.
     measured_spectra: Vec<Vec<f64>>,
+    /// Where the billet blows' start heights come from.
+    pub heights: Heights,
 }
 
 /// One reference simulated: the load at the measured samples and its spectrum.
@@ -373,7 +408,13 @@ impl Objective {
             setting,
             f_max_hz,
             measured_spectra,
+            heights: Heights::Sheet,
         }
+    }
+
+    /// The same references with the start heights from `heights`.
+    pub fn with_heights(self, heights: Heights) -> Objective {
+        Objective { heights, ..self }
     }
 
     /// The same references with the model's effects.
@@ -427,12 +468,31 @@ impl Objective {
             Setting::Bare => None,
         };
         let mut out = Vec::with_capacity(n);
+        // The encoder's anchor on the sheet's measured heights (`Heights::Encoder`).
+        let anchor = match (&self.setting, self.heights) {
+            (Setting::Billet(p), Heights::Encoder) => encoder_anchor_m(
+                &self.refs[..n]
+                    .iter()
+                    .filter_map(|r| {
+                        let k = r.blow_index?.checked_sub(2)?;
+                        Some((*p.measured_final_heights_m.get(k)?, r.x_contact_m?))
+                    })
+                    .collect::<Vec<_>>(),
+            ),
+            _ => None,
+        };
         for r in &self.refs[..n] {
             let plant = match (&self.setting, r.blow_index, h) {
                 (Setting::Billet(p), Some(n), Some(h_start)) => {
                     // The sheet's measured height after the previous blow, when given.
-                    let h0 =
+                    let sheet =
                         n.checked_sub(2).and_then(|k| p.measured_final_heights_m.get(k).copied()).unwrap_or(h_start);
+                    // From the encoder where it reads a height the billet can have.
+                    let encoder = match (anchor, r.x_contact_m) {
+                        (Some(e), Some(x)) if n >= 2 => Some(e - x).filter(|h| *h > 0.0 && *h <= p.billet.height_m),
+                        _ => None,
+                    };
+                    let h0 = encoder.unwrap_or(sheet);
                     blow_plant(machine, &self.effects, p, n, h0)
                 }
                 _ => Plant::new(machine, &self.effects, None, 0.0),
@@ -649,6 +709,15 @@ mod tests {
         // Without noise the shortest clip is 1 + ln(1e-6 / 4000) / ln(0.5) ≈ 32 samples: a
         // noise-free sensor may repeat a value, but not for a third of a millisecond.
         assert_eq!(clip_run(&pulse(2.33e6, 0.0, q, f64::INFINITY)), 33);
+    }
+
+    #[test]
+    fn the_encoder_anchor_averages_the_calipers() {
+        // Readings of 0.470 and 0.472 m on billets measured at 30.1 and 27.9 mm (caliper
+        // errors of +0.1 and −0.1 mm about 30 and 28): the die at 0.5 m.
+        let e = encoder_anchor_m(&[(30.1e-3, 0.470), (27.9e-3, 0.472)]).unwrap();
+        assert!((e - 0.5).abs() < 1e-12, "{e}");
+        assert_eq!(encoder_anchor_m(&[]), None);
     }
 
     #[test]
