@@ -94,6 +94,11 @@ pub struct EstimatorConfig {
     pub new_billet_rise_m: Option<f64>,
     /// After an idle gap this long, any rise beyond the measurement starts a new billet, s.
     pub idle_new_billet_s: f64,
+    /// The encoder's reading with the ram on the lower die, m, when the DAQ's encoder is
+    /// referenced to the die (a die-closing calibration). Then every billet's height at its
+    /// first contact is measured, the first billet's too; `None`: the first billet is taken
+    /// to be the sheet's height and teaches the reference.
+    pub encoder_at_die_m: Option<f64>,
 }
 
 impl EstimatorConfig {
@@ -120,6 +125,7 @@ impl EstimatorConfig {
             caliper_resolution_m: Self::DEFAULT_CALIPER_RESOLUTION_M,
             new_billet_rise_m: None,
             idle_new_billet_s: billet::DEFAULT_IDLE_NEW_BILLET_S,
+            encoder_at_die_m: None,
         }
     }
 
@@ -149,7 +155,12 @@ pub enum EstimateError {
 #[derive(Debug, Clone)]
 pub struct Estimator {
     machine: Machine,
+    /// The process sheet as given.
     process: Option<Process>,
+    /// The sheet with the present billet's own height at its first contact, when the
+    /// encoder measured one off the sheet's (`first_blow_height`): a billet's strain counts
+    /// from its own height, so its law is the sheet's law on that height.
+    billet_process: Option<Process>,
     cfg: EstimatorConfig,
     /// Billet height before the next blow, from the model observer's compression.
     h_m: Option<f64>,
@@ -198,6 +209,7 @@ impl Estimator {
         let detect = BilletDetect::new(h_m, cfg.encoder_resolution_m, cfg.new_billet_rise_m, cfg.idle_new_billet_s);
         Estimator {
             machine,
+            billet_process: process.clone(),
             process,
             cfg,
             h_m,
@@ -209,7 +221,7 @@ impl Estimator {
             prev_billet_blows: 0,
             signalled: false,
             last_end: None,
-            die_x_m: None,
+            die_x_m: cfg.encoder_at_die_m,
             scale: 1.0,
             last_method: None,
             last_course: None,
@@ -259,6 +271,7 @@ impl Estimator {
 
     fn start_billet(&mut self) {
         self.h_m = self.process.as_ref().map(|p| p.billet.height_m);
+        self.billet_process = self.process.clone();
         self.chain = None;
         self.billet += 1;
         self.prev_billet_blows = self.billet_blows;
@@ -305,10 +318,15 @@ impl Estimator {
             return None;
         };
         let off_m = (die_x_m - x_contact_m) - nominal_m;
-        (off_m.abs() > tolerance_m).then(|| {
+        // A configured reference measures every billet; a learnt one only tells a billet
+        // off the sheet by more than the measurement.
+        if self.cfg.encoder_at_die_m.is_some() || off_m.abs() > tolerance_m {
             self.h_m = Some(nominal_m + off_m);
-            off_m
-        })
+            if let Some(p) = self.billet_process.as_mut() {
+                p.billet.height_m = nominal_m + off_m;
+            }
+        }
+        (off_m.abs() > tolerance_m).then_some(off_m)
     }
 
     /// The longest hole bridged inside a blow, s: a tenth of the machine's second-mode
@@ -344,14 +362,21 @@ impl Estimator {
         let tolerance_m = self.contact_tolerance_m(v0 * blow.period_s);
         let mut billet_check = self.follow_billet(fit.x_contact_m, t_contact_s, tolerance_m);
         let mut h_start_off_sheet_m = None;
+        // Whether this contact measured the billet's height (the die reference), or taught
+        // the reference (the first billet's first blow, taken at the sheet's height).
+        let (mut measured, mut taught) = (false, false);
         if self.billet_blows == 0 {
+            taught = self.die_x_m.is_none();
             h_start_off_sheet_m = self.first_blow_height(fit.x_contact_m, tolerance_m);
+            measured = !taught && (self.cfg.encoder_at_die_m.is_some() || h_start_off_sheet_m.is_some());
             if self.prev_billet_blows == 1 && self.billet > 1 {
                 billet_check = billet_check.or(Some(BilletCheck::PreviousBilletOneBlow));
             }
         }
         self.billet_blows += 1;
-        let (h_start_m, height_check) = self.start_height(fit.x_contact_m, v0 * blow.period_s);
+        let (mut h_start_m, height_check, chained) = self.start_height(fit.x_contact_m, v0 * blow.period_s);
+        measured |= chained;
+        let mut x_contact_m = fit.x_contact_m;
         let mut e = BlowEstimate {
             judgement: None,
             blow: n,
@@ -404,6 +429,21 @@ impl Estimator {
             }
             _ => {}
         }
+        // The refit may have moved contact. A height the encoder measured moves with it
+        // (the ram met the billet lower by the shift, so it was that much shorter); a die
+        // reference taught by this contact moves the other way; the chain takes the new one.
+        if let Some(f) = fitted.as_ref().filter(|f| f.contact_samples != delta) {
+            let x_m = approach.at(f.contact_samples * blow.period_s).x_contact_m;
+            let shift_m = x_m - x_contact_m;
+            if measured {
+                h_start_m = h_start_m.map(|h| h - shift_m);
+                e.h_start_m = h_start_m;
+            } else if taught {
+                self.die_x_m = self.die_x_m.map(|d| d + shift_m);
+            }
+            x_contact_m = x_m;
+            self.chain = h_start_m.map(|h| (x_m, h));
+        }
         if h_start_m.is_none() {
             fitted = None;
         }
@@ -419,9 +459,9 @@ impl Estimator {
         // height, by the ram's deepest travel past contact is all that is known.
         self.last_end = Some(match (h_start_m, h_end_m) {
             (Some(h0), Some(h1)) => {
-                LastEnd { x_m: fit.x_contact_m + (h0 - h1), end_known: true, h_end_m: Some(h1), t_s: t_end_s }
+                LastEnd { x_m: x_contact_m + (h0 - h1), end_known: true, h_end_m: Some(h1), t_s: t_end_s }
             }
-            _ => LastEnd { x_m: fit.x_contact_m, end_known: false, h_end_m: None, t_s: t_end_s },
+            _ => LastEnd { x_m: x_contact_m, end_known: false, h_end_m: None, t_s: t_end_s },
         });
         Ok(e)
     }
@@ -429,7 +469,7 @@ impl Estimator {
     /// First contact, samples after the segmenter's contact sample: the hinge shaped by the
     /// process sheet's law from height `h_m` when both are known, else a straight line.
     fn locate_contact(&self, blow: &Blow, v0_mps: f64, h_m: Option<f64>) -> f64 {
-        let law = self.process.as_ref().map(|p| {
+        let law = self.billet_process.as_ref().map(|p| {
             let n = self.billet_blows + 1;
             BilletLaw::new(p.billet.clone(), p.material.clone(), p.friction, LoadEffects::NEUTRAL, n)
         });
@@ -453,7 +493,7 @@ impl Estimator {
         delta0: f64,
         search_contact: bool,
     ) -> Option<fit::ModelFit> {
-        let process = self.process.as_ref()?;
+        let process = self.billet_process.as_ref()?;
         // Above the fit's rate, a decimated copy: contact counts in its coarser samples.
         let f = decimate::factor(blow.period_s);
         let coarse = decimate::decimate(blow, f);
@@ -546,7 +586,7 @@ impl Estimator {
             Machine::Hammer(_) => 0.0,
         };
         let max_comp = o.set_m.max(0.0) + before_m;
-        let (plastic_j, friction_j, h_end_m) = match (&self.process, h_start_m) {
+        let (plastic_j, friction_j, h_end_m) = match (&self.billet_process, h_start_m) {
             (Some(p), Some(h0)) => {
                 let law =
                     BilletLaw::new(p.billet.clone(), p.material.clone(), p.friction, LoadEffects::NEUTRAL, n as usize);
@@ -607,8 +647,9 @@ impl Estimator {
     /// The billet's height before this blow: the one tracked through the last blow, or, when
     /// that was lost (an incomplete blow), the encoder's chain from the last contact: the ram
     /// meets the billet lower by exactly the height the billet lost. The chain is also
-    /// checked against the sheet's measured height after the blow before.
-    fn start_height(&self, x_contact_m: f64, sample_travel_m: f64) -> (Option<f64>, Option<HeightCheck>) {
+    /// checked against the sheet's measured height after the blow before. The last is
+    /// whether the height is the chain's.
+    fn start_height(&self, x_contact_m: f64, sample_travel_m: f64) -> (Option<f64>, Option<HeightCheck>, bool) {
         let tolerance_m = self.contact_tolerance_m(sample_travel_m);
         // A billet does not grow: a contact higher than the last one (beyond the tolerance)
         // breaks the chain (another billet, or the part turned over).
@@ -628,7 +669,7 @@ impl Estimator {
             agree: (sheet_m - encoder_m).abs() <= tolerance_m,
         });
         let h = if self.process.is_some() { chained.or(self.h_m) } else { None };
-        (h, check)
+        (h, check, chained.is_some() && self.process.is_some())
     }
 }
 
