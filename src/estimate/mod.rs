@@ -15,6 +15,7 @@
 pub mod approach;
 pub mod billet;
 pub mod billet_book;
+pub mod config;
 pub mod contact;
 pub mod curve;
 pub mod decimate;
@@ -23,10 +24,11 @@ pub mod observer;
 pub mod result;
 pub mod sensor;
 
+pub use config::EstimatorConfig;
 pub use result::{BilletTag, BlowClass, BlowEstimate, HeightCheck};
 
 use crate::physics::billet::{BilletLaw, LoadEffects};
-use crate::physics::machine::{Machine, MachineKind};
+use crate::physics::machine::Machine;
 use crate::physics::process::Process;
 use crate::signal::segment::Blow;
 use approach::{ApproachError, ApproachFit, fit_impact_speed};
@@ -71,72 +73,6 @@ impl Method {
     /// The method named `s` (`as_str`), `None` for a name this version does not know.
     pub fn parse(s: &str) -> Option<Self> {
         [Method::Observer, Method::ModelFit].into_iter().find(|m| m.as_str() == s)
-    }
-}
-
-/// Thresholds of the estimator, with the defaults named.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct EstimatorConfig {
-    /// Efficiency at or above which a blow is `soft` (`DEFAULT_SOFT_MIN` says why 0.75).
-    pub soft_min: f64,
-    /// At or above which it is `intermediate`; below, `hard` (seed 000 §4.3: 20–50 %).
-    pub intermediate_min: f64,
-    /// Length of the approach window of the impact-speed fit, s.
-    pub fit_s: f64,
-    /// The ram encoder's resolution, m (CONTRACTS.md §1: "quantised, for example 10 µm").
-    pub encoder_resolution_m: f64,
-    /// The resolution of the process sheet's measured heights, m: a digital caliper reads
-    /// 0.01 mm and is good to ±0.02 mm over 100 mm (DIN 862).
-    pub caliper_resolution_m: f64,
-    /// A contact higher than the last blow's end by more than this starts a new billet, m;
-    /// `None`: `billet::NEW_BILLET_RISE_FRACTION` of the sheet's height, at least
-    /// `billet::NEW_BILLET_RISE_COUNTS` encoder counts.
-    pub new_billet_rise_m: Option<f64>,
-    /// After an idle gap this long, any rise beyond the measurement starts a new billet, s.
-    pub idle_new_billet_s: f64,
-    /// The encoder's reading with the ram on the lower die, m, when the DAQ's encoder is
-    /// referenced to the die (a die-closing calibration). Then every billet's height at its
-    /// first contact is measured, the first billet's too; `None`: the first billet is taken
-    /// to be the sheet's height and teaches the reference.
-    pub encoder_at_die_m: Option<f64>,
-}
-
-impl EstimatorConfig {
-    /// Seed 000 §4.3 puts soft blows at 80–90 % and hard ones at 20–50 %, and calls its
-    /// blows 1–4 soft (simulated efficiency down to 0.807) and 5–6 intermediate (0.722 and
-    /// 0.614): a soft threshold between 0.722 and 0.807 classes the paper's blows as the
-    /// paper does, and 0.75 lies within that gap. Below 0.50 a blow is hard, the top of
-    /// the paper's hard range.
-    pub const DEFAULT_SOFT_MIN: f64 = 0.75;
-    pub const DEFAULT_INTERMEDIATE_MIN: f64 = 0.50;
-    pub const DEFAULT_ENCODER_RESOLUTION_M: f64 = 10e-6;
-    pub const DEFAULT_CALIPER_RESOLUTION_M: f64 = 0.02e-3;
-
-    pub fn for_kind(kind: MachineKind) -> Self {
-        EstimatorConfig {
-            soft_min: Self::DEFAULT_SOFT_MIN,
-            intermediate_min: Self::DEFAULT_INTERMEDIATE_MIN,
-            // 10 ms of a 4 m/s free fall is 40 mm of travel; 50 ms at 0.35 m/s is 17 mm.
-            fit_s: match kind {
-                MachineKind::Hammer => 0.010,
-                MachineKind::ScrewPress => 0.050,
-            },
-            encoder_resolution_m: Self::DEFAULT_ENCODER_RESOLUTION_M,
-            caliper_resolution_m: Self::DEFAULT_CALIPER_RESOLUTION_M,
-            new_billet_rise_m: None,
-            idle_new_billet_s: billet::DEFAULT_IDLE_NEW_BILLET_S,
-            encoder_at_die_m: None,
-        }
-    }
-
-    pub fn classify(&self, efficiency: f64) -> BlowClass {
-        if efficiency >= self.soft_min {
-            BlowClass::Soft
-        } else if efficiency >= self.intermediate_min {
-            BlowClass::Intermediate
-        } else {
-            BlowClass::Hard
-        }
     }
 }
 
@@ -310,7 +246,9 @@ impl Estimator {
 
     /// A billet's first blow: its height is the sheet's unless the encoder's (the die
     /// reference less the contact) differs by more than the measurement; the first billet
-    /// teaches the die reference. Returns the encoder's height less the sheet's when reported.
+    /// teaches the die reference, unless it is configured (`encoder_at_die_m`): then the
+    /// encoder's height is always taken. A height off the sheet's becomes the billet's own
+    /// (`billet_process`). Returns the encoder's height less the sheet's when reported.
     fn first_blow_height(&mut self, x_contact_m: f64, tolerance_m: f64) -> Option<f64> {
         let nominal_m = self.process.as_ref()?.billet.height_m;
         let Some(die_x_m) = self.die_x_m else {
@@ -345,9 +283,21 @@ impl Estimator {
         let n = self.blows;
         let approach = fit_impact_speed(&blow.samples, blow.i_contact, self.cfg.fit_s, blow.period_s)
             .map_err(|source| EstimateError::Approach { blow: n, source })?;
-        let h_guess_m = self.h_m.or(self.process.as_ref().map(|p| p.billet.height_m));
+        let mut h_guess_m = self.h_m.or(self.process.as_ref().map(|p| p.billet.height_m));
         // Contact between samples: from the load's rise, or where the model fits it.
         let delta0 = self.locate_contact(blow, approach.v_impact_mps, h_guess_m);
+        // A billet's first blow with the die reference configured: its height from the
+        // locator's contact, so that the fit starts on the billet's own law. The fit's move
+        // of the contact is then not refitted (that doubled a first blow's latency, 24 ms at
+        // 5 kHz on the hammer): the spring-back's set absorbs it (`fill_from_fit`).
+        let premeasured = self.billet_blows == 0 && self.process.is_some() && self.cfg.encoder_at_die_m.is_some();
+        if let (true, Some(die_x_m)) = (premeasured, self.cfg.encoder_at_die_m) {
+            let h_m = die_x_m - approach.at(delta0 * blow.period_s).x_contact_m;
+            if let Some(p) = self.billet_process.as_mut() {
+                p.billet.height_m = h_m;
+            }
+            h_guess_m = Some(h_m);
+        }
         let gap_s = self.gap_s(blow);
         let complete = blow.lost_s == 0.0 && gap_s <= self.max_bridged_s();
         let wants_fit = complete && self.method_for(blow.period_s) == Method::ModelFit;
@@ -421,7 +371,7 @@ impl Estimator {
         // A fit that failed on the guess (a new billet the guess did not know) is tried
         // afresh from the follow-up's height and the locator's contact.
         match (&fitted, h_start_m) {
-            (Some(f), Some(h0)) if (f.h_start_m - h0).abs() > REFIT_HEIGHT_M => {
+            (Some(f), Some(h0)) if !premeasured && (f.h_start_m - h0).abs() > REFIT_HEIGHT_M => {
                 fitted = self.fit(blow, approach, h0, f.scale, f.contact_samples, false);
             }
             (None, Some(h0)) if wants_fit && h_guess_m.is_none_or(|h| (h - h0).abs() > REFIT_HEIGHT_M) => {
