@@ -2,7 +2,8 @@
 //! at 5 kHz, 3 channels): one `Estimator::estimate` of the hammer paper's blow 2 (steel,
 //! 5.3 m/s) and the press paper's blow 2 (copper, 0.346 m/s), rendered by the DAQ chain of
 //! `forgemon::daq` and cut by the segmenter, at 100 kHz and at 5 kHz. The estimator has
-//! seen blow 1 (its height and flow-stress scale carry over), as in service.
+//! seen blow 1 (its height and flow-stress scale carry over), as in service. At 5 and
+//! 100 kHz also blow 1 itself, with the encoder referenced to the die (`encoder_at_die_m`).
 
 use std::hint::black_box;
 
@@ -68,6 +69,22 @@ fn latency(c: &mut Criterion) {
                     black_box(est.estimate(black_box(&cut[1])).unwrap())
                 })
             });
+            // A billet's first blow with the encoder referenced to the die: the fit on the
+            // sheet's height, then again on the height the encoder measured (the worst case).
+            if rate == 100e3 || rate == 5e3 {
+                let mut cfg = EstimatorConfig::for_kind(m.kind());
+                cfg.encoder_at_die_m = Some(forgemon::synth::ENCODER_AT_LOWER_DIE_M);
+                // Its sheet 1.5 % off the billet, as in `tests/estimate_rates.rs`: the refit runs.
+                let mut sheet = p.clone();
+                sheet.billet.height_m *= 1.015;
+                let fresh = Estimator::new(m, Some(sheet), cfg);
+                g.bench_function(format!("{name}_{}kHz_3ch_first_blow_die_referenced", rate / 1e3), |b| {
+                    b.iter(|| {
+                        let mut est = fresh.clone();
+                        black_box(est.estimate(black_box(&cut[0])).unwrap())
+                    })
+                });
+            }
         }
     }
     g.finish();

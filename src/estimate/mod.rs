@@ -15,6 +15,7 @@
 pub mod approach;
 pub mod billet;
 pub mod billet_book;
+pub mod config;
 pub mod contact;
 pub mod curve;
 pub mod decimate;
@@ -23,10 +24,11 @@ pub mod observer;
 pub mod result;
 pub mod sensor;
 
+pub use config::EstimatorConfig;
 pub use result::{BilletTag, BlowClass, BlowEstimate, HeightCheck};
 
 use crate::physics::billet::{BilletLaw, LoadEffects};
-use crate::physics::machine::{Machine, MachineKind};
+use crate::physics::machine::Machine;
 use crate::physics::process::Process;
 use crate::signal::segment::Blow;
 use approach::{ApproachError, ApproachFit, fit_impact_speed};
@@ -74,66 +76,6 @@ impl Method {
     }
 }
 
-/// Thresholds of the estimator, with the defaults named.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct EstimatorConfig {
-    /// Efficiency at or above which a blow is `soft` (`DEFAULT_SOFT_MIN` says why 0.75).
-    pub soft_min: f64,
-    /// At or above which it is `intermediate`; below, `hard` (seed 000 §4.3: 20–50 %).
-    pub intermediate_min: f64,
-    /// Length of the approach window of the impact-speed fit, s.
-    pub fit_s: f64,
-    /// The ram encoder's resolution, m (CONTRACTS.md §1: "quantised, for example 10 µm").
-    pub encoder_resolution_m: f64,
-    /// The resolution of the process sheet's measured heights, m: a digital caliper reads
-    /// 0.01 mm and is good to ±0.02 mm over 100 mm (DIN 862).
-    pub caliper_resolution_m: f64,
-    /// A contact higher than the last blow's end by more than this starts a new billet, m;
-    /// `None`: `billet::NEW_BILLET_RISE_FRACTION` of the sheet's height, at least
-    /// `billet::NEW_BILLET_RISE_COUNTS` encoder counts.
-    pub new_billet_rise_m: Option<f64>,
-    /// After an idle gap this long, any rise beyond the measurement starts a new billet, s.
-    pub idle_new_billet_s: f64,
-}
-
-impl EstimatorConfig {
-    /// Seed 000 §4.3 puts soft blows at 80–90 % and hard ones at 20–50 %, and calls its
-    /// blows 1–4 soft (simulated efficiency down to 0.807) and 5–6 intermediate (0.722 and
-    /// 0.614): a soft threshold between 0.722 and 0.807 classes the paper's blows as the
-    /// paper does, and 0.75 lies within that gap. Below 0.50 a blow is hard, the top of
-    /// the paper's hard range.
-    pub const DEFAULT_SOFT_MIN: f64 = 0.75;
-    pub const DEFAULT_INTERMEDIATE_MIN: f64 = 0.50;
-    pub const DEFAULT_ENCODER_RESOLUTION_M: f64 = 10e-6;
-    pub const DEFAULT_CALIPER_RESOLUTION_M: f64 = 0.02e-3;
-
-    pub fn for_kind(kind: MachineKind) -> Self {
-        EstimatorConfig {
-            soft_min: Self::DEFAULT_SOFT_MIN,
-            intermediate_min: Self::DEFAULT_INTERMEDIATE_MIN,
-            // 10 ms of a 4 m/s free fall is 40 mm of travel; 50 ms at 0.35 m/s is 17 mm.
-            fit_s: match kind {
-                MachineKind::Hammer => 0.010,
-                MachineKind::ScrewPress => 0.050,
-            },
-            encoder_resolution_m: Self::DEFAULT_ENCODER_RESOLUTION_M,
-            caliper_resolution_m: Self::DEFAULT_CALIPER_RESOLUTION_M,
-            new_billet_rise_m: None,
-            idle_new_billet_s: billet::DEFAULT_IDLE_NEW_BILLET_S,
-        }
-    }
-
-    pub fn classify(&self, efficiency: f64) -> BlowClass {
-        if efficiency >= self.soft_min {
-            BlowClass::Soft
-        } else if efficiency >= self.intermediate_min {
-            BlowClass::Intermediate
-        } else {
-            BlowClass::Hard
-        }
-    }
-}
-
 /// A blow the estimator could not evaluate.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EstimateError {
@@ -149,7 +91,12 @@ pub enum EstimateError {
 #[derive(Debug, Clone)]
 pub struct Estimator {
     machine: Machine,
+    /// The process sheet as given.
     process: Option<Process>,
+    /// The sheet with the present billet's own height at its first contact, when the
+    /// encoder measured one off the sheet's (`first_blow_height`): a billet's strain counts
+    /// from its own height, so its law is the sheet's law on that height.
+    billet_process: Option<Process>,
     cfg: EstimatorConfig,
     /// Billet height before the next blow, from the model observer's compression.
     h_m: Option<f64>,
@@ -198,6 +145,7 @@ impl Estimator {
         let detect = BilletDetect::new(h_m, cfg.encoder_resolution_m, cfg.new_billet_rise_m, cfg.idle_new_billet_s);
         Estimator {
             machine,
+            billet_process: process.clone(),
             process,
             cfg,
             h_m,
@@ -209,7 +157,7 @@ impl Estimator {
             prev_billet_blows: 0,
             signalled: false,
             last_end: None,
-            die_x_m: None,
+            die_x_m: cfg.encoder_at_die_m,
             scale: 1.0,
             last_method: None,
             last_course: None,
@@ -259,6 +207,7 @@ impl Estimator {
 
     fn start_billet(&mut self) {
         self.h_m = self.process.as_ref().map(|p| p.billet.height_m);
+        self.billet_process = self.process.clone();
         self.chain = None;
         self.billet += 1;
         self.prev_billet_blows = self.billet_blows;
@@ -297,7 +246,9 @@ impl Estimator {
 
     /// A billet's first blow: its height is the sheet's unless the encoder's (the die
     /// reference less the contact) differs by more than the measurement; the first billet
-    /// teaches the die reference. Returns the encoder's height less the sheet's when reported.
+    /// teaches the die reference, unless it is configured (`encoder_at_die_m`): then the
+    /// encoder's height is always taken. A height off the sheet's becomes the billet's own
+    /// (`billet_process`). Returns the encoder's height less the sheet's when reported.
     fn first_blow_height(&mut self, x_contact_m: f64, tolerance_m: f64) -> Option<f64> {
         let nominal_m = self.process.as_ref()?.billet.height_m;
         let Some(die_x_m) = self.die_x_m else {
@@ -305,10 +256,15 @@ impl Estimator {
             return None;
         };
         let off_m = (die_x_m - x_contact_m) - nominal_m;
-        (off_m.abs() > tolerance_m).then(|| {
+        // A configured reference measures every billet; a learnt one only tells a billet
+        // off the sheet by more than the measurement.
+        if self.cfg.encoder_at_die_m.is_some() || off_m.abs() > tolerance_m {
             self.h_m = Some(nominal_m + off_m);
-            off_m
-        })
+            if let Some(p) = self.billet_process.as_mut() {
+                p.billet.height_m = nominal_m + off_m;
+            }
+        }
+        (off_m.abs() > tolerance_m).then_some(off_m)
     }
 
     /// The longest hole bridged inside a blow, s: a tenth of the machine's second-mode
@@ -327,9 +283,21 @@ impl Estimator {
         let n = self.blows;
         let approach = fit_impact_speed(&blow.samples, blow.i_contact, self.cfg.fit_s, blow.period_s)
             .map_err(|source| EstimateError::Approach { blow: n, source })?;
-        let h_guess_m = self.h_m.or(self.process.as_ref().map(|p| p.billet.height_m));
+        let mut h_guess_m = self.h_m.or(self.process.as_ref().map(|p| p.billet.height_m));
         // Contact between samples: from the load's rise, or where the model fits it.
         let delta0 = self.locate_contact(blow, approach.v_impact_mps, h_guess_m);
+        // A billet's first blow with the die reference configured: its height from the
+        // locator's contact, so that the fit starts on the billet's own law. The fit's move
+        // of the contact is then not refitted (that doubled a first blow's latency, 24 ms at
+        // 5 kHz on the hammer): the spring-back's set absorbs it (`fill_from_fit`).
+        let premeasured = self.billet_blows == 0 && self.process.is_some() && self.cfg.encoder_at_die_m.is_some();
+        if let (true, Some(die_x_m)) = (premeasured, self.cfg.encoder_at_die_m) {
+            let h_m = die_x_m - approach.at(delta0 * blow.period_s).x_contact_m;
+            if let Some(p) = self.billet_process.as_mut() {
+                p.billet.height_m = h_m;
+            }
+            h_guess_m = Some(h_m);
+        }
         let gap_s = self.gap_s(blow);
         let complete = blow.lost_s == 0.0 && gap_s <= self.max_bridged_s();
         let wants_fit = complete && self.method_for(blow.period_s) == Method::ModelFit;
@@ -344,14 +312,21 @@ impl Estimator {
         let tolerance_m = self.contact_tolerance_m(v0 * blow.period_s);
         let mut billet_check = self.follow_billet(fit.x_contact_m, t_contact_s, tolerance_m);
         let mut h_start_off_sheet_m = None;
+        // Whether this contact measured the billet's height (the die reference), or taught
+        // the reference (the first billet's first blow, taken at the sheet's height).
+        let (mut measured, mut taught) = (false, false);
         if self.billet_blows == 0 {
+            taught = self.die_x_m.is_none();
             h_start_off_sheet_m = self.first_blow_height(fit.x_contact_m, tolerance_m);
+            measured = !taught && (self.cfg.encoder_at_die_m.is_some() || h_start_off_sheet_m.is_some());
             if self.prev_billet_blows == 1 && self.billet > 1 {
                 billet_check = billet_check.or(Some(BilletCheck::PreviousBilletOneBlow));
             }
         }
         self.billet_blows += 1;
-        let (h_start_m, height_check) = self.start_height(fit.x_contact_m, v0 * blow.period_s);
+        let (mut h_start_m, height_check, chained) = self.start_height(fit.x_contact_m, v0 * blow.period_s);
+        measured |= chained;
+        let mut x_contact_m = fit.x_contact_m;
         let mut e = BlowEstimate {
             judgement: None,
             blow: n,
@@ -396,13 +371,28 @@ impl Estimator {
         // A fit that failed on the guess (a new billet the guess did not know) is tried
         // afresh from the follow-up's height and the locator's contact.
         match (&fitted, h_start_m) {
-            (Some(f), Some(h0)) if (f.h_start_m - h0).abs() > REFIT_HEIGHT_M => {
+            (Some(f), Some(h0)) if !premeasured && (f.h_start_m - h0).abs() > REFIT_HEIGHT_M => {
                 fitted = self.fit(blow, approach, h0, f.scale, f.contact_samples, false);
             }
             (None, Some(h0)) if wants_fit && h_guess_m.is_none_or(|h| (h - h0).abs() > REFIT_HEIGHT_M) => {
                 fitted = self.fit(blow, approach, h0, self.scale, delta0, true);
             }
             _ => {}
+        }
+        // The refit may have moved contact. A height the encoder measured moves with it
+        // (the ram met the billet lower by the shift, so it was that much shorter); a die
+        // reference taught by this contact moves the other way; the chain takes the new one.
+        if let Some(f) = fitted.as_ref().filter(|f| f.contact_samples != delta) {
+            let x_m = approach.at(f.contact_samples * blow.period_s).x_contact_m;
+            let shift_m = x_m - x_contact_m;
+            if measured {
+                h_start_m = h_start_m.map(|h| h - shift_m);
+                e.h_start_m = h_start_m;
+            } else if taught {
+                self.die_x_m = self.die_x_m.map(|d| d + shift_m);
+            }
+            x_contact_m = x_m;
+            self.chain = h_start_m.map(|h| (x_m, h));
         }
         if h_start_m.is_none() {
             fitted = None;
@@ -419,9 +409,9 @@ impl Estimator {
         // height, by the ram's deepest travel past contact is all that is known.
         self.last_end = Some(match (h_start_m, h_end_m) {
             (Some(h0), Some(h1)) => {
-                LastEnd { x_m: fit.x_contact_m + (h0 - h1), end_known: true, h_end_m: Some(h1), t_s: t_end_s }
+                LastEnd { x_m: x_contact_m + (h0 - h1), end_known: true, h_end_m: Some(h1), t_s: t_end_s }
             }
-            _ => LastEnd { x_m: fit.x_contact_m, end_known: false, h_end_m: None, t_s: t_end_s },
+            _ => LastEnd { x_m: x_contact_m, end_known: false, h_end_m: None, t_s: t_end_s },
         });
         Ok(e)
     }
@@ -429,7 +419,7 @@ impl Estimator {
     /// First contact, samples after the segmenter's contact sample: the hinge shaped by the
     /// process sheet's law from height `h_m` when both are known, else a straight line.
     fn locate_contact(&self, blow: &Blow, v0_mps: f64, h_m: Option<f64>) -> f64 {
-        let law = self.process.as_ref().map(|p| {
+        let law = self.billet_process.as_ref().map(|p| {
             let n = self.billet_blows + 1;
             BilletLaw::new(p.billet.clone(), p.material.clone(), p.friction, LoadEffects::NEUTRAL, n)
         });
@@ -453,7 +443,7 @@ impl Estimator {
         delta0: f64,
         search_contact: bool,
     ) -> Option<fit::ModelFit> {
-        let process = self.process.as_ref()?;
+        let process = self.billet_process.as_ref()?;
         // Above the fit's rate, a decimated copy: contact counts in its coarser samples.
         let f = decimate::factor(blow.period_s);
         let coarse = decimate::decimate(blow, f);
@@ -546,7 +536,7 @@ impl Estimator {
             Machine::Hammer(_) => 0.0,
         };
         let max_comp = o.set_m.max(0.0) + before_m;
-        let (plastic_j, friction_j, h_end_m) = match (&self.process, h_start_m) {
+        let (plastic_j, friction_j, h_end_m) = match (&self.billet_process, h_start_m) {
             (Some(p), Some(h0)) => {
                 let law =
                     BilletLaw::new(p.billet.clone(), p.material.clone(), p.friction, LoadEffects::NEUTRAL, n as usize);
@@ -607,8 +597,9 @@ impl Estimator {
     /// The billet's height before this blow: the one tracked through the last blow, or, when
     /// that was lost (an incomplete blow), the encoder's chain from the last contact: the ram
     /// meets the billet lower by exactly the height the billet lost. The chain is also
-    /// checked against the sheet's measured height after the blow before.
-    fn start_height(&self, x_contact_m: f64, sample_travel_m: f64) -> (Option<f64>, Option<HeightCheck>) {
+    /// checked against the sheet's measured height after the blow before. The last is
+    /// whether the height is the chain's.
+    fn start_height(&self, x_contact_m: f64, sample_travel_m: f64) -> (Option<f64>, Option<HeightCheck>, bool) {
         let tolerance_m = self.contact_tolerance_m(sample_travel_m);
         // A billet does not grow: a contact higher than the last one (beyond the tolerance)
         // breaks the chain (another billet, or the part turned over).
@@ -628,7 +619,7 @@ impl Estimator {
             agree: (sheet_m - encoder_m).abs() <= tolerance_m,
         });
         let h = if self.process.is_some() { chained.or(self.h_m) } else { None };
-        (h, check)
+        (h, check, chained.is_some() && self.process.is_some())
     }
 }
 
