@@ -136,14 +136,16 @@ pub fn simulate_blow_traced_from(
     opts: &SimOptions,
     trace_t0_s: f64,
 ) -> Result<BlowResult, BlowError> {
-    let (res, _) = run(plant, v0_mps, opts, trace_t0_s, Trace::Outputs(Vec::new()), Path::Exact)?;
+    let (res, _) = run(plant, v0_mps, opts, trace_t0_s, Trace::Outputs(Vec::new()), Path::Specialised)?;
     Ok(res)
 }
 
 /// `simulate_blow` keeping only the sensor's load at each trace sample (from first contact,
 /// every `opts.trace_dt_s`), N; the result's `trace` is empty. The samples are the
 /// `sensor_n` of the full trace, bit for bit, without evaluating the billet law for the
-/// outputs a fit does not compare.
+/// outputs a fit does not compare; except on a base hammer under Dormand–Prince, whose blow
+/// runs here with its linear phases advanced exactly (`Path::Exact`: the fits' cost, issue
+/// 17), within the general plant's own integration error of it (`tests` below).
 pub fn simulate_blow_sensor(
     plant: &Plant,
     v0_mps: f64,
@@ -163,11 +165,11 @@ pub fn simulate_blow_sensor(
 enum Path {
     /// The general plant.
     General,
-    /// The specialised plant, the general one's to the bit (the tests' reference for it).
-    #[cfg_attr(not(test), allow(dead_code))]
+    /// The specialised plant, the general one's to the bit: `simulate_blow` and the traced
+    /// blows, so that `simulate`, the estimator, replay and their fixtures keep their bits.
     Specialised,
     /// The specialised plant with its phases without plastic flow advanced exactly under
-    /// Dormand–Prince (`BaseHammer::with_exact_phases`): what every caller gets.
+    /// Dormand–Prince (`BaseHammer::with_exact_phases`): `simulate_blow_sensor`, the fits'.
     Exact,
 }
 
@@ -467,5 +469,13 @@ mod tests {
             assert_eq!(sensor, full.trace.iter().map(|p| p.out.sensor_n).collect::<Vec<_>>());
             assert_eq!(res, BlowResult { trace: Vec::new(), ..full });
         }
+        // A base hammer's sensor-only blow runs with its exact phases: the full trace on the
+        // same path (its samples from the same grid points) has the same sensor.
+        let plant = blow_plant(&paper_hammer(), &EffectSet::NONE, &steel(), 1, 0.112);
+        let (full, _) = run(&plant, 3.9, &opts, 0.0, Trace::Outputs(Vec::new()), Path::Exact).unwrap();
+        let (res, sensor) = simulate_blow_sensor(&plant, 3.9, &opts).unwrap();
+        assert!(res.stats.exact_steps > 0, "{:?}", res.stats);
+        assert_eq!(sensor, full.trace.iter().map(|p| p.out.sensor_n).collect::<Vec<_>>());
+        assert_eq!(res, BlowResult { trace: Vec::new(), ..full });
     }
 }

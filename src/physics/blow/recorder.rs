@@ -6,7 +6,7 @@
 
 use super::{FORMING_CREEP_M, Forming, TracePoint};
 use crate::physics::integrator::{self, Hybrid, Observer};
-use crate::physics::plant::{BaseHammer, Contact, Mode, N, NB, Plant};
+use crate::physics::plant::{BaseHammer, Contact, GridPoint, Mode, N, NB, Plant};
 
 /// What a traced blow keeps at each sample.
 pub(super) enum Trace {
@@ -37,10 +37,14 @@ pub(super) trait Integrated<const M: usize>: Hybrid<M, Mode = Mode> {
     ) -> f64 {
         self.sensor_at(&integrator::hermite(y0, dy0, y1, dy1, h, theta), mode)
     }
-    /// In an exact step from a grid point (`BaseHammer::grid_points`), `f(t, sensor, rate)`
-    /// at each grid point within it; false (the default), and no call, otherwise.
-    fn grid_points(&self, _t0: f64, _y0: &[f64; M], _mode: Mode, _h: f64, _f: &mut dyn FnMut(f64, f64, f64)) -> bool {
+    /// In an exact step from a grid point (`BaseHammer::grid_points`), `f` at each grid
+    /// point within it; false (the default), and no call, otherwise.
+    fn grid_points(&self, _t0: f64, _y0: &[f64; M], _mode: Mode, _h: f64, _f: &mut dyn FnMut(&GridPoint)) -> bool {
         false
+    }
+    /// The whole state at a grid point `grid_points` gave.
+    fn grid_point_state(&self, _t0: f64, _y0: &[f64; M], _mode: Mode, _p: &GridPoint) -> [f64; M] {
+        unreachable!("grid_point_state without grid points")
     }
 }
 
@@ -78,8 +82,11 @@ impl Integrated<NB> for BaseHammer<'_> {
     ) -> f64 {
         BaseHammer::sensor_within(self, y0, dy0, y1, dy1, h, theta)
     }
-    fn grid_points(&self, t0: f64, y0: &[f64; NB], mode: Mode, h: f64, f: &mut dyn FnMut(f64, f64, f64)) -> bool {
+    fn grid_points(&self, t0: f64, y0: &[f64; NB], mode: Mode, h: f64, f: &mut dyn FnMut(&GridPoint)) -> bool {
         BaseHammer::grid_points(self, t0, y0, mode, h, f)
+    }
+    fn grid_point_state(&self, t0: f64, y0: &[f64; NB], mode: Mode, p: &GridPoint) -> [f64; NB] {
+        BaseHammer::grid_point_state(self, t0, y0, mode, p)
     }
 }
 
@@ -202,30 +209,31 @@ fn exact_points<const M: usize, S: Integrated<M>>(
 ) -> bool {
     let snap = r.trace_dt.map_or(0.0, |dt| SAMPLE_SNAP * dt);
     let mut prev = (t0, s0, rate0);
-    // The samples up to a grid point (to roundoff), the first of them perhaps left at the
-    // step's start by the previous step.
-    let sample = |r: &mut Record, t: f64, s: f64| {
+    // The samples up to a grid point (to roundoff): at the step's start (`None`, left by
+    // the previous step), or at a grid point inside it.
+    let sample = |r: &mut Record, t: f64, s: f64, point: Option<&GridPoint>| {
         let Some(dt) = r.trace_dt else { return };
         while r.next_sample <= t + snap {
             match r.trace {
                 Trace::Sensor(ref mut v) => v.push(s),
                 Trace::Outputs(ref mut v) => {
-                    let y = sys.full(&sys.advance(y0, mode, (r.next_sample - t0).max(0.0)));
-                    v.push(TracePoint { t_s: r.next_sample, out: plant.outputs(&y, mode) })
+                    let y = point.map_or(*y0, |p| sys.grid_point_state(t0, y0, mode, p));
+                    v.push(TracePoint { t_s: r.next_sample, out: plant.outputs(&sys.full(&y), mode) })
                 }
             }
             r.next_sample += dt;
         }
     };
     let mut first = true;
-    let walked = sys.grid_points(t0, y0, mode, h, &mut |t, s, rate| {
+    let walked = sys.grid_points(t0, y0, mode, h, &mut |p| {
         if first {
-            sample(r, t0, s0);
+            sample(r, t0, s0, None);
             first = false;
         }
-        peak_between(&mut r.peak_n, prev, (t, s, rate));
-        prev = (t, s, rate);
-        sample(r, t, s);
+        let here = (p.t_s, p.sensor_n, p.rate);
+        peak_between(&mut r.peak_n, prev, here);
+        prev = here;
+        sample(r, p.t_s, p.sensor_n, Some(p));
     });
     if walked && end.0 > prev.0 {
         // A step cut short of a grid point by the stop: no sample can fall after the last.

@@ -11,12 +11,13 @@
 //! state, energies, full outputs) expand the state and ask the general plant.
 //! `blow::run` selects it automatically; `blow`'s tests compare the two paths.
 //!
-//! With `with_exact_phases` (what `blow::run` uses under Dormand–Prince) it also advances the
-//! phases in which the billet does not flow by their exact flow: there the plant is linear,
-//! the lower tool a damped oscillator (`oscillator`) alone or carrying the ram, the ram in
-//! free flight or riding on it. Those phases (most of the post window) then cost a 2×2
-//! product per grid step instead of Runge–Kutta stages; the results move by the general
-//! plant's integration error there, which `blow`'s tests bound.
+//! With `with_exact_phases` (what `blow::simulate_blow_sensor`, the fits' blow, uses under
+//! Dormand–Prince) it also advances the phases in which the billet does not flow by their
+//! exact flow: there the plant is linear, the lower tool a damped oscillator (`oscillator`)
+//! alone or carrying the ram, the ram in free flight or riding on it. Those phases (most of
+//! the post window) then cost a 2×2 product per grid point instead of Runge–Kutta stages;
+//! the results move by the general plant's integration error there, which `blow`'s tests
+//! bound.
 
 use super::*;
 use crate::physics::integrator::Grid;
@@ -57,6 +58,18 @@ struct Exact {
     stuck_step: Propagator,
     free_span: Propagator,
     stuck_span: Propagator,
+}
+
+/// The sensor at a grid point inside an exact step (`BaseHammer::grid_points`).
+#[derive(Debug, Clone, Copy)]
+pub struct GridPoint {
+    pub t_s: f64,
+    pub sensor_n: f64,
+    /// The sensor's rate, N/s.
+    pub rate: f64,
+    /// The lower tool's position and velocity (`BaseHammer::grid_point_state`).
+    lower_m: f64,
+    lower_mps: f64,
 }
 
 /// A hammer on a billet with no machine-side effect, borrowed from its general plant.
@@ -182,17 +195,10 @@ impl<'a> BaseHammer<'a> {
     }
 
     /// In an exact phase, the grid points after `t0_s` within a step of `h_s` from a grid
-    /// point `(t0_s, y0)`: `f(t, sensor, its rate)` at each in turn, the lower tool advanced
+    /// point `(t0_s, y0)`: `f` at each in turn, the lower tool advanced
     /// by the one-point propagator (a 2×2 product per point). False, and no call, where the
     /// step is not such a step.
-    pub fn grid_points(
-        &self,
-        t0_s: f64,
-        y0: &[f64; NB],
-        mode: Mode,
-        h_s: f64,
-        f: &mut dyn FnMut(f64, f64, f64),
-    ) -> bool {
+    pub fn grid_points(&self, t0_s: f64, y0: &[f64; NB], mode: Mode, h_s: f64, f: &mut dyn FnMut(&GridPoint)) -> bool {
         let Some(e) = self.exact.as_ref().filter(|_| mode.contact != Contact::Plastic) else { return false };
         let Some(k0) = e.grid.on_grid(t0_s) else { return false };
         // A step of whole points is their multiple to roundoff; the slack keeps the last.
@@ -209,13 +215,41 @@ impl<'a> BaseHammer<'a> {
         let mut j = 1.0;
         while j <= n {
             (x, v) = oscillator::apply(step, x, v);
-            let sensor = self.k_n_per_m * x + self.c_ns_per_m * v;
+            let sensor_n = self.k_n_per_m * x + self.c_ns_per_m * v;
             // The lower tool's acceleration: the frame's force over the mass it carries.
-            let rate = self.k_n_per_m * v - self.c_ns_per_m * sensor / m_kg;
-            f(e.grid.t0_s + (k0 + j) * e.grid.dt_s, sensor, rate);
+            let rate = self.k_n_per_m * v - self.c_ns_per_m * sensor_n / m_kg;
+            f(&GridPoint { t_s: e.grid.t0_s + (k0 + j) * e.grid.dt_s, sensor_n, rate, lower_m: x, lower_mps: v });
             j += 1.0;
         }
         true
+    }
+
+    /// The whole state at a grid point of an exact step from `(t0_s, y0)`.
+    pub fn grid_point_state(&self, t0_s: f64, y0: &[f64; NB], mode: Mode, p: &GridPoint) -> [f64; NB] {
+        self.phase_state(y0, mode, p.t_s - t0_s, p.lower_m, p.lower_mps)
+    }
+
+    /// The state `tau_s` after `y` in a linear phase, given the lower tool's position and
+    /// velocity then: the ram in free flight, or riding on the tool when stuck; the damped
+    /// work as the oscillator's energy loss; the plastic state unchanged.
+    fn phase_state(&self, y: &[f64; NB], mode: Mode, tau_s: f64, xl: f64, vl: f64) -> [f64; NB] {
+        let stuck = mode.contact == Contact::Stuck;
+        let m_kg = if stuck { self.m1_kg + self.m2_kg } else { self.m2_kg };
+        let mut out = *y;
+        out[BL] = xl;
+        out[BVL] = vl;
+        if stuck {
+            // Stuck tools share one velocity exactly (`Plant::common_velocity` at entry).
+            out[BU] = y[BU] + (xl - y[BL]);
+            out[BVU] = vl;
+        } else {
+            out[BU] = y[BU] + tau_s * y[BVU];
+        }
+        // The damper takes what the oscillator loses, d/dt (½ m v² + ½ k x²) = -c v²: the
+        // energy ledger closes to roundoff over these phases.
+        out[BWD] =
+            y[BWD] + 0.5 * m_kg * (y[BVL] - vl) * (y[BVL] + vl) + 0.5 * self.k_n_per_m * (y[BL] - xl) * (y[BL] + xl);
+        out
     }
 }
 
@@ -294,11 +328,7 @@ impl Hybrid<NB> for BaseHammer<'_> {
     fn advance(&self, y: &[f64; NB], mode: Mode, h_s: f64) -> [f64; NB] {
         let Some(e) = self.exact.as_ref() else { unreachable!("advance without exact phases") };
         let stuck = mode.contact == Contact::Stuck;
-        let (osc, step, m_kg) = if stuck {
-            (&e.stuck, &e.stuck_step, self.m1_kg + self.m2_kg)
-        } else {
-            (&e.free, &e.free_step, self.m2_kg)
-        };
+        let (osc, step) = if stuck { (&e.stuck, &e.stuck_step) } else { (&e.free, &e.free_step) };
         let span = if stuck { &e.stuck_span } else { &e.free_span };
         let phi = if h_s == e.grid.span_s() {
             *span
@@ -308,20 +338,6 @@ impl Hybrid<NB> for BaseHammer<'_> {
             osc.propagator(h_s)
         };
         let (xl, vl) = oscillator::apply(&phi, y[BL], y[BVL]);
-        let mut out = *y;
-        out[BL] = xl;
-        out[BVL] = vl;
-        if stuck {
-            // Stuck tools share one velocity exactly (`Plant::common_velocity` at entry).
-            out[BU] = y[BU] + (xl - y[BL]);
-            out[BVU] = vl;
-        } else {
-            out[BU] = y[BU] + h_s * y[BVU];
-        }
-        // The damper takes what the oscillator loses, d/dt (½ m v² + ½ k x²) = -c v²: the
-        // energy ledger closes to roundoff over these phases.
-        out[BWD] =
-            y[BWD] + 0.5 * m_kg * (y[BVL] - vl) * (y[BVL] + vl) + 0.5 * self.k_n_per_m * (y[BL] - xl) * (y[BL] + xl);
-        out
+        self.phase_state(y, mode, h_s, xl, vl)
     }
 }
