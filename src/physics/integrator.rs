@@ -5,10 +5,16 @@
 //! (DESIGN.md §2.3); here the system names its phase (`Mode`), each phase is integrated with
 //! Dormand–Prince 5(4) under step control, and every switch is located by root finding on
 //! the step's cubic Hermite interpolant, then reached exactly with one more RK step before
-//! the mode changes. A fixed-step classical RK4 runs through the same driver as the
-//! reference the tests compare against.
+//! the mode changes. A phase whose vector field is linear may instead be advanced by its
+//! exact flow (`Hybrid::exact_grid`, `Hybrid::advance`) in steps that end on a fixed grid
+//! (the trace's samples), its switches located on that flow. A fixed-step classical RK4
+//! runs through the same driver as the reference the tests compare against.
 
 use std::fmt::Debug;
+
+mod steppers;
+
+use steppers::{Workspace, take_step};
 
 /// Most guards (switching functions) a mode may arm at once.
 pub const MAX_GUARDS: usize = 6;
@@ -24,6 +30,46 @@ const ROOT_STALL: u8 = 3;
 const SAFETY: f64 = 0.9;
 const MAX_GROWTH: f64 = 5.0;
 const MIN_SHRINK: f64 = 0.2;
+/// An instant within this fraction of a grid step of a grid point is on it: the next exact
+/// step is a whole one (its propagator precomputed), the time error at most this fraction of
+/// the step (1e-14 s on a 10 µs grid).
+const GRID_SNAP: f64 = 1e-9;
+
+/// The instants `t0_s + k dt_s` (k integer) at which the exact steps of a linear phase end.
+/// A step from a grid point spans `points` of them (`span_s`); a step from elsewhere ends at
+/// the next one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Grid {
+    pub t0_s: f64,
+    pub dt_s: f64,
+    pub points: u32,
+}
+
+impl Grid {
+    /// Length of a step from a grid point, s (computed here only, so that it compares equal).
+    pub fn span_s(&self) -> f64 {
+        self.dt_s * f64::from(self.points)
+    }
+
+    /// Whether `t_s` is a grid point (within `GRID_SNAP` of a step), and its index.
+    pub fn on_grid(&self, t_s: f64) -> Option<f64> {
+        let k = (t_s - self.t0_s) / self.dt_s;
+        let k_near = k.round();
+        ((k - k_near).abs() <= GRID_SNAP).then_some(k_near)
+    }
+
+    /// The step from `t_s`: its length and its end. From a grid point (within `GRID_SNAP`)
+    /// the length is `span_s()` exactly.
+    fn next_step(&self, t_s: f64) -> (f64, f64) {
+        if let Some(k) = self.on_grid(t_s) {
+            (self.span_s(), self.t0_s + (k + f64::from(self.points)) * self.dt_s)
+        } else {
+            let k = (t_s - self.t0_s) / self.dt_s;
+            let t_next = self.t0_s + (k.floor() + 1.0) * self.dt_s;
+            (t_next - t_s, t_next)
+        }
+    }
+}
 
 /// Which sign change of a guard counts as its event.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -88,6 +134,17 @@ pub trait Hybrid<const N: usize> {
     /// Longest step that cannot jump over a double sign change of a guard
     /// (a fraction of the fastest mode's period).
     fn max_step(&self) -> f64;
+    /// Where `mode`'s vector field is linear and `advance` gives its exact flow, the grid
+    /// that flow's steps end on (short enough that no guard changes sign twice within one).
+    /// `None` (the default): Dormand–Prince integrates the mode.
+    fn exact_grid(&self, _mode: Self::Mode) -> Option<Grid> {
+        None
+    }
+    /// The state `h_s` after `y` by the exact flow of `mode`; called only where `exact_grid`
+    /// is `Some`.
+    fn advance(&self, _y: &[f64; N], _mode: Self::Mode, _h_s: f64) -> [f64; N] {
+        unreachable!("advance called in a mode without an exact_grid")
+    }
 }
 
 /// What the driver tells the observer, and what the observer answers.
@@ -127,6 +184,8 @@ pub struct Stats {
     pub rejected: u32,
     pub rhs_evals: u32,
     pub events: u32,
+    /// Of `steps`, those taken by a linear phase's exact flow.
+    pub exact_steps: u32,
 }
 
 /// Why integration stopped early.
@@ -203,26 +262,44 @@ where
                 Err(IntegrationError::NoEnd { t_max_s: limits.t_max_s })
             };
         }
-        let h_try = h.min(t_stop - t);
-        // One trial step; only Dormand–Prince's is checked and its next length chosen.
-        let (y1, dy1, err) = take_step(sys, method, mode, &y, &dy, h_try, &mut ws, scale, &mut stats);
-        if let Method::Dopri5 { .. } = method {
-            if !err.is_finite() || err > 1.0 {
-                stats.rejected += 1;
-                let shrink = if err.is_finite() { (SAFETY * err.powf(-0.2)).max(MIN_SHRINK) } else { MIN_SHRINK };
-                h = h_try * shrink;
-                if h < min_step {
-                    return Err(IntegrationError::StepTooSmall {
-                        t_s: t,
-                        min_step_s: min_step,
-                        mode: format!("{mode:?}"),
-                    });
+        // A linear phase steps by its exact flow to the next grid point (and leaves the
+        // step-size controller's proposal `h` for the next nonlinear phase); the RK4
+        // reference integrates every phase.
+        let grid = match method {
+            Method::Dopri5 { .. } => sys.exact_grid(mode),
+            Method::Rk4 { .. } => None,
+        };
+        let (h_try, t1, y1, dy1) = if let Some(g) = grid {
+            let (h_grid, t_grid) = g.next_step(t);
+            let (h_try, t1) = if t_grid < t_stop { (h_grid, t_grid) } else { (t_stop - t, t_stop) };
+            let y1 = sys.advance(&y, mode, h_try);
+            let mut dy1 = [0.0; N];
+            sys.rhs(&y1, mode, &mut dy1);
+            stats.rhs_evals += 1;
+            (h_try, t1, y1, dy1)
+        } else {
+            let h_try = h.min(t_stop - t);
+            // One trial step; only Dormand–Prince's is checked and its next length chosen.
+            let (y1, dy1, err) = take_step(sys, method, mode, &y, &dy, h_try, &mut ws, scale, &mut stats);
+            if let Method::Dopri5 { .. } = method {
+                if !err.is_finite() || err > 1.0 {
+                    stats.rejected += 1;
+                    let shrink = if err.is_finite() { (SAFETY * err.powf(-0.2)).max(MIN_SHRINK) } else { MIN_SHRINK };
+                    h = h_try * shrink;
+                    if h < min_step {
+                        return Err(IntegrationError::StepTooSmall {
+                            t_s: t,
+                            min_step_s: min_step,
+                            mode: format!("{mode:?}"),
+                        });
+                    }
+                    continue;
                 }
-                continue;
+                let grow = if err > 0.0 { (SAFETY * err.powf(-0.2)).min(MAX_GROWTH) } else { MAX_GROWTH };
+                h = (h_try * grow).min(h_max);
             }
-            let grow = if err > 0.0 { (SAFETY * err.powf(-0.2)).min(MAX_GROWTH) } else { MAX_GROWTH };
-            h = (h_try * grow).min(h_max);
-        }
+            (h_try, t + h_try, y1, dy1)
+        };
         if y1.iter().any(|v| !v.is_finite()) {
             return Err(IntegrationError::NonFinite { t_s: t + h_try, mode: format!("{mode:?}") });
         }
@@ -233,7 +310,12 @@ where
         let mut earliest: Option<(f64, u8)> = None;
         for i in 0..guards.len.min(g1.len) {
             if g1.fired(i, guards.value[i]) {
-                let theta = locate(sys, mode, &y, &dy, &y1, &dy1, h_try, i, guards.value[i], g1.value[i], &mut stats);
+                // On the step's Hermite cubic, or on the exact flow of a linear phase.
+                let at = |theta: f64| match grid {
+                    Some(_) => sys.advance(&y, mode, theta * h_try),
+                    None => hermite(&y, &dy, &y1, &dy1, h_try, theta),
+                };
+                let theta = locate(sys, mode, at, i, guards.value[i], g1.value[i], &mut stats);
                 if earliest.is_none_or(|(th, _)| theta < th) {
                     earliest = Some((theta, g1.id[i]));
                 }
@@ -243,9 +325,9 @@ where
         match earliest {
             None => {
                 stats.steps += 1;
-                t_stop =
-                    obs.on_step(t, &y, &dy, t + h_try, &y1, &dy1, mode).map_or(limits.t_max_s, |ts| ts.max(t + h_try));
-                t += h_try;
+                stats.exact_steps += u32::from(grid.is_some());
+                t_stop = obs.on_step(t, &y, &dy, t1, &y1, &dy1, mode).map_or(limits.t_max_s, |ts| ts.max(t1));
+                t = t1;
                 y = y1;
                 dy = dy1;
                 guards = g1;
@@ -253,13 +335,20 @@ where
             Some((theta, id)) => {
                 // Reach the event exactly with one RK step of the located length.
                 let h_ev = theta * h_try;
-                let (ye, dye) = if h_ev > 0.0 {
-                    let (ye, dye, _) = take_step(sys, method, mode, &y, &dy, h_ev, &mut ws, scale, &mut stats);
+                let (ye, dye) = if h_ev <= 0.0 {
+                    (y, dy)
+                } else if grid.is_some() {
+                    let ye = sys.advance(&y, mode, h_ev);
+                    let mut dye = [0.0; N];
+                    sys.rhs(&ye, mode, &mut dye);
+                    stats.rhs_evals += 1;
                     (ye, dye)
                 } else {
-                    (y, dy)
+                    let (ye, dye, _) = take_step(sys, method, mode, &y, &dy, h_ev, &mut ws, scale, &mut stats);
+                    (ye, dye)
                 };
                 stats.steps += 1;
+                stats.exact_steps += u32::from(grid.is_some());
                 t_stop =
                     obs.on_step(t, &y, &dy, t + h_ev, &ye, &dye, mode).map_or(limits.t_max_s, |ts| ts.max(t + h_ev));
                 t += h_ev;
@@ -281,155 +370,6 @@ where
                 sys.guards(&y, &dy, mode, &mut guards);
             }
         }
-    }
-}
-
-/// One step of `method` of length `h` from `(y, dy)`: the new state, its derivative, and
-/// Dormand–Prince's error norm (0 for the fixed-step RK4, which has none).
-#[allow(clippy::too_many_arguments)]
-fn take_step<const N: usize, S: Hybrid<N>>(
-    sys: &S,
-    method: Method,
-    mode: S::Mode,
-    y: &[f64; N],
-    dy: &[f64; N],
-    h: f64,
-    ws: &mut Workspace<N>,
-    scale: &[f64; N],
-    stats: &mut Stats,
-) -> ([f64; N], [f64; N], f64) {
-    match method {
-        Method::Dopri5 { rtol } => {
-            let err = dopri5_step(sys, mode, y, dy, h, ws, scale, rtol);
-            stats.rhs_evals += 6;
-            (ws.y_new, ws.k[6], err)
-        }
-        Method::Rk4 { .. } => {
-            rk4_step(sys, mode, y, dy, h, ws);
-            let mut dy1 = [0.0; N];
-            sys.rhs(&ws.y_new, mode, &mut dy1);
-            stats.rhs_evals += 5;
-            (ws.y_new, dy1, 0.0)
-        }
-    }
-}
-
-/// Scratch space of the RK stages.
-struct Workspace<const N: usize> {
-    k: [[f64; N]; 7],
-    y_new: [f64; N],
-    tmp: [f64; N],
-}
-
-impl<const N: usize> Workspace<N> {
-    fn new() -> Self {
-        Workspace { k: [[0.0; N]; 7], y_new: [0.0; N], tmp: [0.0; N] }
-    }
-}
-
-// Dormand–Prince 5(4) tableau (Hairer, Nørsett, Wanner, Table II.5.2).
-const A21: f64 = 1.0 / 5.0;
-const A31: f64 = 3.0 / 40.0;
-const A32: f64 = 9.0 / 40.0;
-const A41: f64 = 44.0 / 45.0;
-const A42: f64 = -56.0 / 15.0;
-const A43: f64 = 32.0 / 9.0;
-const A51: f64 = 19372.0 / 6561.0;
-const A52: f64 = -25360.0 / 2187.0;
-const A53: f64 = 64448.0 / 6561.0;
-const A54: f64 = -212.0 / 729.0;
-const A61: f64 = 9017.0 / 3168.0;
-const A62: f64 = -355.0 / 33.0;
-const A63: f64 = 46732.0 / 5247.0;
-const A64: f64 = 49.0 / 176.0;
-const A65: f64 = -5103.0 / 18656.0;
-const B1: f64 = 35.0 / 384.0;
-const B3: f64 = 500.0 / 1113.0;
-const B4: f64 = 125.0 / 192.0;
-const B5: f64 = -2187.0 / 6784.0;
-const B6: f64 = 11.0 / 84.0;
-const E1: f64 = 71.0 / 57600.0;
-const E3: f64 = -71.0 / 16695.0;
-const E4: f64 = 71.0 / 1920.0;
-const E5: f64 = -17253.0 / 339200.0;
-const E6: f64 = 22.0 / 525.0;
-const E7: f64 = -1.0 / 40.0;
-
-// The stage loops index several arrays in step; iterators would hide the tableau.
-#[allow(clippy::needless_range_loop)]
-/// One Dormand–Prince step of length `h`; leaves the new state in `ws.y_new` and its
-/// derivative (FSAL) in `ws.k[6]`. Returns the RMS error norm (≤ 1 accepts).
-#[allow(clippy::too_many_arguments)]
-fn dopri5_step<const N: usize, S: Hybrid<N>>(
-    sys: &S,
-    mode: S::Mode,
-    y: &[f64; N],
-    dy: &[f64; N],
-    h: f64,
-    ws: &mut Workspace<N>,
-    scale: &[f64; N],
-    rtol: f64,
-) -> f64 {
-    ws.k[0] = *dy;
-    macro_rules! stage {
-        ($dst:expr, $($a:expr => $ki:expr),+) => {{
-            for i in 0..N {
-                ws.tmp[i] = y[i] + h * (0.0 $(+ $a * ws.k[$ki][i])+);
-            }
-            let (tmp, k) = (&ws.tmp, &mut ws.k);
-            sys.rhs(tmp, mode, &mut k[$dst]);
-        }};
-    }
-    stage!(1, A21 => 0);
-    stage!(2, A31 => 0, A32 => 1);
-    stage!(3, A41 => 0, A42 => 1, A43 => 2);
-    stage!(4, A51 => 0, A52 => 1, A53 => 2, A54 => 3);
-    stage!(5, A61 => 0, A62 => 1, A63 => 2, A64 => 3, A65 => 4);
-    for i in 0..N {
-        ws.y_new[i] =
-            y[i] + h * (B1 * ws.k[0][i] + B3 * ws.k[2][i] + B4 * ws.k[3][i] + B5 * ws.k[4][i] + B6 * ws.k[5][i]);
-    }
-    let (y_new, k) = (&ws.y_new, &mut ws.k);
-    sys.rhs(y_new, mode, &mut k[6]);
-    let mut sum = 0.0;
-    let mut active = 0usize;
-    for i in 0..N {
-        let e = h
-            * (E1 * ws.k[0][i]
-                + E3 * ws.k[2][i]
-                + E4 * ws.k[3][i]
-                + E5 * ws.k[4][i]
-                + E6 * ws.k[5][i]
-                + E7 * ws.k[6][i]);
-        if scale[i].is_finite() {
-            let sc = rtol * (scale[i] + y[i].abs().max(ws.y_new[i].abs()));
-            sum += (e / sc) * (e / sc);
-            active += 1;
-        }
-    }
-    (sum / active.max(1) as f64).sqrt()
-}
-
-#[allow(clippy::needless_range_loop)]
-/// One classical RK4 step of length `h` into `ws.y_new`.
-fn rk4_step<const N: usize, S: Hybrid<N>>(
-    sys: &S,
-    mode: S::Mode,
-    y: &[f64; N],
-    dy: &[f64; N],
-    h: f64,
-    ws: &mut Workspace<N>,
-) {
-    ws.k[0] = *dy;
-    for (stage, c) in [(1usize, 0.5), (2, 0.5), (3, 1.0)] {
-        for i in 0..N {
-            ws.tmp[i] = y[i] + c * h * ws.k[stage - 1][i];
-        }
-        let (tmp, k) = (&ws.tmp, &mut ws.k);
-        sys.rhs(tmp, mode, &mut k[stage]);
-    }
-    for i in 0..N {
-        ws.y_new[i] = y[i] + h / 6.0 * (ws.k[0][i] + 2.0 * ws.k[1][i] + 2.0 * ws.k[2][i] + ws.k[3][i]);
     }
 }
 
@@ -456,24 +396,20 @@ pub fn hermite<const N: usize>(
     out
 }
 
-/// Locate where guard `i` crosses zero within the step (Illinois regula falsi on the
-/// Hermite interpolant). Returns the fraction of the step.
-#[allow(clippy::too_many_arguments)]
+/// Locate where guard `i` crosses zero within the step (Illinois regula falsi on the state
+/// `at` a fraction of the step: the Hermite interpolant, or a linear phase's exact flow).
+/// Returns the fraction of the step.
 fn locate<const N: usize, S: Hybrid<N>>(
     sys: &S,
     mode: S::Mode,
-    y0: &[f64; N],
-    dy0: &[f64; N],
-    y1: &[f64; N],
-    dy1: &[f64; N],
-    h: f64,
+    at: impl Fn(f64) -> [f64; N],
     i: usize,
     g_start: f64,
     g_end: f64,
     stats: &mut Stats,
 ) -> f64 {
     let eval = |theta: f64, stats: &mut Stats| {
-        let y = hermite(y0, dy0, y1, dy1, h, theta);
+        let y = at(theta);
         let mut dy = [0.0; N];
         sys.rhs(&y, mode, &mut dy);
         stats.rhs_evals += 1;
@@ -591,6 +527,67 @@ mod tests {
     fn dopri5_locates_the_event_of_a_harmonic_oscillator() {
         let t = run(Method::Dopri5 { rtol: 1e-9 });
         assert!((t - std::f64::consts::FRAC_PI_2).abs() < 1e-8, "{t}");
+    }
+
+    /// The same oscillator advanced by its exact flow (a rotation) in steps of 0.3 s (two
+    /// grid points of 0.15 s) from 0.1 s, so that no step ends on the event.
+    struct ExactOscillator;
+
+    impl Hybrid<2> for ExactOscillator {
+        type Mode = M;
+        fn rhs(&self, y: &[f64; 2], mode: M, dy: &mut [f64; 2]) {
+            Oscillator.rhs(y, mode, dy)
+        }
+        fn guards(&self, y: &[f64; 2], dy: &[f64; 2], mode: M, out: &mut Guards) {
+            Oscillator.guards(y, dy, mode, out)
+        }
+        fn on_event(&self, y: &mut [f64; 2], mode: M, id: u8) -> M {
+            Oscillator.on_event(y, mode, id)
+        }
+        fn max_step(&self) -> f64 {
+            0.5
+        }
+        fn exact_grid(&self, mode: M) -> Option<Grid> {
+            (mode == M::Swing).then_some(Grid { t0_s: 0.1, dt_s: 0.15, points: 2 })
+        }
+        fn advance(&self, y: &[f64; 2], _mode: M, h: f64) -> [f64; 2] {
+            let (s, c) = h.sin_cos();
+            [c * y[0] + s * y[1], -s * y[0] + c * y[1]]
+        }
+    }
+
+    #[test]
+    fn the_exact_flow_locates_the_event_on_its_grid() {
+        let mut rec = Record(None);
+        let limits = Limits { t_max_s: 10.0, max_events: 10, initial_step_s: 1e-3, max_steps: 1_000_000 };
+        let stats = integrate(
+            &ExactOscillator,
+            Method::Dopri5 { rtol: 1e-9 },
+            &[1.0, 1.0],
+            [1.0, 0.0],
+            M::Swing,
+            limits,
+            &mut rec,
+        )
+        .unwrap();
+        // The root finder's ROOT_REL_TOL of the 0.3 s step on the exact flow: 3e-11 s.
+        let t = rec.0.unwrap();
+        assert!((t - std::f64::consts::FRAC_PI_2).abs() < 1e-10, "{t}");
+        // 0 -> 0.1 -> ... -> 1.3 -> the event at 1.5708: six exact steps, the last to the
+        // event; then `Done` is integrated by Dormand–Prince.
+        assert_eq!(stats.exact_steps, 6, "{stats:?}");
+        assert_eq!(stats.rejected, 0);
+    }
+
+    #[test]
+    fn a_grid_step_ends_on_the_next_point() {
+        let g = Grid { t0_s: 0.1, dt_s: 0.3, points: 2 };
+        let (h, t) = g.next_step(0.0);
+        assert!((h - 0.1).abs() < 1e-15 && (t - 0.1).abs() < 1e-15, "{h} {t}");
+        // On a grid point (as computed, t0 + k dt): a whole step, its length exactly the span.
+        assert_eq!(g.next_step(0.1 + 3.0 * 0.3), (g.span_s(), 0.1 + 5.0 * 0.3));
+        let (h, t) = g.next_step(0.5);
+        assert!((h - 0.2).abs() < 1e-15 && (t - 0.7).abs() < 1e-15, "{h} {t}");
     }
 
     #[test]

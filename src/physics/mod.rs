@@ -8,6 +8,7 @@ pub mod integrator;
 pub mod ledger;
 pub mod machine;
 pub mod montecarlo;
+pub mod oscillator;
 pub mod plant;
 pub mod process;
 pub mod sequence;

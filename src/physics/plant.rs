@@ -13,7 +13,7 @@
 mod base_hammer;
 mod hybrid;
 
-pub use base_hammer::{BaseHammer, NB};
+pub use base_hammer::{BaseHammer, GridPoint, NB};
 
 use super::billet::{BilletLaw, STRAIN_RATE_FLOOR_PER_S};
 use super::effects::{EffectSet, Foundation};

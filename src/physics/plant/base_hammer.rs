@@ -10,8 +10,18 @@
 //! norm sees the same components in the same order, and the rare calls (events, initial
 //! state, energies, full outputs) expand the state and ask the general plant.
 //! `blow::run` selects it automatically; `blow`'s tests compare the two paths.
+//!
+//! With `with_exact_phases` (what `blow::simulate_blow_sensor`, the fits' blow, uses under
+//! Dormand–Prince) it also advances the phases in which the billet does not flow by their
+//! exact flow: there the plant is linear, the lower tool a damped oscillator (`oscillator`)
+//! alone or carrying the ram, the ram in free flight or riding on it. Those phases (most of
+//! the post window) then cost a 2×2 product per grid point instead of Runge–Kutta stages;
+//! the results move by the general plant's integration error there, which `blow`'s tests
+//! bound.
 
 use super::*;
+use crate::physics::integrator::Grid;
+use crate::physics::oscillator::{self, Oscillator, Propagator};
 
 /// Length of the reduced state.
 pub const NB: usize = 8;
@@ -29,6 +39,39 @@ const BWP: usize = 5;
 const BWF: usize = 6;
 const BWD: usize = 7;
 
+/// Angle of the fastest linear mode one exact step may cover, rad. The exact steps end on
+/// the trace's samples, which are exact; between grid points the recorder reads the sensor
+/// (its peak, a guard's bracket) on the cubic Hermite through exact ends, within
+/// `(w h)^4 / 384` = 4.2e-6 of the ringing's amplitude (the interpolation's error bound),
+/// less than a Dormand–Prince step of the same phase leaves at the fits' rtol 1e-6.
+const EXACT_STEP_RAD: f64 = 0.2;
+
+/// The exact flow of the phases without plastic flow.
+#[derive(Debug, Clone, Copy)]
+struct Exact {
+    grid: Grid,
+    /// The lower tool on its frame alone (tools apart) and carrying the ram (stuck).
+    free: Oscillator,
+    stuck: Oscillator,
+    /// Their propagators over one grid step and over a step's span of grid points.
+    free_step: Propagator,
+    stuck_step: Propagator,
+    free_span: Propagator,
+    stuck_span: Propagator,
+}
+
+/// The sensor at a grid point inside an exact step (`BaseHammer::grid_points`).
+#[derive(Debug, Clone, Copy)]
+pub struct GridPoint {
+    pub t_s: f64,
+    pub sensor_n: f64,
+    /// The sensor's rate, N/s.
+    pub rate: f64,
+    /// The lower tool's position and velocity (`BaseHammer::grid_point_state`).
+    lower_m: f64,
+    lower_mps: f64,
+}
+
 /// A hammer on a billet with no machine-side effect, borrowed from its general plant.
 #[derive(Debug, Clone, Copy)]
 pub struct BaseHammer<'a> {
@@ -38,6 +81,7 @@ pub struct BaseHammer<'a> {
     m2_kg: f64,
     k_n_per_m: f64,
     c_ns_per_m: f64,
+    exact: Option<Exact>,
 }
 
 impl<'a> BaseHammer<'a> {
@@ -53,7 +97,48 @@ impl<'a> BaseHammer<'a> {
             && plant.gap_contact_m == 0.0
             && !plant.highpass_tau_s.is_finite();
         let law = plant.billet.as_ref()?;
-        base.then_some(BaseHammer { plant, law, m1_kg: plant.m_upper_kg, m2_kg: m_kg, k_n_per_m, c_ns_per_m })
+        base.then_some(BaseHammer {
+            plant,
+            law,
+            m1_kg: plant.m_upper_kg,
+            m2_kg: m_kg,
+            k_n_per_m,
+            c_ns_per_m,
+            exact: None,
+        })
+    }
+
+    /// The same plant advancing the phases without plastic flow by their exact flow, on the
+    /// grid `t0_s + k dt`: `dt` is the trace's `sample_dt_s` (or a whole fraction of it)
+    /// within `EXACT_STEP_RAD` of the fastest mode, so every sample is a grid point, and a
+    /// step spans as many grid points as fit in the plant's `max_step` (a guard cannot
+    /// change sign twice within it; `grid_points` gives the sensor at those inside).
+    /// Unchanged if no finite step follows from the parameters.
+    pub fn with_exact_phases(self, t0_s: f64, sample_dt_s: Option<f64>) -> Self {
+        let free = Oscillator::new(self.m2_kg, self.k_n_per_m, self.c_ns_per_m);
+        let stuck = Oscillator::new(self.m1_kg + self.m2_kg, self.k_n_per_m, self.c_ns_per_m);
+        let h_max = EXACT_STEP_RAD / free.fastest_rate_per_s().max(stuck.fastest_rate_per_s());
+        let dt_s = match sample_dt_s {
+            // The ceiling's slack keeps a sample step equal to h_max (to roundoff) whole.
+            Some(d) if d > 0.0 && d.is_finite() => d / (d / h_max * (1.0 - 1e-9)).ceil().max(1.0),
+            _ => h_max,
+        };
+        if !(dt_s > 0.0 && dt_s.is_finite() && t0_s.is_finite()) {
+            return self;
+        }
+        // At most u32::MAX points: a float-to-int cast saturates.
+        let points = ((self.plant.max_step() / dt_s).floor() as u32).max(1);
+        let grid = Grid { t0_s, dt_s, points };
+        let exact = Exact {
+            grid,
+            free,
+            stuck,
+            free_step: free.propagator(dt_s),
+            stuck_step: stuck.propagator(dt_s),
+            free_span: free.propagator(grid.span_s()),
+            stuck_span: stuck.propagator(grid.span_s()),
+        };
+        BaseHammer { exact: Some(exact), ..self }
     }
 
     /// The reduced state of a general one.
@@ -107,6 +192,64 @@ impl<'a> BaseHammer<'a> {
     /// Rate of the sensor output (`Plant::sensor_rate`).
     pub fn sensor_rate(&self, y: &[f64; NB], dy: &[f64; NB]) -> f64 {
         self.k_n_per_m * y[BVL] + self.c_ns_per_m * dy[BVL]
+    }
+
+    /// In an exact phase, the grid points after `t0_s` within a step of `h_s` from a grid
+    /// point `(t0_s, y0)`: `f` at each in turn, the lower tool advanced
+    /// by the one-point propagator (a 2×2 product per point). False, and no call, where the
+    /// step is not such a step.
+    pub fn grid_points(&self, t0_s: f64, y0: &[f64; NB], mode: Mode, h_s: f64, f: &mut dyn FnMut(&GridPoint)) -> bool {
+        let Some(e) = self.exact.as_ref().filter(|_| mode.contact != Contact::Plastic) else { return false };
+        let Some(k0) = e.grid.on_grid(t0_s) else { return false };
+        // A step of whole points is their multiple to roundoff; the slack keeps the last.
+        let n = (h_s / e.grid.dt_s * (1.0 + 1e-9)).floor();
+        if n < 1.0 {
+            return false;
+        }
+        let (step, m_kg) = if mode.contact == Contact::Stuck {
+            (&e.stuck_step, self.m1_kg + self.m2_kg)
+        } else {
+            (&e.free_step, self.m2_kg)
+        };
+        let (mut x, mut v) = (y0[BL], y0[BVL]);
+        let mut j = 1.0;
+        while j <= n {
+            (x, v) = oscillator::apply(step, x, v);
+            let sensor_n = self.k_n_per_m * x + self.c_ns_per_m * v;
+            // The lower tool's acceleration: the frame's force over the mass it carries.
+            let rate = self.k_n_per_m * v - self.c_ns_per_m * sensor_n / m_kg;
+            f(&GridPoint { t_s: e.grid.t0_s + (k0 + j) * e.grid.dt_s, sensor_n, rate, lower_m: x, lower_mps: v });
+            j += 1.0;
+        }
+        true
+    }
+
+    /// The whole state at a grid point of an exact step from `(t0_s, y0)`.
+    pub fn grid_point_state(&self, t0_s: f64, y0: &[f64; NB], mode: Mode, p: &GridPoint) -> [f64; NB] {
+        self.phase_state(y0, mode, p.t_s - t0_s, p.lower_m, p.lower_mps)
+    }
+
+    /// The state `tau_s` after `y` in a linear phase, given the lower tool's position and
+    /// velocity then: the ram in free flight, or riding on the tool when stuck; the damped
+    /// work as the oscillator's energy loss; the plastic state unchanged.
+    fn phase_state(&self, y: &[f64; NB], mode: Mode, tau_s: f64, xl: f64, vl: f64) -> [f64; NB] {
+        let stuck = mode.contact == Contact::Stuck;
+        let m_kg = if stuck { self.m1_kg + self.m2_kg } else { self.m2_kg };
+        let mut out = *y;
+        out[BL] = xl;
+        out[BVL] = vl;
+        if stuck {
+            // Stuck tools share one velocity exactly (`Plant::common_velocity` at entry).
+            out[BU] = y[BU] + (xl - y[BL]);
+            out[BVU] = vl;
+        } else {
+            out[BU] = y[BU] + tau_s * y[BVU];
+        }
+        // The damper takes what the oscillator loses, d/dt (½ m v² + ½ k x²) = -c v²: the
+        // energy ledger closes to roundoff over these phases.
+        out[BWD] =
+            y[BWD] + 0.5 * m_kg * (y[BVL] - vl) * (y[BVL] + vl) + 0.5 * self.k_n_per_m * (y[BL] - xl) * (y[BL] + xl);
+        out
     }
 }
 
@@ -173,5 +316,28 @@ impl Hybrid<NB> for BaseHammer<'_> {
 
     fn max_step(&self) -> f64 {
         self.plant.max_step()
+    }
+
+    /// The tools apart or stuck: a linear phase, advanced exactly with `with_exact_phases`.
+    fn exact_grid(&self, mode: Mode) -> Option<Grid> {
+        self.exact.filter(|_| mode.contact != Contact::Plastic).map(|e| e.grid)
+    }
+
+    /// The lower tool (alone, or with the ram when stuck) by its oscillator's propagator;
+    /// the ram in free flight, or riding on it; the plastic state unchanged.
+    fn advance(&self, y: &[f64; NB], mode: Mode, h_s: f64) -> [f64; NB] {
+        let Some(e) = self.exact.as_ref() else { unreachable!("advance without exact phases") };
+        let stuck = mode.contact == Contact::Stuck;
+        let (osc, step) = if stuck { (&e.stuck, &e.stuck_step) } else { (&e.free, &e.free_step) };
+        let span = if stuck { &e.stuck_span } else { &e.free_span };
+        let phi = if h_s == e.grid.span_s() {
+            *span
+        } else if h_s == e.grid.dt_s {
+            *step
+        } else {
+            osc.propagator(h_s)
+        };
+        let (xl, vl) = oscillator::apply(&phi, y[BL], y[BVL]);
+        self.phase_state(y, mode, h_s, xl, vl)
     }
 }

@@ -1,0 +1,307 @@
+//! What a blow records while the integrator runs: the sensor's peak, the exits from plastic
+//! flow and the sensor's zeros (the indicators of the hammer paper §3.1.3), the separation
+//! that ends the blow, and the sampled trace, on the general plant or its specialisation
+//! (`Integrated`). In an exact phase of the base hammer the samples and the peak come from
+//! the grid points of the exact flow (`exact_points`).
+
+use super::{FORMING_CREEP_M, Forming, TracePoint};
+use crate::physics::integrator::{self, Hybrid, Observer};
+use crate::physics::plant::{BaseHammer, Contact, GridPoint, Mode, N, NB, Plant};
+
+/// What a traced blow keeps at each sample.
+pub(super) enum Trace {
+    /// Every output (`Plant::outputs`).
+    Outputs(Vec<TracePoint>),
+    /// The sensor's load alone, N: all a fit compares, and it needs no billet law.
+    Sensor(Vec<f64>),
+}
+
+/// A plant the blow is integrated on: the general `Plant`, or its specialisation on a
+/// smaller state (`BaseHammer`), which hands its states back in the general layout.
+pub(super) trait Integrated<const M: usize>: Hybrid<M, Mode = Mode> {
+    fn sensor_at(&self, y: &[f64; M], mode: Mode) -> f64;
+    fn sensor_rate(&self, y: &[f64; M], dy: &[f64; M], mode: Mode) -> f64;
+    /// The state in the general plant's layout.
+    fn full(&self, y: &[f64; M]) -> [f64; N];
+    /// The sensor on the step's cubic Hermite interpolant at `theta`.
+    #[allow(clippy::too_many_arguments)]
+    fn sensor_within(
+        &self,
+        y0: &[f64; M],
+        dy0: &[f64; M],
+        y1: &[f64; M],
+        dy1: &[f64; M],
+        h: f64,
+        theta: f64,
+        mode: Mode,
+    ) -> f64 {
+        self.sensor_at(&integrator::hermite(y0, dy0, y1, dy1, h, theta), mode)
+    }
+    /// In an exact step from a grid point (`BaseHammer::grid_points`), `f` at each grid
+    /// point within it; false (the default), and no call, otherwise.
+    fn grid_points(&self, _t0: f64, _y0: &[f64; M], _mode: Mode, _h: f64, _f: &mut dyn FnMut(&GridPoint)) -> bool {
+        false
+    }
+    /// The whole state at a grid point `grid_points` gave.
+    fn grid_point_state(&self, _t0: f64, _y0: &[f64; M], _mode: Mode, _p: &GridPoint) -> [f64; M] {
+        unreachable!("grid_point_state without grid points")
+    }
+}
+
+impl Integrated<N> for Plant {
+    fn sensor_at(&self, y: &[f64; N], mode: Mode) -> f64 {
+        Plant::sensor_at(self, y, mode)
+    }
+    fn sensor_rate(&self, y: &[f64; N], dy: &[f64; N], mode: Mode) -> f64 {
+        Plant::sensor_rate(self, y, dy, mode)
+    }
+    fn full(&self, y: &[f64; N]) -> [f64; N] {
+        *y
+    }
+}
+
+impl Integrated<NB> for BaseHammer<'_> {
+    fn sensor_at(&self, y: &[f64; NB], _mode: Mode) -> f64 {
+        BaseHammer::sensor_at(self, y)
+    }
+    fn sensor_rate(&self, y: &[f64; NB], dy: &[f64; NB], _mode: Mode) -> f64 {
+        BaseHammer::sensor_rate(self, y, dy)
+    }
+    fn full(&self, y: &[f64; NB]) -> [f64; N] {
+        self.expand(y)
+    }
+    fn sensor_within(
+        &self,
+        y0: &[f64; NB],
+        dy0: &[f64; NB],
+        y1: &[f64; NB],
+        dy1: &[f64; NB],
+        h: f64,
+        theta: f64,
+        _mode: Mode,
+    ) -> f64 {
+        BaseHammer::sensor_within(self, y0, dy0, y1, dy1, h, theta)
+    }
+    fn grid_points(&self, t0: f64, y0: &[f64; NB], mode: Mode, h: f64, f: &mut dyn FnMut(&GridPoint)) -> bool {
+        BaseHammer::grid_points(self, t0, y0, mode, h, f)
+    }
+    fn grid_point_state(&self, t0: f64, y0: &[f64; NB], mode: Mode, p: &GridPoint) -> [f64; NB] {
+        BaseHammer::grid_point_state(self, t0, y0, mode, p)
+    }
+}
+
+/// What a blow records while the integrator runs.
+pub(super) struct Record {
+    pub(super) post_s: f64,
+    pub(super) peak_n: f64,
+    /// Every exit from plastic flow: (t, h, sensor load).
+    pub(super) plastic_exits: Vec<(f64, f64, f64)>,
+    /// Every instant the sensor load reached zero outside plastic flow, after the first exit.
+    pub(super) sensor_zeros: Vec<f64>,
+    pub(super) separation: Option<(f64, [f64; N], Mode)>,
+    pub(super) trace_dt: Option<f64>,
+    pub(super) next_sample: f64,
+    pub(super) trace: Trace,
+    /// Sensor load and its rate at the end of the last step, reused as the next step's start.
+    pub(super) last_end: Option<(f64, f64, f64)>,
+}
+
+/// Records indicators while `sys` (`plant` or its specialisation) is integrated.
+pub(super) struct Recorder<'a, S> {
+    pub(super) plant: &'a Plant,
+    pub(super) sys: &'a S,
+    pub(super) r: Record,
+}
+
+impl<const M: usize, S: Integrated<M>> Observer<M, Mode> for Recorder<'_, S> {
+    fn on_step(
+        &mut self,
+        t0: f64,
+        y0: &[f64; M],
+        dy0: &[f64; M],
+        t1: f64,
+        y1: &[f64; M],
+        dy1: &[f64; M],
+        mode: Mode,
+    ) -> Option<f64> {
+        let (sys, r) = (self.sys, &mut self.r);
+        let h = t1 - t0;
+        // Peak of the sensor load within the step: the cubic through both ends.
+        let (s0, rate0) = match r.last_end {
+            Some((t, s, rate)) if t == t0 => (s, rate),
+            _ => (sys.sensor_at(y0, mode), sys.sensor_rate(y0, dy0, mode)),
+        };
+        let s1 = sys.sensor_at(y1, mode);
+        let rate1 = sys.sensor_rate(y1, dy1, mode);
+        r.last_end = Some((t1, s1, rate1));
+        let (r0, r1) = (rate0 * h, rate1 * h);
+        r.peak_n = r.peak_n.max(s0).max(s1);
+        if exact_points(sys, self.plant, r, t0, y0, mode, h, (s0, rate0), (t1, s1, rate1)) {
+            return r.separation.map(|(ts, _, _)| ts + r.post_s);
+        }
+        if h > 0.0 {
+            for theta in cubic_extrema(s0, r0, s1, r1) {
+                let s = hermite_scalar(s0, r0, s1, r1, theta);
+                r.peak_n = r.peak_n.max(s);
+            }
+        }
+        if let Some(dt) = r.trace_dt {
+            while r.next_sample <= t1 && h > 0.0 {
+                let theta = ((r.next_sample - t0) / h).clamp(0.0, 1.0);
+                match r.trace {
+                    Trace::Outputs(ref mut v) => {
+                        let y = sys.full(&integrator::hermite(y0, dy0, y1, dy1, h, theta));
+                        v.push(TracePoint { t_s: r.next_sample, out: self.plant.outputs(&y, mode) })
+                    }
+                    Trace::Sensor(ref mut v) => v.push(sys.sensor_within(y0, dy0, y1, dy1, h, theta, mode)),
+                }
+                r.next_sample += dt;
+            }
+        }
+        r.separation.map(|(ts, _, _)| ts + r.post_s)
+    }
+
+    fn on_event(&mut self, t: f64, y: &[f64; M], from: Mode, to: Mode, _guard: u8) {
+        let y = &self.sys.full(y);
+        let r = &mut self.r;
+        // The mode (and possibly the state) changed: the cached step end is stale.
+        r.last_end = None;
+        if from.contact == Contact::Plastic && to.contact != Contact::Plastic {
+            let o = self.plant.outputs(y, to);
+            r.plastic_exits.push((t, o.h_m, o.sensor_n));
+        }
+        if to.contact != Contact::Plastic && !r.plastic_exits.is_empty() && self.plant.outputs(y, to).sensor_n <= 0.0 {
+            r.sensor_zeros.push(t);
+        }
+        // The blow has ended when the tools part with the support path closed: with a
+        // clearance, ram and lower tool can fly apart together before the gap has closed.
+        // A lower mass that has bounced off its support (rising, the gap opening) with the
+        // tools apart ends it too, whichever came first: the model has no gravity to bring
+        // it back.
+        let parted = to.contact == Contact::Free && from.contact != Contact::Free;
+        let lifted = to.contact == Contact::Free && from.engaged && !to.engaged;
+        if (parted || lifted) && (to.engaged || self.plant.support_opening(y)) {
+            r.separation = Some((t, *y, to));
+        } else if from.contact == Contact::Free && to.contact != Contact::Free {
+            r.separation = None;
+        }
+    }
+}
+
+/// A trace sample this fraction of the sample period from a grid point is taken there (the
+/// sample instants accumulate `dt` and drift from the grid's by roundoff).
+const SAMPLE_SNAP: f64 = 1e-6;
+
+/// The peak and the trace samples of an exact step from a grid point, from the sensor at
+/// each grid point within it (exact) and the cubic between neighbours (for the peak);
+/// false, and nothing recorded, where the step is not one (`Integrated::grid_points`).
+#[allow(clippy::too_many_arguments)]
+fn exact_points<const M: usize, S: Integrated<M>>(
+    sys: &S,
+    plant: &Plant,
+    r: &mut Record,
+    t0: f64,
+    y0: &[f64; M],
+    mode: Mode,
+    h: f64,
+    (s0, rate0): (f64, f64),
+    end: (f64, f64, f64),
+) -> bool {
+    let snap = r.trace_dt.map_or(0.0, |dt| SAMPLE_SNAP * dt);
+    let mut prev = (t0, s0, rate0);
+    // The samples up to a grid point (to roundoff): at the step's start (`None`, left by
+    // the previous step), or at a grid point inside it.
+    let sample = |r: &mut Record, t: f64, s: f64, point: Option<&GridPoint>| {
+        let Some(dt) = r.trace_dt else { return };
+        while r.next_sample <= t + snap {
+            match r.trace {
+                Trace::Sensor(ref mut v) => v.push(s),
+                Trace::Outputs(ref mut v) => {
+                    let y = point.map_or(*y0, |p| sys.grid_point_state(t0, y0, mode, p));
+                    v.push(TracePoint { t_s: r.next_sample, out: plant.outputs(&sys.full(&y), mode) })
+                }
+            }
+            r.next_sample += dt;
+        }
+    };
+    let mut first = true;
+    let walked = sys.grid_points(t0, y0, mode, h, &mut |p| {
+        if first {
+            sample(r, t0, s0, None);
+            first = false;
+        }
+        let here = (p.t_s, p.sensor_n, p.rate);
+        peak_between(&mut r.peak_n, prev, here);
+        prev = here;
+        sample(r, p.t_s, p.sensor_n, Some(p));
+    });
+    if walked && end.0 > prev.0 {
+        // A step cut short of a grid point by the stop: no sample can fall after the last.
+        peak_between(&mut r.peak_n, prev, end);
+    }
+    walked
+}
+
+/// Raise `peak` to the largest value of the cubic Hermite through `(t, s, rate)` at both
+/// ends. The cubic stays within `max(s_a, s_b) + 4/27 (|r_a| + |r_b|) h` (the Hermite basis'
+/// bounds), so a segment below the peak by that much is skipped.
+fn peak_between(peak: &mut f64, (ta, sa, ra): (f64, f64, f64), (tb, sb, rb): (f64, f64, f64)) {
+    let h = tb - ta;
+    let (r0, r1) = (ra * h, rb * h);
+    *peak = peak.max(sa).max(sb);
+    if h <= 0.0 || sa.max(sb) + 0.15 * (r0.abs() + r1.abs()) < *peak {
+        return;
+    }
+    for theta in cubic_extrema(sa, r0, sb, r1) {
+        *peak = peak.max(hermite_scalar(sa, r0, sb, r1, theta));
+    }
+}
+
+/// The end of forming is the first exit from plastic flow after which the billet loses less
+/// than `FORMING_CREEP_M` more height: near the end the stick force can hover at the flow
+/// load, and a sub-micrometre re-entry must not move the end of forming (CONTRACTS.md §4:
+/// "numerical creep after that instant does not move it").
+pub(super) fn forming_indicators(exits: &[(f64, f64, f64)], zeros: &[f64], h_start_m: f64, t_sep: f64) -> Forming {
+    let Some(&(_, h_final, _)) = exits.last() else {
+        // The billet never yielded: a fully elastic blow. Forming ends at first contact
+        // (load 0), and the spring-back is the whole contact.
+        return Forming { h_end_m: h_start_m, final_load_n: 0.0, forming_time_s: 0.0, spring_back_time_s: Some(t_sep) };
+    };
+    let &(t_end, h_end, load) =
+        exits.iter().find(|e| e.1 - h_final < FORMING_CREEP_M).expect("the last exit qualifies");
+    Forming {
+        h_end_m: h_end,
+        final_load_n: load,
+        forming_time_s: t_end,
+        // A sensor already at or below zero when forming ends (a high-passed sensor) has a
+        // spring-back of 0.
+        spring_back_time_s: zeros.iter().find(|&&t| t >= t_end).map(|t| t - t_end),
+    }
+}
+
+/// Extrema of the cubic Hermite segment of a scalar (values s0, s1, scaled slopes r0, r1)
+/// inside (0, 1).
+fn cubic_extrema(s0: f64, r0: f64, s1: f64, r1: f64) -> impl Iterator<Item = f64> {
+    // s(θ) = a θ^3 + b θ^2 + r0 θ + s0
+    let a = 2.0 * s0 + r0 - 2.0 * s1 + r1;
+    let b = -3.0 * s0 - 2.0 * r0 + 3.0 * s1 - r1;
+    // s'(θ) = 3a θ^2 + 2b θ + r0
+    let (qa, qb, qc) = (3.0 * a, 2.0 * b, r0);
+    let mut roots = [f64::NAN; 2];
+    if qa.abs() < 1e-300 {
+        if qb != 0.0 {
+            roots[0] = -qc / qb;
+        }
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            let sq = disc.sqrt();
+            roots = [(-qb + sq) / (2.0 * qa), (-qb - sq) / (2.0 * qa)];
+        }
+    }
+    roots.into_iter().filter(|t| *t > 0.0 && *t < 1.0)
+}
+
+fn hermite_scalar(s0: f64, r0: f64, s1: f64, r1: f64, theta: f64) -> f64 {
+    integrator::hermite(&[s0], &[r0], &[s1], &[r1], 1.0, theta)[0]
+}
