@@ -97,6 +97,10 @@ pub const DEBOUNCE_BLOWS: WholeLimits = WholeLimits { min: 0, max: 1_000_000, un
 /// encoder) to a metre (taller than any billet a hammer takes).
 pub const NEW_BILLET_RISE_M: Limits = Limits { min: 1e-4, max: 1.0, unit: "m" };
 
+/// `[billets] encoder_at_die_m`: any reading within ±100 m (an encoder's counter may start
+/// anywhere; no ram travels that far).
+pub const ENCODER_AT_DIE_M: Limits = Limits { min: -100.0, max: 100.0, unit: "m" };
+
 /// `[billets] idle_s`: from a second (a fast line's part change) to a day.
 pub const BILLET_IDLE_S: Limits = Limits { min: 1.0, max: 86_400.0, unit: "s" };
 

@@ -13,8 +13,8 @@ use serde::de::IgnoredAny;
 
 use super::document::Document;
 use super::limits::{
-    ALERT_WINDOW_BLOWS, BILLET_IDLE_S, DEBOUNCE_BLOWS, EFFICIENCY, NEW_BILLET_RISE_M, RESIDUAL_LIMIT, ROTATE_BYTES,
-    ROTATE_SECONDS, SENSOR_LIMIT,
+    ALERT_WINDOW_BLOWS, BILLET_IDLE_S, DEBOUNCE_BLOWS, EFFICIENCY, ENCODER_AT_DIE_M, NEW_BILLET_RISE_M, RESIDUAL_LIMIT,
+    ROTATE_BYTES, ROTATE_SECONDS, SENSOR_LIMIT,
 };
 use super::{ConfigError, source};
 use crate::acquire::ChannelSpec;
@@ -97,6 +97,9 @@ pub struct ServiceConfig {
     pub new_billet_rise_m: Option<f64>,
     /// `[billets] idle_s`: the idle gap after which a smaller rise starts a billet, s.
     pub idle_new_billet_s: f64,
+    /// `[billets] encoder_at_die_m`: the encoder's reading with the ram on the lower die, m
+    /// (`None`: not known; `estimate::EstimatorConfig::encoder_at_die_m`).
+    pub encoder_at_die_m: Option<f64>,
     pub sources: Vec<SourceSpec>,
     /// `[advisor]`: replan the billet's next blows after each one (issue 20).
     pub advisor: Option<super::advisor::AdvisorConfig>,
@@ -126,6 +129,7 @@ impl ServiceConfig {
             webhook: None,
             plc_coil: None,
             new_billet_rise_m: None,
+            encoder_at_die_m: None,
             idle_new_billet_s: crate::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
             sources: Vec::new(),
             advisor: None,
@@ -197,6 +201,7 @@ struct RawAlerts {
 #[serde(deny_unknown_fields)]
 struct RawBillets {
     new_billet_rise_m: Option<f64>,
+    encoder_at_die_m: Option<f64>,
     idle_s: Option<f64>,
 }
 
@@ -221,7 +226,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         Some(a) => parse_alerts(&doc, a)?,
         None => (AlertConfig::default(), None, None),
     };
-    let (new_billet_rise_m, idle_new_billet_s) = parse_billets(&doc, raw.billets.as_ref())?;
+    let (new_billet_rise_m, idle_new_billet_s, encoder_at_die_m) = parse_billets(&doc, raw.billets.as_ref())?;
     let sources = parse_sources(&doc, raw.sources.len(), base)?;
     let advisor = super::advisor::parse_advisor(&doc, raw.advisor.as_ref())?;
     Ok(ServiceConfig {
@@ -241,6 +246,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         plc_coil,
         new_billet_rise_m,
         idle_new_billet_s,
+        encoder_at_die_m,
         sources,
         advisor,
         uplink_mqtt: super::uplink::parse_uplink(&doc)?,
@@ -308,6 +314,7 @@ pub struct PipelineTuning {
     pub alerts: AlertConfig,
     pub new_billet_rise_m: Option<f64>,
     pub idle_new_billet_s: f64,
+    pub encoder_at_die_m: Option<f64>,
 }
 
 /// Only the tables a [`PipelineTuning`] reads; the rest of the file is not looked at (a
@@ -327,8 +334,8 @@ pub fn parse_tuning(origin: &str, text: &str) -> Result<PipelineTuning, ConfigEr
         Some(a) => parse_alerts(&doc, a)?.0,
         None => AlertConfig::default(),
     };
-    let (new_billet_rise_m, idle_new_billet_s) = parse_billets(&doc, raw.billets.as_ref())?;
-    Ok(PipelineTuning { alerts, new_billet_rise_m, idle_new_billet_s })
+    let (new_billet_rise_m, idle_new_billet_s, encoder_at_die_m) = parse_billets(&doc, raw.billets.as_ref())?;
+    Ok(PipelineTuning { alerts, new_billet_rise_m, idle_new_billet_s, encoder_at_die_m })
 }
 
 impl ServiceConfig {
@@ -338,12 +345,17 @@ impl ServiceConfig {
             alerts: self.alerts,
             new_billet_rise_m: self.new_billet_rise_m,
             idle_new_billet_s: self.idle_new_billet_s,
+            encoder_at_die_m: self.encoder_at_die_m,
         }
     }
 }
 
-/// `[billets]`: the new-billet rise (`None`: the estimator's default) and idle gap.
-fn parse_billets(doc: &Document<'_>, billets: Option<&RawBillets>) -> Result<(Option<f64>, f64), ConfigError> {
+/// `[billets]`: the new-billet rise (`None`: the estimator's default), idle gap and the
+/// encoder's reading on the die.
+fn parse_billets(
+    doc: &Document<'_>,
+    billets: Option<&RawBillets>,
+) -> Result<(Option<f64>, f64, Option<f64>), ConfigError> {
     let new_billet_rise_m = match billets.and_then(|b| b.new_billet_rise_m) {
         Some(r) => Some(doc.in_range("billets.new_billet_rise_m", r, &NEW_BILLET_RISE_M)?),
         None => None,
@@ -352,7 +364,11 @@ fn parse_billets(doc: &Document<'_>, billets: Option<&RawBillets>) -> Result<(Op
         Some(s) => doc.in_range("billets.idle_s", s, &BILLET_IDLE_S)?,
         None => crate::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
     };
-    Ok((new_billet_rise_m, idle_new_billet_s))
+    let encoder_at_die_m = match billets.and_then(|b| b.encoder_at_die_m) {
+        Some(x) => Some(doc.in_range("billets.encoder_at_die_m", x, &ENCODER_AT_DIE_M)?),
+        None => None,
+    };
+    Ok((new_billet_rise_m, idle_new_billet_s, encoder_at_die_m))
 }
 
 /// `[alerts]` over the defaults, with its webhook and PLC coil.

@@ -39,6 +39,11 @@ fn billet_detection_is_tuned_in_its_table() {
     let set = GOOD.replace("[[sources]]", "[billets]\nnew_billet_rise_m = 0.005\nidle_s = 45.0\n[[sources]]");
     let c = parse_service("s.toml", Path::new("/"), &set).unwrap();
     assert_eq!((c.new_billet_rise_m, c.idle_new_billet_s), (Some(0.005), 45.0));
+    let die = GOOD.replace("[[sources]]", "[billets]\nencoder_at_die_m = 0.5\n[[sources]]");
+    assert_eq!(parse_service("s.toml", Path::new("/"), &die).unwrap().encoder_at_die_m, Some(0.5));
+    let far = GOOD.replace("[[sources]]", "[billets]\nencoder_at_die_m = 1e3\n[[sources]]");
+    let e = parse_service("s.toml", Path::new("/"), &far).unwrap_err().to_string();
+    assert!(e.contains("billets.encoder_at_die_m"), "{e}");
     let bad = GOOD.replace("[[sources]]", "[billets]\nnew_billet_rise_m = 5.0\n[[sources]]");
     let e = parse_service("s.toml", Path::new("/"), &bad).unwrap_err().to_string();
     assert!(e.contains("billets.new_billet_rise_m"), "{e}");

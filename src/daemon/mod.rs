@@ -257,6 +257,7 @@ pub fn tuned_config(tuning: &PipelineTuning, machine: &Machine) -> PipelineConfi
     let mut p = PipelineConfig { alerts: tuning.alerts, ..PipelineConfig::for_machine(machine) };
     p.estimate.new_billet_rise_m = tuning.new_billet_rise_m;
     p.estimate.idle_new_billet_s = tuning.idle_new_billet_s;
+    p.estimate.encoder_at_die_m = tuning.encoder_at_die_m;
     p
 }
 
