@@ -6,6 +6,7 @@
 //! correlations, a verdict on which parameters the data determines, and Monte Carlo bands
 //! of the predicted load. Pure: the caller reads the files and writes the results.
 
+pub mod clip;
 pub mod fit;
 pub mod model;
 pub mod objective;
