@@ -17,7 +17,7 @@ pub mod verdict;
 use rayon::prelude::*;
 use serde_json::{Value, json};
 
-use crate::identify::objective::{Heights, Objective, Reference, Setting};
+use crate::identify::objective::{Objective, Reference, Setting};
 use crate::physics::effects::EffectSet;
 use crate::physics::machine::Machine;
 use attribute::{BlowSet, Candidate, Fitted, library, mean};
@@ -59,13 +59,11 @@ fn blow_set(
     effects: &EffectSet,
 ) -> Option<(BlowSet, Vec<Localised>, Vec<Indicators>)> {
     let n = refs.len();
-    // The start heights from the encoder, as the live estimator takes them: a caliper's
-    // scatter in the sheet's heights moves each blow's error by more than the sensors' noise
-    // (issue #17's independent renderer, ±0.2 mm: the no-effect blows' errors 1.3–11 × the
-    // noise from seed to seed, which the fitted effects followed into false positives).
-    let obj = Objective::new(refs, vec![true; n], setting, machine.kind())
-        .with_effects(*effects)
-        .with_heights(Heights::Encoder);
+    // The start heights from the sheet, not the encoder's chain (`Heights::Encoder`): the
+    // chain removed the independent hammer's false positives (0/40) but, carrying a fresh
+    // copper billet's late first contact (+117 µm) to every later blow, gave the independent
+    // press `thermal` on 3 of 3 no-effect billets (README, "Start heights from the encoder").
+    let obj = Objective::new(refs, vec![true; n], setting, machine.kind()).with_effects(*effects);
     let mode2 = machine.second_mode_hz();
     let sims = obj.simulate(machine)?;
     let loc: Vec<Localised> = obj.refs.iter().zip(&sims).map(|(r, s)| localise(r, s, mode2)).collect();

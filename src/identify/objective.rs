@@ -246,7 +246,9 @@ pub enum Heights {
     /// height of the blow before.
     #[default]
     Sheet,
-    /// Where the sheet gives measured heights: the encoder's chain, as the live estimator
+    /// Not used by `diagnose` (README, "Start heights from the encoder": it fixed the
+    /// independent hammer's false positives and caused the press's). Where the sheet gives
+    /// measured heights: the encoder's chain, as the live estimator
     /// keeps it, from the first blow's start (the sheet's billet): the blow before's start
     /// less how much lower the ram met the billet this time (`Reference::x_contact_m`),
     /// when the blow before is the reference before and the chain is plausible
