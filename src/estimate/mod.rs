@@ -247,8 +247,7 @@ impl Estimator {
     /// A billet's first blow: its height is the sheet's unless the encoder's (the die
     /// reference less the contact) differs by more than the measurement; the first billet
     /// teaches the die reference, unless it is configured (`encoder_at_die_m`): then the
-    /// encoder's height is always taken. A height off the sheet's becomes the billet's own
-    /// (`billet_process`). Returns the encoder's height less the sheet's when reported.
+    /// encoder's height is always taken, and becomes the billet's own (`billet_process`). Returns the encoder's height less the sheet's when reported.
     fn first_blow_height(&mut self, x_contact_m: f64, tolerance_m: f64) -> Option<f64> {
         let nominal_m = self.process.as_ref()?.billet.height_m;
         let Some(die_x_m) = self.die_x_m else {
@@ -260,7 +259,11 @@ impl Estimator {
         // off the sheet by more than the measurement.
         if self.cfg.encoder_at_die_m.is_some() || off_m.abs() > tolerance_m {
             self.h_m = Some(nominal_m + off_m);
-            if let Some(p) = self.billet_process.as_mut() {
+            // The billet's own law only on a configured reference: with a learnt one, a
+            // "billet" off the sheet may be the same billet taken up again after lost data
+            // (its strain does not start again), whose blows must keep the intact run's
+            // figures (tests/record_corrupt.rs).
+            if let (Some(p), Some(_)) = (self.billet_process.as_mut(), self.cfg.encoder_at_die_m) {
                 p.billet.height_m = nominal_m + off_m;
             }
         }
