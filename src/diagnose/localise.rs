@@ -491,7 +491,7 @@ mod tests {
             peak_n: peak,
             blow_index: Some(1),
             t_ram_contact_s: None,
-            x_contact_m: None,
+            approach: None,
         };
         let s = Simulated {
             load_n: model,

@@ -17,7 +17,7 @@ pub mod verdict;
 use rayon::prelude::*;
 use serde_json::{Value, json};
 
-use crate::identify::objective::{Objective, Reference, Setting};
+use crate::identify::objective::{Heights, Objective, Reference, Setting};
 use crate::physics::effects::EffectSet;
 use crate::physics::machine::Machine;
 use attribute::{BlowSet, Candidate, Fitted, library, mean};
@@ -59,11 +59,13 @@ fn blow_set(
     effects: &EffectSet,
 ) -> Option<(BlowSet, Vec<Localised>, Vec<Indicators>)> {
     let n = refs.len();
-    // The start heights from the sheet, not the encoder's chain (`Heights::Encoder`): the
-    // chain removed the independent hammer's false positives (0/40) but, carrying a fresh
-    // copper billet's late first contact (+117 µm) to every later blow, gave the independent
-    // press `thermal` on 3 of 3 no-effect billets (README, "Start heights from the encoder").
-    let obj = Objective::new(refs, vec![true; n], setting, machine.kind()).with_effects(*effects);
+    // Where the sheet has hand-measured heights, the start heights from the encoder's chain
+    // (`Heights::Encoder`): the calipers' scatter (±0.2 mm) moved each holdout blow's error by
+    // more than the noise and gave the independent hammer false positives (README, "Start
+    // heights from the encoder").
+    let obj = Objective::new(refs, vec![true; n], setting, machine.kind())
+        .with_effects(*effects)
+        .with_heights(Heights::Encoder);
     let mode2 = machine.second_mode_hz();
     let sims = obj.simulate(machine)?;
     let loc: Vec<Localised> = obj.refs.iter().zip(&sims).map(|(r, s)| localise(r, s, mode2)).collect();
