@@ -334,11 +334,15 @@ mod tests {
     /// (final, peak), an energy term over the energy in, a sensor sample N. And the run's
     /// largest ledger residual over the energy in.
     fn errors(m: &Machine, v0s: &[f64], path: Path, opts: &SimOptions) -> ([f64; 5], f64) {
-        let p = steel();
+        errors_on(m, &steel(), v0s, path, opts)
+    }
+
+    /// `errors` on the billet `p`.
+    fn errors_on(m: &Machine, p: &Process, v0s: &[f64], path: Path, opts: &SimOptions) -> ([f64; 5], f64) {
         let converged = SimOptions { method: Method::Dopri5 { rtol: 1e-10 }, ..*opts };
         let (mut h, mut d, mut closure) = (p.billet.height_m, [0.0f64; 5], 0.0f64);
         for (i, &v0) in v0s.iter().enumerate() {
-            let plant = blow_plant(m, &EffectSet::NONE, &p, i + 1, h);
+            let plant = blow_plant(m, &EffectSet::NONE, p, i + 1, h);
             let outputs = || Trace::Outputs(Vec::new());
             let (run_, _) = run(&plant, v0, opts, 0.0, outputs(), path).unwrap();
             let (reference, _) = run(&plant, v0, &converged, 0.0, outputs(), Path::General).unwrap();
@@ -427,6 +431,45 @@ mod tests {
                 assert!(ce <= 1e-5, "ledger closure {ce:e}");
             }
         }
+    }
+
+    #[test]
+    fn the_fits_tolerance_is_the_loosest_the_captures_cannot_see() {
+        // The fits' rtol (`identify::objective::FIT_RTOL`, 1e-6) against the next looser one
+        // of issue 17's sweep (1e-6, 3e-6, 1e-5, 3e-5, 1e-4; README "Exact linear phases"),
+        // each run as the fits run it (100 kHz on the hammers, 20 kHz on the press; the
+        // hammers with their exact phases), errors against the general plant at rtol 1e-10.
+        // Bounds: what a capture cannot see (as in the test above): 1e-3 of the 10 µm encoder
+        // step (seed 001 §2.1) on the final height, a tenth of the captures' load noise on the
+        // sensor (`synth::CaptureSpec`: 2 kN on the hammers, 5 kN on the press), and on the
+        // hammers a tenth of a sample on the instants. The press's end of forming (where the
+        // flow load drops as the plastic rate reaches the rate floor, located late by the step
+        // control: `synth::CAPTURE_RTOL`) is already off by 50 µs, a sample, at 1e-6: printed,
+        // not bounded.
+        let small = machine("kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n");
+        let press = machine(include_str!("../../config/screw-press-spr400.machine.toml"));
+        let copper = parse_process("cu", include_str!("../../config/copper-cu99.process.toml")).unwrap();
+        let cases = [
+            (paper_hammer(), steel(), &[3.9, 4.5, 5.3][..], Path::Exact, 1e-5, [1e-8, 1e-6, 200.0]),
+            (small, steel(), &[4.0, 4.5, 5.0][..], Path::Exact, 1e-5, [1e-8, 1e-6, 200.0]),
+            // Press paper Table 1's speeds on copper; the press runs on the general plant.
+            (press, copper, &[0.30, 0.33, 0.36][..], Path::General, 5e-5, [1e-8, f64::INFINITY, 500.0]),
+        ];
+        let mut looser_seen = false;
+        for (m, p, v0s, path, dt_s, bound) in &cases {
+            let within = |rtol: f64| {
+                let opts =
+                    SimOptions { method: Method::Dopri5 { rtol }, trace_dt_s: Some(*dt_s), ..SimOptions::default() };
+                let (e, _) = errors_on(m, p, v0s, *path, &opts);
+                eprintln!("{:?} rtol {rtol:e}: h {:.2e} m, t {:.2e} s, sensor {:.2e} N", m.kind(), e[0], e[1], e[4]);
+                [e[0], e[1], e[4]].iter().zip(bound).all(|(e, b)| e <= b)
+            };
+            assert!(within(1e-6), "{:?} at the fits' rtol", m.kind());
+            looser_seen |= !within(3e-6);
+        }
+        // 3e-6 is over a bound somewhere (the hammers' final height, 1.6e-8 m; the press's
+        // sensor, 3.8 kN): tightening nothing else, 1e-6 is the loosest of the sweep.
+        assert!(looser_seen, "rtol 3e-6 is within every bound: the fits' tolerance could be loosened");
     }
 
     #[test]
