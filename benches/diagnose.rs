@@ -152,13 +152,29 @@ fn blow_cpu(c: &mut Criterion<Cpu>) {
 }
 
 fn blow_in<M: Measurement>(c: &mut Criterion<M>, group: &str) {
-    use forgemon::identify::objective::Objective;
+    use forgemon::identify::objective::{ALIGN_FRACTION, FIT_RTOL, Objective};
+    use forgemon::physics::blow::{SimOptions, TraceEnd, simulate_blow_sensor, simulate_blow_sensor_until};
+    use forgemon::physics::integrator::Method;
+    use forgemon::physics::sequence::blow_plant;
     let m = parse_machine("m", HAMMER).unwrap().machine;
     let (refs, setting) =
         billet(&m, include_str!("../config/steel-16NiCrMo13.process.toml"), 1.0, &[4.0, 4.5, 5.0, 5.3, 5.3], 3);
-    let one = Objective::new(refs[..1].to_vec(), vec![true], setting, MachineKind::Hammer);
+    let r = refs[0].clone();
+    let Setting::Billet(ref p) = setting else { unreachable!("a billet") };
+    let plant = blow_plant(&m, &EffectSet::NONE, p, 1, p.billet.height_m);
+    let one = Objective::new(refs[..1].to_vec(), vec![true], setting.clone(), MachineKind::Hammer);
     let mut g = c.benchmark_group(group);
     g.bench_function("hammer_blow_as_fitted", |b| b.iter(|| one.simulate(&m).unwrap()));
+    // The physics of that blow alone, as `Objective::simulate_to` asks for it, and ending
+    // at its last compared sample (`simulate_blow_sensor_until`: the caller's change the
+    // README's "Speed" section describes).
+    let opts =
+        SimOptions { method: Method::Dopri5 { rtol: FIT_RTOL }, post_s: r.duration_s(), trace_dt_s: Some(r.dt_s) };
+    let end = TraceEnd { threshold_n: ALIGN_FRACTION * r.peak_n, after_s: r.duration_s() - r.t_align_s };
+    g.bench_function("hammer_blow_physics", |b| b.iter(|| simulate_blow_sensor(&plant, r.v0_mps, &opts).unwrap()));
+    g.bench_function("hammer_blow_physics_until_last_sample", |b| {
+        b.iter(|| simulate_blow_sensor_until(&plant, r.v0_mps, &opts, end).unwrap())
+    });
     g.finish();
 }
 

@@ -88,6 +88,17 @@ impl Default for SimOptions {
     }
 }
 
+/// Where a fit's sensor trace may end (`simulate_blow_sensor_until`): `after_s` after the
+/// first sample at or above `threshold_n`, but never before the contact opens (the
+/// indicators and the ledger need the whole contact). A fit aligns the blows at its load's
+/// first crossing of a threshold, which lies before that sample, and compares a window of
+/// known length from there: the samples after it are never read.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TraceEnd {
+    pub threshold_n: f64,
+    pub after_s: f64,
+}
+
 /// Why a blow could not be simulated.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum BlowError {
@@ -159,6 +170,25 @@ pub fn simulate_blow_sensor(
     Ok((res, sensor))
 }
 
+/// `simulate_blow_sensor` ending at `end` instead of `opts.post_s` after the contact opens
+/// (`post_s` still ends it if the sensor never reaches `end.threshold_n`). The samples it
+/// keeps are `simulate_blow_sensor`'s (the steps before the stop are the same; on a plant
+/// without exact phases the last step, cut at the stop, may move its last samples by the
+/// step control's error) and so are the indicators, the peak and the ledger.
+pub fn simulate_blow_sensor_until(
+    plant: &Plant,
+    v0_mps: f64,
+    opts: &SimOptions,
+    end: TraceEnd,
+) -> Result<(BlowResult, Vec<f64>), BlowError> {
+    let (res, trace) = run_until(plant, v0_mps, opts, 0.0, Trace::Sensor(Vec::new()), Path::Exact, Some(end))?;
+    let sensor = match trace {
+        Trace::Sensor(v) => v,
+        Trace::Outputs(v) => v.iter().map(|p| p.out.sensor_n).collect(),
+    };
+    Ok((res, sensor))
+}
+
 /// Which plant integrates a base hammer's blow (`BaseHammer::of`); other plants always run
 /// on the general one. The tests compare the three.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -182,6 +212,19 @@ fn run(
     trace: Trace,
     path: Path,
 ) -> Result<(BlowResult, Trace), BlowError> {
+    run_until(plant, v0_mps, opts, trace_t0_s, trace, path, None)
+}
+
+/// `run`, ending at `end` when given (`simulate_blow_sensor_until`).
+fn run_until(
+    plant: &Plant,
+    v0_mps: f64,
+    opts: &SimOptions,
+    trace_t0_s: f64,
+    trace: Trace,
+    path: Path,
+    end: Option<TraceEnd>,
+) -> Result<(BlowResult, Trace), BlowError> {
     if !(v0_mps.is_finite() && v0_mps > 0.0) {
         return Err(BlowError::BadSpeed { v0_mps });
     }
@@ -200,6 +243,8 @@ fn run(
         next_sample: trace_t0_s.max(0.0),
         trace,
         last_end: None,
+        trace_end: end,
+        end_at_s: None,
     };
     let limits = Limits {
         t_max_s: MAX_BLOW_S,
@@ -334,11 +379,15 @@ mod tests {
     /// (final, peak), an energy term over the energy in, a sensor sample N. And the run's
     /// largest ledger residual over the energy in.
     fn errors(m: &Machine, v0s: &[f64], path: Path, opts: &SimOptions) -> ([f64; 5], f64) {
-        let p = steel();
+        errors_on(m, &steel(), v0s, path, opts)
+    }
+
+    /// `errors` on the billet `p`.
+    fn errors_on(m: &Machine, p: &Process, v0s: &[f64], path: Path, opts: &SimOptions) -> ([f64; 5], f64) {
         let converged = SimOptions { method: Method::Dopri5 { rtol: 1e-10 }, ..*opts };
         let (mut h, mut d, mut closure) = (p.billet.height_m, [0.0f64; 5], 0.0f64);
         for (i, &v0) in v0s.iter().enumerate() {
-            let plant = blow_plant(m, &EffectSet::NONE, &p, i + 1, h);
+            let plant = blow_plant(m, &EffectSet::NONE, p, i + 1, h);
             let outputs = || Trace::Outputs(Vec::new());
             let (run_, _) = run(&plant, v0, opts, 0.0, outputs(), path).unwrap();
             let (reference, _) = run(&plant, v0, &converged, 0.0, outputs(), Path::General).unwrap();
@@ -426,6 +475,89 @@ mod tests {
             if at_fits {
                 assert!(ce <= 1e-5, "ledger closure {ce:e}");
             }
+        }
+    }
+
+    #[test]
+    fn the_fits_tolerance_is_the_loosest_the_captures_cannot_see() {
+        // The fits' rtol (`identify::objective::FIT_RTOL`, 1e-6) against the next looser one
+        // of issue 17's sweep (1e-6, 3e-6, 1e-5, 3e-5, 1e-4; README "Exact linear phases"),
+        // each run as the fits run it (100 kHz on the hammers, 20 kHz on the press; the
+        // hammers with their exact phases), errors against the general plant at rtol 1e-10.
+        // Bounds: what a capture cannot see (as in the test above): 1e-3 of the 10 µm encoder
+        // step (seed 001 §2.1) on the final height, a tenth of the captures' load noise on the
+        // sensor (`synth::CaptureSpec`: 2 kN on the hammers, 5 kN on the press), and on the
+        // hammers a tenth of a sample on the instants. The press's end of forming (where the
+        // flow load drops as the plastic rate reaches the rate floor, located late by the step
+        // control: `synth::CAPTURE_RTOL`) is already off by 50 µs, a sample, at 1e-6: printed,
+        // not bounded.
+        let small = machine("kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n");
+        let press = machine(include_str!("../../config/screw-press-spr400.machine.toml"));
+        let copper = parse_process("cu", include_str!("../../config/copper-cu99.process.toml")).unwrap();
+        let cases = [
+            (paper_hammer(), steel(), &[3.9, 4.5, 5.3][..], Path::Exact, 1e-5, [1e-8, 1e-6, 200.0]),
+            (small, steel(), &[4.0, 4.5, 5.0][..], Path::Exact, 1e-5, [1e-8, 1e-6, 200.0]),
+            // Press paper Table 1's speeds on copper; the press runs on the general plant.
+            (press, copper, &[0.30, 0.33, 0.36][..], Path::General, 5e-5, [1e-8, f64::INFINITY, 500.0]),
+        ];
+        let mut looser_seen = false;
+        for (m, p, v0s, path, dt_s, bound) in &cases {
+            let within = |rtol: f64| {
+                let opts =
+                    SimOptions { method: Method::Dopri5 { rtol }, trace_dt_s: Some(*dt_s), ..SimOptions::default() };
+                let (e, _) = errors_on(m, p, v0s, *path, &opts);
+                eprintln!("{:?} rtol {rtol:e}: h {:.2e} m, t {:.2e} s, sensor {:.2e} N", m.kind(), e[0], e[1], e[4]);
+                [e[0], e[1], e[4]].iter().zip(bound).all(|(e, b)| e <= b)
+            };
+            assert!(within(1e-6), "{:?} at the fits' rtol", m.kind());
+            looser_seen |= !within(3e-6);
+        }
+        // 3e-6 is over a bound somewhere (the hammers' final height, 1.6e-8 m; the press's
+        // sensor, 3.8 kN): tightening nothing else, 1e-6 is the loosest of the sweep.
+        assert!(looser_seen, "rtol 3e-6 is within every bound: the fits' tolerance could be loosened");
+    }
+
+    #[test]
+    fn a_fits_blow_ends_at_its_last_compared_sample() {
+        // The fits' options on the suite's hammer (its post window advanced exactly) and the
+        // paper's press on copper (Dormand–Prince throughout; press paper Table 1's speed),
+        // a 17 ms window as the suite's hammer captures have, 100 ms on the press (its contact
+        // lasts 65 ms): ending the blow 16 ms (80 ms) after the first sample at a tenth of
+        // the peak (the window less the 1 ms the fits keep before it) keeps the indicators, the ledger and
+        // the samples up to there, and saves steps: the hammer's tools ride together for
+        // 12.6 ms, so the post window ran 17 ms past the 16 ms the fits compare.
+        let small = machine("kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n");
+        let press = machine(include_str!("../../config/screw-press-spr400.machine.toml"));
+        let copper = parse_process("cu", include_str!("../../config/copper-cu99.process.toml")).unwrap();
+        for (m, p, v0, dt, post_s, after_s) in
+            [(small, steel(), 4.0, 1e-5, 17e-3, 16e-3), (press, copper, 0.346, 5e-5, 100e-3, 80e-3)]
+        {
+            let plant = blow_plant(&m, &EffectSet::NONE, &p, 1, p.billet.height_m);
+            let opts = SimOptions { method: Method::Dopri5 { rtol: 1e-6 }, post_s, trace_dt_s: Some(dt) };
+            let (full, s_full) = simulate_blow_sensor(&plant, v0, &opts).unwrap();
+            let end = TraceEnd { threshold_n: 0.1 * full.peak_load_n, after_s };
+            let (cut, s_cut) = simulate_blow_sensor_until(&plant, v0, &opts, end).unwrap();
+            let k = s_full.iter().position(|&s| s >= end.threshold_n).unwrap();
+            // The last sample at or before the stop (the contact is over by then).
+            let last = ((k as f64 * dt + end.after_s) / dt * (1.0 + 1e-9)).floor() as usize;
+            assert!(full.contact_time_s < (last as f64) * dt, "{:?} {}", m.kind(), full.contact_time_s);
+            assert_eq!(s_cut.len(), last + 1, "{:?}", m.kind());
+            assert_eq!(BlowResult { stats: full.stats, ..cut.clone() }, full, "{:?}", m.kind());
+            assert!(cut.stats.steps < full.stats.steps, "{:?} vs {:?}", cut.stats, full.stats);
+            // Samples of the steps before the stop are the same; the last, cut short, moves
+            // its samples by the step control's error on the press (its own 1e-6).
+            let diff = |i: usize| (s_cut[i] - s_full[i]).abs();
+            let moved = (0..=last).filter(|&i| diff(i) > 0.0).count();
+            let largest = (0..=last).map(diff).fold(0.0, f64::max);
+            eprintln!(
+                "{:?}: {} of {} samples, {} steps of {}, {moved} moved by up to {largest:e} N",
+                m.kind(),
+                s_cut.len(),
+                s_full.len(),
+                cut.stats.steps,
+                full.stats.steps
+            );
+            assert!(largest <= 1e-6 * full.peak_load_n, "{largest} N");
         }
     }
 

@@ -4,7 +4,7 @@
 //! (`Integrated`). In an exact phase of the base hammer the samples and the peak come from
 //! the grid points of the exact flow (`exact_points`).
 
-use super::{FORMING_CREEP_M, Forming, TracePoint};
+use super::{FORMING_CREEP_M, Forming, TraceEnd, TracePoint};
 use crate::physics::integrator::{self, Hybrid, Observer};
 use crate::physics::plant::{BaseHammer, Contact, GridPoint, Mode, N, NB, Plant};
 
@@ -104,6 +104,29 @@ pub(super) struct Record {
     pub(super) trace: Trace,
     /// Sensor load and its rate at the end of the last step, reused as the next step's start.
     pub(super) last_end: Option<(f64, f64, f64)>,
+    /// Where the trace may end (`simulate_blow_sensor_until`), and the instant that makes,
+    /// once a sample has reached the threshold.
+    pub(super) trace_end: Option<TraceEnd>,
+    pub(super) end_at_s: Option<f64>,
+}
+
+impl Record {
+    /// Where the blow stops: once the contact has opened, `post_s` after that, or the trace's
+    /// end if that is known (and not before the opening); `None` before.
+    fn stop_s(&self) -> Option<f64> {
+        let (t_sep, _, _) = self.separation.as_ref()?;
+        Some(self.end_at_s.map_or(t_sep + self.post_s, |t| t.max(*t_sep)))
+    }
+
+    /// Note the sample `sensor_n` at `t_s` (before `next_sample` moves on): the first one at
+    /// or above the trace end's threshold fixes where the trace may end.
+    fn sampled(&mut self, t_s: f64, sensor_n: f64) {
+        if let (Some(e), None) = (self.trace_end, self.end_at_s)
+            && sensor_n >= e.threshold_n
+        {
+            self.end_at_s = Some(t_s + e.after_s);
+        }
+    }
 }
 
 /// Records indicators while `sys` (`plant` or its specialisation) is integrated.
@@ -137,7 +160,7 @@ impl<const M: usize, S: Integrated<M>> Observer<M, Mode> for Recorder<'_, S> {
         let (r0, r1) = (rate0 * h, rate1 * h);
         r.peak_n = r.peak_n.max(s0).max(s1);
         if exact_points(sys, self.plant, r, t0, y0, mode, h, (s0, rate0), (t1, s1, rate1)) {
-            return r.separation.map(|(ts, _, _)| ts + r.post_s);
+            return r.stop_s();
         }
         if h > 0.0 {
             for theta in cubic_extrema(s0, r0, s1, r1) {
@@ -148,17 +171,24 @@ impl<const M: usize, S: Integrated<M>> Observer<M, Mode> for Recorder<'_, S> {
         if let Some(dt) = r.trace_dt {
             while r.next_sample <= t1 && h > 0.0 {
                 let theta = ((r.next_sample - t0) / h).clamp(0.0, 1.0);
-                match r.trace {
+                let sensor_n = match r.trace {
                     Trace::Outputs(ref mut v) => {
                         let y = sys.full(&integrator::hermite(y0, dy0, y1, dy1, h, theta));
-                        v.push(TracePoint { t_s: r.next_sample, out: self.plant.outputs(&y, mode) })
+                        let out = self.plant.outputs(&y, mode);
+                        v.push(TracePoint { t_s: r.next_sample, out });
+                        out.sensor_n
                     }
-                    Trace::Sensor(ref mut v) => v.push(sys.sensor_within(y0, dy0, y1, dy1, h, theta, mode)),
-                }
+                    Trace::Sensor(ref mut v) => {
+                        let s = sys.sensor_within(y0, dy0, y1, dy1, h, theta, mode);
+                        v.push(s);
+                        s
+                    }
+                };
+                r.sampled(r.next_sample, sensor_n);
                 r.next_sample += dt;
             }
         }
-        r.separation.map(|(ts, _, _)| ts + r.post_s)
+        r.stop_s()
     }
 
     fn on_event(&mut self, t: f64, y: &[f64; M], from: Mode, to: Mode, _guard: u8) {
@@ -221,6 +251,7 @@ fn exact_points<const M: usize, S: Integrated<M>>(
                     v.push(TracePoint { t_s: r.next_sample, out: plant.outputs(&sys.full(&y), mode) })
                 }
             }
+            r.sampled(r.next_sample, s);
             r.next_sample += dt;
         }
     };
