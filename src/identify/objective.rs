@@ -14,7 +14,7 @@
 //! contact sample nor a few samples of trigger jitter enter the fit.
 
 use crate::identify::model::default_prior;
-use crate::physics::blow::{SimOptions, simulate_blow_sensor};
+use crate::physics::blow::{SimOptions, TraceEnd, simulate_blow_sensor_until};
 use crate::physics::effects::EffectSet;
 use crate::physics::integrator::Method;
 use crate::physics::machine::{Machine, MachineKind};
@@ -481,7 +481,10 @@ impl Objective {
                 post_s: r.duration_s(),
                 trace_dt_s: Some(r.dt_s),
             };
-            let (res, trace) = simulate_blow_sensor(&plant, r.v0_mps, &opts).ok()?;
+            // The blow ends a window after the model's alignment crossing (the last sample
+            // compared), never before the contact opens (`TraceEnd`).
+            let end = TraceEnd { threshold_n: ALIGN_FRACTION * r.peak_n, after_s: r.duration_s() - r.t_align_s };
+            let (res, trace) = simulate_blow_sensor_until(&plant, r.v0_mps, &opts, end).ok()?;
             h = res.forming.map(|f| f.h_end_m).or(h);
             let threshold = ALIGN_FRACTION * r.peak_n;
             // The first sample at or above the threshold (the damper's share of the load
