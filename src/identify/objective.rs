@@ -483,10 +483,10 @@ impl Objective {
             };
             // The blow ends a window after the model's alignment crossing (the last sample
             // compared), never before the contact opens (`TraceEnd`).
-            let end = TraceEnd { threshold_n: ALIGN_FRACTION * r.peak_n, after_s: r.duration_s() - r.t_align_s };
+            let threshold = ALIGN_FRACTION * r.peak_n;
+            let end = TraceEnd { threshold_n: threshold, after_s: r.duration_s() - r.t_align_s };
             let (res, trace) = simulate_blow_sensor_until(&plant, r.v0_mps, &opts, end).ok()?;
             h = res.forming.map(|f| f.h_end_m).or(h);
-            let threshold = ALIGN_FRACTION * r.peak_n;
             // The first sample at or above the threshold (the damper's share of the load
             // jumps at first contact, so it may be the very first).
             let t_cross = match trace.iter().position(|&x| x >= threshold) {
