@@ -247,7 +247,8 @@ impl Estimator {
     /// A billet's first blow: its height is the sheet's unless the encoder's (the die
     /// reference less the contact) differs by more than the measurement; the first billet
     /// teaches the die reference, unless it is configured (`encoder_at_die_m`): then the
-    /// encoder's height is always taken, and becomes the billet's own (`billet_process`). Returns the encoder's height less the sheet's when reported.
+    /// encoder's height is always taken, and becomes the billet's own (`billet_process`).
+    /// Returns the encoder's height less the sheet's when reported.
     fn first_blow_height(&mut self, x_contact_m: f64, tolerance_m: f64) -> Option<f64> {
         let nominal_m = self.process.as_ref()?.billet.height_m;
         let Some(die_x_m) = self.die_x_m else {

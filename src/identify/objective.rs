@@ -13,6 +13,7 @@
 //! 10 % of the measured peak (interpolated between samples), so neither the segmenter's
 //! contact sample nor a few samples of trigger jitter enter the fit.
 
+use crate::estimate::approach::ApproachFit;
 use crate::identify::model::default_prior;
 use crate::physics::blow::{SimOptions, TraceEnd, simulate_blow_sensor_until};
 use crate::physics::effects::EffectSet;
@@ -139,23 +140,23 @@ pub struct Reference {
 }
 
 /// The ram's approach as the encoder shows it: the parabola fitted before the load's
-/// contact sample (`estimate::approach::ApproachFit`), on the reference window's clock.
+/// contact sample, and that sample's instant, s from the reference window's start.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EncoderApproach {
-    /// The reading at the load's contact sample, m.
-    pub x_m: f64,
-    /// That sample's instant, s from the window's start.
+    pub fit: ApproachFit,
     pub t_s: f64,
-    pub v_mps: f64,
-    pub acc_mps2: f64,
 }
 
 impl EncoderApproach {
-    /// The reading the ram would show at `t_s` (window clock) on its approach's parabola:
-    /// where it met the billet, when `t_s` is the first contact.
+    /// The reading the ram would show at `t_s` (window clock) on its approach's parabola
+    /// (`ApproachFit::at`): where it met the billet, when `t_s` is the first contact.
     pub fn at(&self, t_s: f64) -> f64 {
-        let tau = t_s - self.t_s;
-        self.x_m + self.v_mps * tau + 0.5 * self.acc_mps2 * tau * tau
+        self.fit.at(t_s - self.t_s).x_contact_m
+    }
+
+    /// The reading at the load's contact sample, m.
+    pub fn x_m(&self) -> f64 {
+        self.fit.x_contact_m
     }
 }
 
@@ -196,13 +197,8 @@ impl Reference {
             peak_n: peak,
             blow_index,
             t_ram_contact_s: ram_contact(blow).map(|t| t - start as f64 * dt),
-            approach: Some(EncoderApproach {
-                x_m: approach.x_contact_m,
-                t_s: (blow.i_contact as f64 - start as f64) * dt,
-                v_mps: approach.v_impact_mps,
-                acc_mps2: approach.acc_mps2,
-            })
-            .filter(|a| a.x_m.is_finite() && a.acc_mps2.is_finite()),
+            approach: Some(EncoderApproach { fit: approach, t_s: (blow.i_contact as f64 - start as f64) * dt })
+                .filter(|a| a.fit.x_contact_m.is_finite() && a.fit.acc_mps2.is_finite()),
         })
     }
 
@@ -466,7 +462,7 @@ impl Objective {
                     let measured = !p.measured_final_heights_m.is_empty();
                     let encoder = match (self.heights, prev, r.approach) {
                         (Heights::Encoder, Some((k, h_prev, Some(x_prev))), Some(a)) if measured && k + 1 == n => {
-                            chained_height((h_prev, x_prev), a.x_m, contact_tolerance_m(r))
+                            chained_height((h_prev, x_prev), a.x_m(), contact_tolerance_m(r))
                         }
                         _ => None,
                     };
@@ -507,7 +503,7 @@ impl Objective {
                 // The encoder's reading where the model met the billet, and the height there:
                 // a chained start was taken at the load's contact sample, which a load rising
                 // from nothing (a fresh billet's first blow) reaches late.
-                let touch = r.approach.map(|a| (a.at(on_window(0.0)), a.x_m));
+                let touch = r.approach.map(|a| (a.at(on_window(0.0)), a.x_m()));
                 let h_touch = match touch {
                     Some((x_touch, x_sample)) if chained => h0 - (x_touch - x_sample),
                     _ => h0,

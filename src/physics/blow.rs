@@ -162,12 +162,7 @@ pub fn simulate_blow_sensor(
     v0_mps: f64,
     opts: &SimOptions,
 ) -> Result<(BlowResult, Vec<f64>), BlowError> {
-    let (res, trace) = run(plant, v0_mps, opts, 0.0, Trace::Sensor(Vec::new()), Path::Exact)?;
-    let sensor = match trace {
-        Trace::Sensor(v) => v,
-        Trace::Outputs(v) => v.iter().map(|p| p.out.sensor_n).collect(),
-    };
-    Ok((res, sensor))
+    sensor_run(plant, v0_mps, opts, None)
 }
 
 /// `simulate_blow_sensor` ending at `end` instead of `opts.post_s` after the contact opens
@@ -181,7 +176,17 @@ pub fn simulate_blow_sensor_until(
     opts: &SimOptions,
     end: TraceEnd,
 ) -> Result<(BlowResult, Vec<f64>), BlowError> {
-    let (res, trace) = run_until(plant, v0_mps, opts, 0.0, Trace::Sensor(Vec::new()), Path::Exact, Some(end))?;
+    sensor_run(plant, v0_mps, opts, Some(end))
+}
+
+/// The fits' sensor-only blow (`Path::Exact`), to `end` when given.
+fn sensor_run(
+    plant: &Plant,
+    v0_mps: f64,
+    opts: &SimOptions,
+    end: Option<TraceEnd>,
+) -> Result<(BlowResult, Vec<f64>), BlowError> {
+    let (res, trace) = run_until(plant, v0_mps, opts, 0.0, Trace::Sensor(Vec::new()), Path::Exact, end)?;
     let sensor = match trace {
         Trace::Sensor(v) => v,
         Trace::Outputs(v) => v.iter().map(|p| p.out.sensor_n).collect(),
