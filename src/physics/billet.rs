@@ -234,10 +234,40 @@ pub fn friction_factor(a: f64) -> f64 {
     if a < SMALL_A { 1.0 + a / 3.0 + a * a / 12.0 } else { 2.0 / a * (a.exp_m1() / a - 1.0) }
 }
 
-/// `friction_factor` with one reciprocal of `A` instead of two divisions (within a few ulp).
+/// Largest `A` at which `friction_factor_fast` sums eq. 3's series instead of calling
+/// `expm1`: its first left-out term, `2 A^17 / 19!`, is 1.6e-17 of the sum here (below half
+/// an ulp), and A stays below it until a billet is flattened to `h < 2 mu r` (A = 2 mu r / h).
+const SERIES_MAX_A: f64 = 1.0;
+
+/// `2 / (n + 2)!`, n = 0..=16: eq. 3's factor as a power series in `A`,
+/// `(2/A) ((e^A - 1)/A - 1) = sum 2 A^n / (n + 2)!`.
+const SERIES: [f64; 17] = {
+    let mut c = [0.0; 17];
+    let mut fact = 2.0; // (n + 2)!
+    let mut n = 0;
+    while n < 17 {
+        c[n] = 2.0 / fact;
+        fact *= (n + 3) as f64;
+        n += 1;
+    }
+    c
+};
+
+/// `friction_factor` as the fits' hot path evaluates it (`load_fast`): up to
+/// `SERIES_MAX_A`, the series' polynomial by Estrin's scheme (all terms positive, so no
+/// cancellation: a few ulp, where `friction_factor`'s `(e^A - 1)/A - 1` cancels to about
+/// `A/2` and loses `2/A` ulps), with no call to `expm1` and no division; above it, one
+/// reciprocal of `A` instead of two divisions (within a few ulp).
 fn friction_factor_fast(a: f64) -> f64 {
-    if a < SMALL_A {
-        1.0 + a / 3.0 + a * a / 12.0
+    if a <= SERIES_MAX_A {
+        let c = &SERIES;
+        let a2 = a * a;
+        let a4 = a2 * a2;
+        let a8 = a4 * a4;
+        let pair = |i: usize| c[i] + c[i + 1] * a;
+        let quad = |i: usize| pair(i) + a2 * pair(i + 2);
+        let oct = |i: usize| quad(i) + a4 * quad(i + 4);
+        (oct(0) + a8 * oct(8)) + (a8 * a8) * c[16]
     } else {
         let inv_a = 1.0 / a;
         2.0 * inv_a * (a.exp_m1() * inv_a - 1.0)
@@ -311,10 +341,36 @@ mod tests {
                 }
             }
         }
-        for a in [0.0, 1e-7, 2e-6, 0.01, 0.5, 3.0] {
+        for a in [0.0, 1e-7, 2e-6, 0.01, 0.5, SERIES_MAX_A, SERIES_MAX_A * (1.0 + 1e-12), 3.0] {
             let (f, l) = (friction_factor_fast(a), friction_factor(a));
             assert!((f / l - 1.0).abs() <= ulps(a.max(SMALL_A)), "A {a}: {f} vs {l}");
         }
+    }
+
+    #[test]
+    fn the_fast_friction_factor_sums_the_series_to_a_few_ulp() {
+        // Another path to eq. 3's factor: its series summed term by term in long double's
+        // stead (smallest first, 40 terms, each by its own factorial), which is exact to
+        // about an ulp for A in [0, 1]; the Estrin polynomial must agree within 4 ulps
+        // (its own rounding, every term positive). Across the switch to `expm1` at
+        // `SERIES_MAX_A`, the two forms agree within `friction_factor`'s own 2/A ulps of
+        // cancellation (`the_fast_load_is_the_law_within_a_few_ulp`).
+        let series = |a: f64| {
+            let terms: Vec<f64> = (0..40)
+                .map(|n| {
+                    let fact: f64 = (1..=n + 2).map(f64::from).product();
+                    2.0 * a.powi(n) / fact
+                })
+                .collect();
+            terms.iter().rev().sum::<f64>()
+        };
+        for i in 0..=2000 {
+            let a = SERIES_MAX_A * f64::from(i) / 2000.0;
+            let (f, s) = (friction_factor_fast(a), series(a));
+            assert!((f / s - 1.0).abs() <= 4.0 * f64::EPSILON, "A {a}: {f} vs {s}");
+        }
+        let (below, above) = (friction_factor_fast(SERIES_MAX_A), friction_factor_fast(SERIES_MAX_A + 1e-15));
+        assert!((above / below - 1.0).abs() <= 16.0 * f64::EPSILON * 3.0, "{below} vs {above}");
     }
 
     #[test]

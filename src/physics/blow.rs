@@ -186,7 +186,14 @@ fn sensor_run(
     opts: &SimOptions,
     end: Option<TraceEnd>,
 ) -> Result<(BlowResult, Vec<f64>), BlowError> {
-    let (res, trace) = run_until(plant, v0_mps, opts, 0.0, Trace::Sensor(Vec::new()), Path::Exact, end)?;
+    // Room for the post window's samples (a fit's whole window, at least), so that the
+    // trace is not moved as it grows; at most a million.
+    let room = match opts.trace_dt_s {
+        Some(dt) if dt > 0.0 && (opts.post_s / dt).is_finite() => (opts.post_s / dt).clamp(0.0, 1e6) as usize + 2,
+        _ => 0,
+    };
+    let trace = Trace::Sensor(Vec::with_capacity(room));
+    let (res, trace) = run_until(plant, v0_mps, opts, 0.0, trace, Path::Exact, end)?;
     let sensor = match trace {
         Trace::Sensor(v) => v,
         Trace::Outputs(v) => v.iter().map(|p| p.out.sensor_n).collect(),
