@@ -298,17 +298,19 @@ impl BaseHammer<'_> {
         let h_m = self.plant.h_start_m - y[BP];
         let ddelta_mps = y[BVU] - y[BVL];
         let support_n = self.support_n(y);
-        let (mut contact_n, mut p_rate_mps, mut frictionless_share) = (0.0, 0.0, 1.0);
+        // The contact load and its frictionless part, whose rates of work split the plastic
+        // work as `rhs_general`'s share does (`work * frictionless / total`), without its
+        // division.
+        let (mut contact_n, mut frictionless_n, mut p_rate_mps) = (0.0, 0.0, 0.0);
         match mode.contact {
             Contact::Free | Contact::Elastic => {}
             Contact::Stuck => contact_n = self.stick_n(support_n),
             Contact::Plastic => {
                 let inv_h = 1.0 / h_m;
                 let l = self.law.load_fast(h_m, inv_h, ddelta_mps.max(0.0) * inv_h);
-                if l.total_n.is_finite() && l.total_n > 0.0 {
-                    frictionless_share = l.frictionless_n / l.total_n;
-                }
                 contact_n = l.total_n;
+                // `rhs_general`'s share of 1 where the load is not finite and positive.
+                frictionless_n = if l.total_n.is_finite() && l.total_n > 0.0 { l.frictionless_n } else { l.total_n };
                 p_rate_mps = ddelta_mps;
             }
         }
@@ -319,9 +321,8 @@ impl BaseHammer<'_> {
         dy[BL] = y[BVL];
         dy[BVL] = acc_lower;
         dy[BP] = p_rate_mps;
-        let work = contact_n * p_rate_mps;
-        dy[BWP] = work * frictionless_share;
-        dy[BWF] = work * (1.0 - frictionless_share);
+        dy[BWP] = frictionless_n * p_rate_mps;
+        dy[BWF] = (contact_n - frictionless_n) * p_rate_mps;
         dy[BWD] = self.c_ns_per_m * y[BVL] * y[BVL];
     }
 }
