@@ -349,10 +349,10 @@ mod tests {
 
     #[test]
     fn the_fast_friction_factor_sums_the_series_to_a_few_ulp() {
-        // Another path to eq. 3's factor: its series summed term by term in long double's
-        // stead (smallest first, 40 terms, each by its own factorial), which is exact to
-        // about an ulp for A in [0, 1]; the Estrin polynomial must agree within 4 ulps
-        // (its own rounding, every term positive). Across the switch to `expm1` at
+        // Another path to eq. 3's factor: its series summed term by term (40 terms, each
+        // with its own power and factorial, added smallest first), accurate to about an ulp
+        // for A in [0, 1]; the Estrin polynomial must agree within 4 ulps (its own
+        // rounding, every term positive). Across the switch to `expm1` at
         // `SERIES_MAX_A`, the two forms agree within `friction_factor`'s own 2/A ulps of
         // cancellation (`the_fast_load_is_the_law_within_a_few_ulp`).
         let series = |a: f64| {
