@@ -57,8 +57,8 @@ fn parts(dir: &std::path::Path, foxglove: std::net::SocketAddr) -> ServiceParts 
 }
 
 /// Connect with a small receive buffer (so the socket soaks up little), read the server's
-/// JSON until `/samples/daq` is advertised, subscribe to every channel, and return the
-/// connection unread.
+/// JSON until `/samples/daq` is advertised, subscribe to every channel, wait until the server
+/// has applied the subscription, and return the connection unread from then on.
 async fn subscribe_then_stall(addr: std::net::SocketAddr) -> tokio_tungstenite::WebSocketStream<tokio::net::TcpStream> {
     let mut tries = 0;
     let stream = loop {
@@ -94,6 +94,21 @@ async fn subscribe_then_stall(addr: std::net::SocketAddr) -> tokio_tungstenite::
     let subs: Vec<_> = ids.iter().map(|(id, _)| serde_json::json!({"id": id, "channelId": id})).collect();
     let msg = serde_json::json!({"op": "subscribe", "subscriptions": subs}).to_string();
     ws.send(Message::text(msg)).await.expect("subscribe");
+    // The protocol acknowledges no subscription, but the server applies a connection's
+    // messages in order: the status refusing to unsubscribe an id never used comes back once
+    // the subscription is in place. Only then may the feed go on: when it went on as soon as
+    // the subscription was sent, a CI run on a loaded machine published 17 batches before the
+    // server applied it (1183 of 1200 queued for this client).
+    let probe = serde_json::json!({"op": "unsubscribe", "subscriptionIds": [u32::MAX]}).to_string();
+    ws.send(Message::text(probe)).await.expect("probe");
+    loop {
+        let frame = ws.next().await.expect("a frame").expect("a good frame");
+        let Message::Text(text) = frame else { continue };
+        let v: serde_json::Value = serde_json::from_str(text.as_str()).expect("JSON");
+        if v["op"] == "status" && v["message"].as_str().is_some_and(|m| m.contains("no such subscription")) {
+            break;
+        }
+    }
     ws
 }
 
