@@ -1,0 +1,71 @@
+//! Uniformly sampled signals, shifted and smoothed on their own step: a fit's simulated
+//! trace read at the measured samples (`shifted`), and the centred moving average of the
+//! envelope fidelity (`moving_average`). Pure code.
+
+/// Centred moving average over `w` samples (shorter at the ends).
+pub fn moving_average(v: &[f64], w: usize) -> Vec<f64> {
+    let n = v.len();
+    let half = w / 2;
+    let mut prefix = Vec::with_capacity(n + 1);
+    prefix.push(0.0);
+    for x in v {
+        prefix.push(prefix.last().copied().unwrap_or(0.0) + x);
+    }
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(half), (i + w - half).min(n));
+            (prefix[b] - prefix[a]) / (b - a) as f64
+        })
+        .collect()
+}
+
+/// `n` samples of `v` linearly interpolated at the indices `i + shift` (0 before the first,
+/// the last value after): one fractional part for all, so one floor in all.
+pub fn shifted(v: &[f64], n: usize, shift: f64) -> Vec<f64> {
+    let (Some(&last), true) = (v.last(), shift.is_finite()) else { return vec![0.0; n] };
+    // Far beyond the trace either way, every sample is a constant; the clamp keeps the
+    // integer arithmetic in range.
+    let bound = (v.len() + n + 1) as f64;
+    let k_f = shift.floor().clamp(-bound, bound);
+    let f = if k_f == shift.floor() { shift - k_f } else { 0.0 };
+    let k = k_f as i64;
+    (0..n as i64)
+        .map(|i| match usize::try_from(i + k) {
+            Err(_) => 0.0,
+            Ok(j) if j + 1 >= v.len() => last,
+            Ok(j) => v[j] * (1.0 - f) + v[j + 1] * f,
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_shifted_trace_is_the_trace_interpolated_at_each_shifted_index() {
+        // Another path: each sample's own index, its own floor and fraction.
+        let at = |v: &[f64], x: f64| {
+            if x < 0.0 {
+                return 0.0;
+            }
+            let i = x.floor() as usize;
+            if i + 1 >= v.len() { v[v.len() - 1] } else { v[i] * (1.0 - (x - i as f64)) + v[i + 1] * (x - i as f64) }
+        };
+        let v: Vec<f64> = (0..50).map(|i| (f64::from(i) * 0.37).sin() * 1e6).collect();
+        for shift in [0.0, 0.25, -0.25, -3.75, 7.5, 48.6, -70.2, 120.0] {
+            let got = shifted(&v, 60, shift);
+            assert_eq!(got.len(), 60);
+            for (i, g) in got.iter().enumerate() {
+                // The fraction rounds once here and once per sample there: within 1e-9 of
+                // the 1e6 N scale.
+                let want = at(&v, i as f64 + shift);
+                assert!((g - want).abs() <= 1e-9 * 1e6, "shift {shift}, sample {i}: {g} vs {want}");
+            }
+        }
+        assert_eq!(shifted(&[], 3, 0.5), vec![0.0; 3]);
+        assert_eq!(shifted(&v, 2, f64::NAN), vec![0.0; 2]);
+        assert_eq!(shifted(&v, 2, 1e300), vec![v[49]; 2]);
+        assert_eq!(shifted(&v, 2, -1e300), vec![0.0; 2]);
+    }
+}
