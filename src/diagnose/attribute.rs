@@ -284,7 +284,7 @@ impl BlowSet {
                 let Some(((m2, p), n)) = pushed.zip(r.blow_index) else { return Some(ram) };
                 let h = n.checked_sub(2).and_then(|k| p.measured_final_heights_m.get(k).copied());
                 let h = h.unwrap_or(p.billet.height_m);
-                let law = BilletLaw::new(p.billet.clone(), p.material.clone(), p.friction, LoadEffects::NEUTRAL, n);
+                let law = BilletLaw::of(p, LoadEffects::NEUTRAL, n);
                 let f = law.load(h, v0 / h).total_n;
                 if !(f.is_finite() && f > 0.0) {
                     return Some(ram);

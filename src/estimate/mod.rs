@@ -425,7 +425,7 @@ impl Estimator {
     fn locate_contact(&self, blow: &Blow, v0_mps: f64, h_m: Option<f64>) -> f64 {
         let law = self.billet_process.as_ref().map(|p| {
             let n = self.billet_blows + 1;
-            BilletLaw::new(p.billet.clone(), p.material.clone(), p.friction, LoadEffects::NEUTRAL, n)
+            BilletLaw::of(p, LoadEffects::NEUTRAL, n)
         });
         let rise = law
             .as_ref()
@@ -542,8 +542,7 @@ impl Estimator {
         let max_comp = o.set_m.max(0.0) + before_m;
         let (plastic_j, friction_j, h_end_m) = match (&self.billet_process, h_start_m) {
             (Some(p), Some(h0)) => {
-                let law =
-                    BilletLaw::new(p.billet.clone(), p.material.clone(), p.friction, LoadEffects::NEUTRAL, n as usize);
+                let law = BilletLaw::of(p, LoadEffects::NEUTRAL, n as usize);
                 let (mut plastic, mut friction) = (0.0, 0.0);
                 let mut h_min = h0;
                 for (comp, dw) in o.compression_m.iter().zip(&o.work_j) {

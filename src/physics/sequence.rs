@@ -21,7 +21,7 @@ pub struct SequenceError {
 
 /// The plant of blow `blow` (1-based) starting at height `h_start_m`.
 pub fn blow_plant(machine: &Machine, effects: &EffectSet, process: &Process, blow: usize, h_start_m: f64) -> Plant {
-    let law = BilletLaw::new(process.billet.clone(), process.material.clone(), process.friction, effects.load, blow);
+    let law = BilletLaw::of(process, effects.load, blow);
     Plant::new(machine, effects, Some(law), h_start_m)
 }
 
