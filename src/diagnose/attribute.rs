@@ -383,7 +383,8 @@ pub fn fit_candidates(
         points = points.into_iter().flat_map(|pt| axis.iter().map(move |v| [pt.clone(), v.clone()].concat())).collect();
     }
     use rayon::prelude::*;
-    let mut costs: Vec<f64> = points.par_iter().map(|v| cost(v)).collect();
+    let mut known = Costed::default();
+    let mut costs = known.costs(&points, &cost);
     // The global stage's second step: each fine-scanned parameter over its whole range,
     // the others at each of the best grid points.
     let fine = fine_points(
@@ -392,7 +393,7 @@ pub fn fit_candidates(
         held.len(),
         &best(&costs, GRID_STARTS).map(|i| points[i].clone()).collect::<Vec<_>>(),
     );
-    costs.extend(fine.par_iter().map(|v| cost(v)).collect::<Vec<_>>());
+    costs.extend(known.costs(&fine, &cost));
     points.extend(fine);
     // And the gaps the measured closure shows, the others again at the best grid points.
     let closure = closure_points(
@@ -402,7 +403,7 @@ pub fn fit_candidates(
         machine,
         &best(&costs, GRID_STARTS).map(|i| points[i].clone()).collect::<Vec<_>>(),
     );
-    costs.extend(closure.par_iter().map(|v| cost(v)).collect::<Vec<_>>());
+    costs.extend(known.costs(&closure, &cost));
     points.extend(closure);
     // Levenberg–Marquardt from the best few points (the costs have several valleys),
     // keeping the best.
@@ -412,7 +413,15 @@ pub fn fit_candidates(
     };
     // The starts in parallel: once the quick candidates are done, the slowest one's
     // searches would otherwise run one after the other on a core each.
-    let starts: Vec<usize> = best(&costs, GRID_STARTS).collect();
+    // A start that repeats an earlier one (a point the scans reached twice) would repeat its
+    // search to the bit.
+    let mut starts: Vec<usize> = best(&costs, GRID_STARTS).collect();
+    let mut seen = Vec::new();
+    starts.retain(|&i| {
+        let fresh = !seen.contains(&bits(&points[i]));
+        seen.push(bits(&points[i]));
+        fresh
+    });
     let mut start = starts.par_iter().map(|i| local(&points[*i], costs[*i])).min_by(|a, b| a.0.total_cmp(&b.0))?;
     // The fine scan again, the other parameters as fitted: a clearance's gap is a shallow
     // valley along which the local search stalls once the die's mass (a sharp one) is
@@ -421,7 +430,7 @@ pub fn fit_candidates(
     let again = fine_points(cands, &params, held.len(), std::slice::from_ref(&start.1));
     if !again.is_empty() {
         let k = points.len();
-        costs.extend(again.par_iter().map(|v| cost(v)).collect::<Vec<_>>());
+        costs.extend(known.costs(&again, &cost));
         points.extend(again);
         let i = best(&costs[k..], 1).next().map_or(k, |i| i + k);
         if costs[i] < start.0 {
@@ -444,6 +453,39 @@ pub fn fit_candidates(
         holdout: mean(&hold_n),
         holdout_per_blow: hold_n,
     })
+}
+
+/// The costs the global stage has evaluated, by point. The fine and closure scans around
+/// several grid points repeat each other where the scanned gap is its candidate's only free
+/// parameter (a hammer's clearance, alone or as a pair's second effect: 3 × 60 + 3 × 7
+/// points, 67 of them distinct, and the scan after the local search all repeats): a point
+/// already costed takes its cost again instead of another simulation of every calibration
+/// blow. The cost is a function of the point alone, so nothing else changes.
+#[derive(Default)]
+struct Costed(std::collections::HashMap<Vec<u64>, f64>);
+
+impl Costed {
+    /// The cost of each of `points`, in order; each new distinct point evaluated once, in
+    /// parallel.
+    fn costs(&mut self, points: &[Vec<f64>], cost: &(dyn Fn(&[f64]) -> f64 + Sync)) -> Vec<f64> {
+        use rayon::prelude::*;
+        let mut queued = std::collections::HashSet::new();
+        let fresh: Vec<(Vec<u64>, &Vec<f64>)> = points
+            .iter()
+            .map(|p| (bits(p), p))
+            .filter(|(key, _)| !self.0.contains_key(key) && queued.insert(key.clone()))
+            .collect();
+        let new: Vec<f64> = fresh.par_iter().map(|(_, v)| cost(v)).collect();
+        for ((key, _), c) in fresh.into_iter().zip(new) {
+            self.0.insert(key, c);
+        }
+        points.iter().map(|p| self.0[&bits(p)]).collect()
+    }
+}
+
+/// A point's coordinates to the bit, as a key (distinct NaNs are distinct points).
+fn bits(point: &[f64]) -> Vec<u64> {
+    point.iter().map(|x| x.to_bits()).collect()
 }
 
 /// Whether a pair (`cands[0]` at `held`, plus another) cannot pass the verdict's pair rule
@@ -532,4 +574,36 @@ fn closure_points(
 
 pub fn mean(v: &[f64]) -> f64 {
     if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    #[test]
+    fn a_point_costed_once_keeps_its_cost_and_is_not_costed_again() {
+        // The scans as a one-parameter clearance makes them: the same fine points around
+        // three grid points, then again around the fitted one, with NaN and -0.0 among them
+        // (kept apart from 0.0 and from each other by their bits: a key, not a comparison).
+        let calls = AtomicUsize::new(0);
+        let cost = |v: &[f64]| {
+            calls.fetch_add(1, Ordering::Relaxed);
+            v.iter().map(|x| (x - 0.3).powi(2)).sum::<f64>()
+        };
+        let line: Vec<Vec<f64>> = (0..60).map(|i| vec![1e-6 * 1.15f64.powi(i)]).collect();
+        let mut known = Costed::default();
+        let mut all = Vec::new();
+        for _ in 0..3 {
+            all.extend(known.costs(&line, &cost));
+        }
+        assert_eq!(calls.load(Ordering::Relaxed), 60);
+        let odd = vec![vec![f64::NAN], vec![-0.0], vec![0.0], vec![f64::NAN], line[7].clone()];
+        let got = known.costs(&odd, &cost);
+        assert_eq!(calls.load(Ordering::Relaxed), 63, "NaN, -0.0 and 0.0 once each; line[7] known");
+        // Every cost is the cost function's own value at that point, in the points' order.
+        for (p, c) in line.iter().cycle().zip(&all).chain(odd.iter().zip(&got)) {
+            assert_eq!(c.to_bits(), cost(p).to_bits(), "{p:?}");
+        }
+    }
 }
