@@ -475,18 +475,23 @@ mod tests {
                 g[0], g[1], g[2], g[3], g[4]
             );
             for i in 0..5 {
-                // The exact phases add no error of their own: what is left is the plastic
-                // phases' Dormand–Prince error, which both paths share (1.5x leaves room for
-                // it to be redistributed by the phases' slightly different switch instants).
+                // The exact phases add no error of their own, and the plastic phases'
+                // exponential steps (`BaseHammer`'s `etd`) follow the lower tool's ringing
+                // exactly, so the height, the instants, the loads and the sensor are at least
+                // as close as the general plant's Dormand–Prince (1.5x leaves room for the
+                // phases' slightly different switch instants). Not the works: their rates
+                // ring (c v², F (v_u - v_l)) and those steps integrate them as RK4 does, so
+                // the ledger is held to the physical bound alone, at every tolerance.
+                if i == 3 {
+                    assert!(e[3] <= physical[3], "energy: {:e} (general {:e})", e[3], g[3]);
+                    continue;
+                }
                 assert!(e[i] <= 1.5 * g[i] + floor[i], "quantity {i}: exact {:e} vs general {:e}", e[i], g[i]);
                 if at_fits {
                     assert!(e[i] <= physical[i], "quantity {i}: {:e} at the fits' tolerance", e[i]);
                 }
             }
-            assert!(ce <= 1.5 * cg + 1e-8, "ledger closure {ce:e} vs {cg:e}");
-            if at_fits {
-                assert!(ce <= 1e-5, "ledger closure {ce:e}");
-            }
+            assert!(ce <= 1e-5, "ledger closure {ce:e} (general {cg:e})");
         }
     }
 
@@ -619,7 +624,45 @@ mod tests {
         let (full, _) = run(&plant, 3.9, &opts, 0.0, Trace::Outputs(Vec::new()), Path::Exact).unwrap();
         let (res, sensor) = simulate_blow_sensor(&plant, 3.9, &opts).unwrap();
         assert!(res.stats.exact_steps > 0, "{:?}", res.stats);
+        assert!(res.stats.etd_steps > 0, "{:?}", res.stats);
         assert_eq!(sensor, full.trace.iter().map(|p| p.out.sensor_n).collect::<Vec<_>>());
         assert_eq!(res, BlowResult { trace: Vec::new(), ..full });
+    }
+
+    #[test]
+    fn the_fits_plastic_flow_takes_exponential_steps_where_they_hold() {
+        // The fits' options on the two hammers (seed 000 §3.2's 3.9 m/s; the suite's 4 m/s):
+        // their plastic flow takes exponential steps, at well under half the evaluations of
+        // Dormand–Prince on the same plant (issue 17's blow; the studied 3.3x is
+        // `benches/plastic_integrators.py`'s, on the first plastic phase alone).
+        let fits =
+            SimOptions { method: Method::Dopri5 { rtol: 1e-6 }, trace_dt_s: Some(1e-5), ..SimOptions::default() };
+        let small = machine("kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n");
+        for (m, v0) in [(paper_hammer(), 3.9), (small, 4.0)] {
+            let plant = blow_plant(&m, &EffectSet::NONE, &steel(), 1, 0.112);
+            let outputs = || Trace::Outputs(Vec::new());
+            let (etd, _) = run(&plant, v0, &fits, 0.0, outputs(), Path::Exact).unwrap();
+            let (dopri, _) = run(&plant, v0, &fits, 0.0, outputs(), Path::Specialised).unwrap();
+            assert!(etd.stats.etd_steps > 50, "{:?}", etd.stats);
+            assert!(2 * etd.stats.rhs_evals < dopri.stats.rhs_evals, "{:?} vs {:?}", etd.stats, dopri.stats);
+        }
+        // A rate-dependent law (the `strain_rate` effect, whose damping near the end of flow,
+        // m F / h', is not in the linear part) takes none.
+        let plant = blow_plant(&paper_hammer(), &effects("strain_rate:m=0.15"), &steel(), 1, 0.112);
+        let (res, _) = simulate_blow_sensor(&plant, 3.9, &fits).unwrap();
+        assert_eq!(res.stats.etd_steps, 0, "{:?}", res.stats);
+        // Asked for 1e-9, most steps' error estimates exceed it: Dormand–Prince takes those
+        // spans (114 of 137 here), and the final height follows the tolerance, within 1e-10 m
+        // of the general plant at 1e-10 (8e-11 m: the estimate is not a bound, and the 23
+        // spans it let through leave more than Dormand–Prince's own 1.8e-12 m; at the fits'
+        // 1e-6 the errors are held to what a capture cannot see by the tests above).
+        let tight = SimOptions { method: Method::Dopri5 { rtol: 1e-9 }, ..fits };
+        let converged = SimOptions { method: Method::Dopri5 { rtol: 1e-10 }, ..fits };
+        let plant = blow_plant(&paper_hammer(), &EffectSet::NONE, &steel(), 1, 0.112);
+        let (res, _) = simulate_blow_sensor(&plant, 3.9, &tight).unwrap();
+        let reference = simulate_blow(&plant, 3.9, &converged).unwrap();
+        assert!(res.stats.rejected > 10, "{:?}", res.stats);
+        let dh = (res.forming.unwrap().h_end_m - reference.forming.unwrap().h_end_m).abs();
+        assert!(dh < 1e-10, "{dh:e} m, {:?}", res.stats);
     }
 }

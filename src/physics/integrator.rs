@@ -7,13 +7,21 @@
 //! the step's cubic Hermite interpolant, then reached exactly with one more RK step before
 //! the mode changes. A phase whose vector field is linear may instead be advanced by its
 //! exact flow (`Hybrid::exact_grid`, `Hybrid::advance`) in steps that end on a fixed grid
-//! (the trace's samples), its switches located on that flow. A fixed-step classical RK4
-//! runs through the same driver as the reference the tests compare against.
+//! (the trace's samples), its switches located on that flow. A mode with a linear part
+//! and a slowly varying rest may take exponential steps from that grid's points, each
+//! spanning several (`Hybrid::etd_grid`, `Hybrid::etd_step`); one whose error estimate
+//! exceeds 1, or in which a guard fires, is not taken, and Dormand–Prince takes its span,
+//! its steps ending on the grid. A fixed-step classical RK4 runs through the same driver as
+//! the reference the tests compare against.
 
 use std::fmt::Debug;
 
+mod grid;
+mod guards;
 mod steppers;
 
+pub use grid::Grid;
+pub use guards::{Crossing, Guards};
 use steppers::{Workspace, take_step};
 
 /// Most guards (switching functions) a mode may arm at once.
@@ -30,97 +38,6 @@ const ROOT_STALL: u8 = 3;
 const SAFETY: f64 = 0.9;
 const MAX_GROWTH: f64 = 5.0;
 const MIN_SHRINK: f64 = 0.2;
-/// An instant within this fraction of a grid step of a grid point is on it: the next exact
-/// step is a whole one (its propagator precomputed), the time error at most this fraction of
-/// the step (1e-14 s on a 10 µs grid).
-const GRID_SNAP: f64 = 1e-9;
-
-/// The instants `t0_s + k dt_s` (k integer) at which the exact steps of a linear phase end.
-/// A step from a grid point spans `points` of them (`span_s`); a step from elsewhere ends at
-/// the next one.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Grid {
-    pub t0_s: f64,
-    pub dt_s: f64,
-    pub points: u32,
-}
-
-impl Grid {
-    /// Length of a step from a grid point, s (computed here only, so that it compares equal).
-    pub fn span_s(&self) -> f64 {
-        self.dt_s * f64::from(self.points)
-    }
-
-    /// Whether `t_s` is a grid point (within `GRID_SNAP` of a step), and its index.
-    pub fn on_grid(&self, t_s: f64) -> Option<f64> {
-        let k = (t_s - self.t0_s) / self.dt_s;
-        let k_near = k.round();
-        ((k - k_near).abs() <= GRID_SNAP).then_some(k_near)
-    }
-
-    /// The step from `t_s`: its length and its end. From a grid point (within `GRID_SNAP`)
-    /// the length is `span_s()` exactly.
-    fn next_step(&self, t_s: f64) -> (f64, f64) {
-        if let Some(k) = self.on_grid(t_s) {
-            (self.span_s(), self.t0_s + (k + f64::from(self.points)) * self.dt_s)
-        } else {
-            let k = (t_s - self.t0_s) / self.dt_s;
-            let t_next = self.t0_s + (k.floor() + 1.0) * self.dt_s;
-            (t_next - t_s, t_next)
-        }
-    }
-}
-
-/// Which sign change of a guard counts as its event.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Crossing {
-    /// From non-positive to strictly positive.
-    Rising,
-    /// From non-negative to strictly negative.
-    Falling,
-}
-
-/// The switching functions armed in one mode.
-#[derive(Debug, Clone, Copy)]
-pub struct Guards {
-    pub value: [f64; MAX_GUARDS],
-    pub crossing: [Crossing; MAX_GUARDS],
-    /// Caller-defined identity of each guard, handed back in `on_event`.
-    pub id: [u8; MAX_GUARDS],
-    pub len: usize,
-}
-
-impl Guards {
-    pub fn new() -> Self {
-        Guards { value: [0.0; MAX_GUARDS], crossing: [Crossing::Rising; MAX_GUARDS], id: [0; MAX_GUARDS], len: 0 }
-    }
-
-    pub fn push(&mut self, id: u8, value: f64, crossing: Crossing) {
-        debug_assert!(self.len < MAX_GUARDS);
-        self.value[self.len] = value;
-        self.crossing[self.len] = crossing;
-        self.id[self.len] = id;
-        self.len += 1;
-    }
-
-    /// A guard fires when the step ends strictly on its triggering side having started on
-    /// the other side or exactly at zero. A mode entered at a switch often starts with a
-    /// guard at exactly zero (entering `Plastic` from `Stuck`, the relative velocity is 0):
-    /// if it then moves the wrong way at once, the mode must end at once.
-    fn fired(&self, i: usize, start: f64) -> bool {
-        let end = self.value[i];
-        match self.crossing[i] {
-            Crossing::Rising => start <= 0.0 && end > 0.0,
-            Crossing::Falling => start >= 0.0 && end < 0.0,
-        }
-    }
-}
-
-impl Default for Guards {
-    fn default() -> Self {
-        Self::new()
-    }
-}
 
 /// A piecewise-smooth autonomous ODE `y' = f(y, mode)` with switching guards.
 pub trait Hybrid<const N: usize> {
@@ -145,6 +62,27 @@ pub trait Hybrid<const N: usize> {
     fn advance(&self, _y: &[f64; N], _mode: Self::Mode, _h_s: f64) -> [f64; N] {
         unreachable!("advance called in a mode without an exact_grid")
     }
+    /// Where `mode` may take exponential steps (`etd_step`), the grid they start on and span
+    /// `points` of. `None` (the default): Dormand–Prince alone.
+    fn etd_grid(&self, _mode: Self::Mode) -> Option<Grid> {
+        None
+    }
+    /// One exponential step of `h_s` (the grid's span) from the grid point `(t_s, y)`: the new
+    /// state, its field, and an error estimate as Dormand–Prince's (≤ 1 accepts).
+    #[allow(clippy::too_many_arguments)]
+    fn etd_step(
+        &self,
+        _t_s: f64,
+        _y: &[f64; N],
+        _dy: &[f64; N],
+        _h_s: f64,
+        _scale: &[f64; N],
+        _rtol: f64,
+    ) -> Option<([f64; N], [f64; N], f64)> {
+        None
+    }
+    /// The last exponential step was not taken (its error, or a guard in it).
+    fn etd_discard(&self) {}
 }
 
 /// What the driver tells the observer, and what the observer answers.
@@ -186,6 +124,8 @@ pub struct Stats {
     pub events: u32,
     /// Of `steps`, those taken by a linear phase's exact flow.
     pub exact_steps: u32,
+    /// Of `steps`, the exponential ones (`Hybrid::etd_step`).
+    pub etd_steps: u32,
 }
 
 /// Why integration stopped early.
@@ -250,6 +190,8 @@ where
     };
     let mut t_stop = limits.t_max_s;
     let mut ws = Workspace::<N>::new();
+    // The end of a span an exponential step left to Dormand–Prince.
+    let mut etd_left_until = f64::NEG_INFINITY;
 
     loop {
         if u64::from(stats.steps) + u64::from(stats.rejected) > limits.max_steps {
@@ -269,7 +211,32 @@ where
             Method::Dopri5 { .. } => sys.exact_grid(mode),
             Method::Rk4 { .. } => None,
         };
-        let (h_try, t1, y1, dy1) = if let Some(g) = grid {
+        // Where the mode has exponential steps: one from a grid point, unless its span was
+        // left to Dormand–Prince; Dormand–Prince's steps end on that grid.
+        let etd = match (method, grid) {
+            (Method::Dopri5 { rtol }, None) => sys.etd_grid(mode).map(|g| (g, rtol)),
+            _ => None,
+        };
+        let mut etd_taken = None;
+        if let Some((g, rtol)) = etd
+            && t >= etd_left_until
+            && g.on_grid(t).is_some()
+            && let (h_g, t_g) = g.next_step(t)
+            && t_g <= t_stop
+            && let Some((y1, dy1, err)) = sys.etd_step(t, &y, &dy, h_g, scale, rtol)
+        {
+            stats.rhs_evals += 4;
+            if err <= 1.0 && y1.iter().all(|v| v.is_finite()) {
+                etd_taken = Some((h_g, t_g, y1, dy1));
+            } else {
+                stats.rejected += 1;
+                sys.etd_discard();
+                etd_left_until = t_g;
+            }
+        }
+        let (h_try, t1, y1, dy1) = if let Some(taken) = etd_taken {
+            taken
+        } else if let Some(g) = grid {
             let (h_grid, t_grid) = g.next_step(t);
             let (h_try, t1) = if t_grid < t_stop { (h_grid, t_grid) } else { (t_stop - t, t_stop) };
             let y1 = sys.advance(&y, mode, h_try);
@@ -278,7 +245,12 @@ where
             stats.rhs_evals += 1;
             (h_try, t1, y1, dy1)
         } else {
-            let h_try = h.min(t_stop - t);
+            let h_try = match etd {
+                Some(_) if t < etd_left_until => h.min(etd_left_until - t),
+                Some((g, _)) => h.min(g.next_step(t).1 - t),
+                None => h,
+            }
+            .min(t_stop - t);
             // One trial step; only Dormand–Prince's is checked and its next length chosen.
             let (y1, dy1, err) = take_step(sys, method, mode, &y, &dy, h_try, &mut ws, scale, &mut stats);
             if let Method::Dopri5 { .. } = method {
@@ -310,6 +282,11 @@ where
         let mut earliest: Option<(f64, u8)> = None;
         for i in 0..guards.len.min(g1.len) {
             if g1.fired(i, guards.value[i]) {
+                if etd_taken.is_some() {
+                    // Dormand–Prince takes the span and locates the event in it.
+                    earliest = Some((f64::NAN, g1.id[i]));
+                    break;
+                }
                 // On the step's Hermite cubic, or on the exact flow of a linear phase.
                 let at = |theta: f64| match grid {
                     Some(_) => sys.advance(&y, mode, theta * h_try),
@@ -322,10 +299,17 @@ where
             }
         }
 
+        if etd_taken.is_some() && earliest.is_some() {
+            stats.rejected += 1;
+            sys.etd_discard();
+            etd_left_until = t1;
+            continue;
+        }
         match earliest {
             None => {
                 stats.steps += 1;
                 stats.exact_steps += u32::from(grid.is_some());
+                stats.etd_steps += u32::from(etd_taken.is_some());
                 t_stop = obs.on_step(t, &y, &dy, t1, &y1, &dy1, mode).map_or(limits.t_max_s, |ts| ts.max(t1));
                 t = t1;
                 y = y1;

@@ -275,12 +275,20 @@ fn exact_points<const M: usize, S: Integrated<M>>(
 
 /// Raise `peak` to the largest value of the cubic Hermite through `(t, s, rate)` at both
 /// ends. The cubic stays within `max(s_a, s_b) + 4/27 (|r_a| + |r_b|) h` (the Hermite basis'
-/// bounds), so a segment below the peak by that much is skipped.
+/// bounds), so a segment below the peak by that much is skipped; and so is one whose scaled
+/// slopes are both of the change's sign and at most 3 times it: such a cubic is monotone
+/// (Fritsch and Carlson 1980, the square of their monotonicity region), its largest value
+/// at an end.
 fn peak_between(peak: &mut f64, (ta, sa, ra): (f64, f64, f64), (tb, sb, rb): (f64, f64, f64)) {
     let h = tb - ta;
     let (r0, r1) = (ra * h, rb * h);
     *peak = peak.max(sa).max(sb);
     if h <= 0.0 || sa.max(sb) + 0.15 * (r0.abs() + r1.abs()) < *peak {
+        return;
+    }
+    let d = sb - sa;
+    let within = |r: f64| if d > 0.0 { (0.0..=3.0 * d).contains(&r) } else { (3.0 * d..=0.0).contains(&r) };
+    if d != 0.0 && within(r0) && within(r1) {
         return;
     }
     for theta in cubic_extrema(sa, r0, sb, r1) {

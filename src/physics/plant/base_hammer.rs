@@ -19,9 +19,14 @@
 //! the results move by the general plant's integration error there, which `blow`'s tests
 //! bound.
 
+use std::cell::Cell;
+
 use super::*;
 use crate::physics::integrator::Grid;
 use crate::physics::oscillator::{self, Oscillator, Propagator};
+
+mod etd;
+use etd::{Etd, EtdStep};
 
 /// Length of the reduced state.
 pub const NB: usize = 8;
@@ -76,7 +81,7 @@ pub struct GridPoint {
 }
 
 /// A hammer on a billet with no machine-side effect, borrowed from its general plant.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct BaseHammer<'a> {
     plant: &'a Plant,
     law: &'a BilletLaw,
@@ -85,6 +90,10 @@ pub struct BaseHammer<'a> {
     k_n_per_m: f64,
     c_ns_per_m: f64,
     exact: Option<Exact>,
+    /// The plastic flow's exponential steps (`etd`), with the exact phases on a
+    /// rate-independent law, and the last one's stages.
+    etd: Option<Etd>,
+    last_etd: Cell<Option<EtdStep>>,
 }
 
 impl<'a> BaseHammer<'a> {
@@ -108,6 +117,8 @@ impl<'a> BaseHammer<'a> {
             k_n_per_m,
             c_ns_per_m,
             exact: None,
+            etd: None,
+            last_etd: Cell::new(None),
         })
     }
 
@@ -143,7 +154,10 @@ impl<'a> BaseHammer<'a> {
             inv_m1: 1.0 / self.m1_kg,
             inv_m2: 1.0 / self.m2_kg,
         };
-        BaseHammer { exact: Some(exact), ..self }
+        // The exponential plastic steps: not on a rate-dependent law (`etd`).
+        let w0 = (self.k_n_per_m / self.m2_kg).sqrt();
+        let etd = (!self.law.is_rate_dependent()).then(|| Etd::new(&free, w0, grid, exact.inv_m2)).flatten();
+        BaseHammer { exact: Some(exact), etd, ..self }
     }
 
     /// The reduced state of a general one.
@@ -204,7 +218,10 @@ impl<'a> BaseHammer<'a> {
     /// by the one-point propagator (a 2×2 product per point). False, and no call, where the
     /// step is not such a step.
     pub fn grid_points(&self, t0_s: f64, y0: &[f64; NB], mode: Mode, h_s: f64, f: &mut dyn FnMut(&GridPoint)) -> bool {
-        let Some(e) = self.exact.as_ref().filter(|_| mode.contact != Contact::Plastic) else { return false };
+        if mode.contact == Contact::Plastic {
+            return self.etd_points(t0_s, h_s, f);
+        }
+        let Some(e) = self.exact.as_ref() else { return false };
         let Some(k0) = e.grid.on_grid(t0_s) else { return false };
         // A step of whole points is their multiple to roundoff; the slack keeps the last.
         let n = (h_s / e.grid.dt_s * (1.0 + 1e-9)).floor();
@@ -229,8 +246,40 @@ impl<'a> BaseHammer<'a> {
         true
     }
 
-    /// The whole state at a grid point of an exact step from `(t0_s, y0)`.
+    /// In an exponential plastic step (the last one taken, from `t0_s` over `h_s`), `f` at
+    /// each grid point within it, on the scheme's continuous extension; false, and no call,
+    /// where the step is not that one.
+    fn etd_points(&self, t0_s: f64, h_s: f64, f: &mut dyn FnMut(&GridPoint)) -> bool {
+        let (Some(etd), Some(s)) = (self.etd.as_ref(), self.last_etd.get()) else { return false };
+        // The observer's step is `t1 - t0`, the span to roundoff.
+        if !(s.t0_s == t0_s && (h_s - s.h_s).abs() <= 1e-9 * s.h_s) {
+            return false;
+        }
+        let Some(k0) = etd.grid.on_grid(t0_s) else { return false };
+        let n = etd.grid.points;
+        for j in 1..=n {
+            let Some((x, v)) = self.etd_lower(&s, j) else { return false };
+            let sensor_n = self.k_n_per_m * x + self.c_ns_per_m * v;
+            let th = f64::from(j) / f64::from(n);
+            let acc = Self::etd_force(&s, th) - sensor_n / self.m2_kg;
+            let rate = self.k_n_per_m * v + self.c_ns_per_m * acc;
+            let t_s = etd.grid.t0_s + (k0 + f64::from(j)) * etd.grid.dt_s;
+            f(&GridPoint { t_s, sensor_n, rate, lower_m: x, lower_mps: v });
+        }
+        true
+    }
+
+    /// The whole state at a grid point of an exact step from `(t0_s, y0)` (or of an
+    /// exponential plastic step).
     pub fn grid_point_state(&self, t0_s: f64, y0: &[f64; NB], mode: Mode, p: &GridPoint) -> [f64; NB] {
+        if mode.contact == Contact::Plastic
+            && let (Some(etd), Some(s)) = (self.etd.as_ref(), self.last_etd.get())
+        {
+            let j = ((p.t_s - t0_s) / etd.grid.dt_s).round() as u32;
+            if let Some(y) = self.etd_point(&s, j.max(1)) {
+                return y;
+            }
+        }
         self.phase_state(y0, mode, p.t_s - t0_s, p.lower_m, p.lower_mps)
     }
 
@@ -373,6 +422,27 @@ impl Hybrid<NB> for BaseHammer<'_> {
     /// The tools apart or stuck: a linear phase, advanced exactly with `with_exact_phases`.
     fn exact_grid(&self, mode: Mode) -> Option<Grid> {
         self.exact.filter(|_| mode.contact != Contact::Plastic).map(|e| e.grid)
+    }
+
+    /// Plastic flow on a rate-independent law, with the exact phases (`etd`).
+    fn etd_grid(&self, mode: Mode) -> Option<Grid> {
+        self.etd.as_ref().filter(|_| mode.contact == Contact::Plastic).map(|e| e.grid)
+    }
+
+    fn etd_step(
+        &self,
+        t_s: f64,
+        y: &[f64; NB],
+        dy: &[f64; NB],
+        h_s: f64,
+        scale: &[f64; NB],
+        rtol: f64,
+    ) -> Option<([f64; NB], [f64; NB], f64)> {
+        self.etd_step_from(t_s, y, dy, h_s, scale, rtol)
+    }
+
+    fn etd_discard(&self) {
+        self.last_etd.set(None);
     }
 
     /// The lower tool (alone, or with the ram when stuck) by its oscillator's propagator;

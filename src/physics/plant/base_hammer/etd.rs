@@ -1,0 +1,198 @@
+//! The base hammer's plastic flow by an exponential integrator (ETDRK4, Cox and Matthews
+//! 2002), for the fits' plant (`BaseHammer::with_exact_phases`) on a rate-independent law.
+//!
+//! While the billet flows, the lower tool rings on its frame at a few kHz, driven by the
+//! billet's load, which changes on the blow's millisecond scale. Dormand–Prince has to
+//! follow the ringing (250 steps over the suite's hammer's 11.7 ms of flow); this integrator
+//! advances the lower tool's oscillator exactly for a load that is quadratic in time over the
+//! step, so its steps are set by the load: `ETD_STEP_RAD` of the ringing, 100 µs on the
+//! suite's hammer (`benches/plastic_integrators.py` and the README's "fifth pass": 3.3× fewer
+//! evaluations, each bound of `blow::tests` met with room).
+//!
+//! - The linear part is the lower tool's oscillator, and the compression's share of its
+//!   speed: `P + x_l` moves only with the ram, so the compression is the ram's share,
+//!   integrated as the other components are, less the lower tool's travel.
+//! - Every other component (the ram, the works) has no linear part, and the scheme is then
+//!   the classical RK4.
+//! - Steps start on the trace's grid and span `Etd::points` of its points, so the samples
+//!   inside take tabulated weights (`Etd::inside`) on the scheme's own continuous extension.
+//! - The error estimate is the defect of the quadratic at the step's end (the load there
+//!   against the quadratic through the stages), carried through the step's `phi_3`. A step
+//!   whose estimate exceeds 1, or in which a guard fires, is not taken: Dormand–Prince
+//!   takes that span (`integrator::integrate`), as it takes a rate-dependent law (whose
+//!   damping near the end of flow, `m F / h'`, is not in the linear part) and every step
+//!   that does not start on the grid. The estimate is an indicator, not a bound: it flags a
+//!   load that stops being smooth over a step (it caught the rate term's end of flow in the
+//!   study), and at the fits' tolerance `blow::tests` hold the results to what a capture
+//!   cannot see; at 1e-9 it lets some spans through that leave 8e-11 m on the final height
+//!   where Dormand–Prince alone leaves 2e-12 m
+//!   (`blow::tests::the_fits_plastic_flow_takes_exponential_steps_where_they_hold`).
+
+use super::{BL, BP, BVL, BaseHammer, NB};
+use crate::physics::integrator::Grid;
+use crate::physics::oscillator::{self, Oscillator, Phi};
+
+/// Angle of the lower tool's ringing one exponential step covers at most, rad. At 1.0 (100 µs
+/// on the suite's hammer, 70 µs on the paper's) `benches/plastic_integrators.py` measured
+/// compressions within 2e-10 m of the reference (bound 1e-8 m), the sensor at the samples
+/// within 3.2 N (bound 200 N) and the plastic work within 6.3e-6 of the kinetic energy
+/// (ledger 1e-5); its error estimate stayed below 0.05 there.
+const ETD_STEP_RAD: f64 = 1.0;
+
+/// The weights of the plastic steps, for one blow.
+#[derive(Debug, Clone)]
+pub(super) struct Etd {
+    /// The grid the steps start and end on (the exact phases' points, `points` per step).
+    pub(super) grid: Grid,
+    full: Phi,
+    half: Phi,
+    /// At each grid point inside a step, `j / points` of it, j = 1 .. points - 1.
+    inside: Vec<Phi>,
+    inv_m2: f64,
+}
+
+impl Etd {
+    /// The weights for steps of whole points of `grid` (the exact phases'), none where the
+    /// step would cover fewer than two points or the lower tool is not underdamped.
+    pub(super) fn new(free: &Oscillator, w0_per_s: f64, grid: Grid, inv_m2: f64) -> Option<Etd> {
+        let points = ((ETD_STEP_RAD / (w0_per_s * grid.dt_s)).floor().min(f64::from(grid.points))) as u32;
+        if points < 2 {
+            return None;
+        }
+        let grid = Grid { points, ..grid };
+        let h = grid.span_s();
+        let inside = (1..points).map(|j| free.phi(h * f64::from(j) / f64::from(points))).collect::<Option<_>>()?;
+        Some(Etd { grid, full: free.phi(h)?, half: free.phi(0.5 * h)?, inside, inv_m2 })
+    }
+}
+
+/// An exponential step's stages, kept for the samples inside it (`BaseHammer::grid_points`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct EtdStep {
+    pub(super) t0_s: f64,
+    pub(super) h_s: f64,
+    y0: [f64; NB],
+    /// The nonlinear part along the step, `n0 + d1 s/h + d2 (s/h)^2`.
+    n0: [f64; NB],
+    d1: [f64; NB],
+    d2: [f64; NB],
+    pub(super) y1: [f64; NB],
+}
+
+impl BaseHammer<'_> {
+    /// The vector field less its linear part, from the field `dy` at `y`: the billet's load
+    /// on the lower tool per its mass, and the ram's speed in the compression's rate.
+    fn nonlinear(&self, inv_m2: f64, y: &[f64; NB], dy: &[f64; NB]) -> [f64; NB] {
+        let mut n = *dy;
+        n[BL] = 0.0;
+        n[BVL] = dy[BVL] + self.support_n(y) * inv_m2;
+        n[BP] = dy[BP] + y[BVL];
+        n
+    }
+
+    /// The state `h` after `from` under the forcing `f0 + f1 s/h + f2 (s/h)^2`: the lower
+    /// tool by `phi`'s weights, the components without a linear part by the forcing's
+    /// integral, the compression by the ram's share less the lower tool's travel.
+    fn forced(phi: &Phi, from: &[f64; NB], h: f64, f0: &[f64; NB], f1: &[f64; NB], f2: &[f64; NB]) -> [f64; NB] {
+        let mut out = [0.0; NB];
+        for i in 0..NB {
+            out[i] = from[i] + h * (f0[i] + f1[i] / 2.0 + f2[i] / 3.0);
+        }
+        let (x, v) = oscillator::apply(&phi.e, from[BL], from[BVL]);
+        let [p1, p2, p3] = phi.p;
+        let force = |k: usize| h * (p1[k] * f0[BVL] + p2[k] * f1[BVL] + 2.0 * p3[k] * f2[BVL]);
+        out[BL] = x + force(0);
+        out[BVL] = v + force(1);
+        out[BP] -= out[BL] - from[BL];
+        out
+    }
+
+    /// One exponential step of a whole span from a grid point: the new state, its field and
+    /// the error estimate (≤ 1 accepts, as Dormand–Prince's). `None` where the plant has no
+    /// exponential steps or `h` is not the span. The stages are kept for `grid_points`.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn etd_step_from(
+        &self,
+        t_s: f64,
+        y: &[f64; NB],
+        dy: &[f64; NB],
+        h: f64,
+        scale: &[f64; NB],
+        rtol: f64,
+    ) -> Option<([f64; NB], [f64; NB], f64)> {
+        let etd = self.etd.as_ref()?;
+        if h != etd.grid.span_s() {
+            return None;
+        }
+        let mode = super::Mode { contact: super::Contact::Plastic, engaged: true };
+        let field = |y: &[f64; NB]| {
+            let mut dy = [0.0; NB];
+            super::Hybrid::rhs(self, y, mode, &mut dy);
+            (dy, self.nonlinear(etd.inv_m2, y, &dy))
+        };
+        let zero = [0.0; NB];
+        let n0 = self.nonlinear(etd.inv_m2, y, dy);
+        let a = Self::forced(&etd.half, y, 0.5 * h, &n0, &zero, &zero);
+        let (_, na) = field(&a);
+        let b = Self::forced(&etd.half, y, 0.5 * h, &na, &zero, &zero);
+        let (_, nb) = field(&b);
+        let twice_b = std::array::from_fn(|i| 2.0 * nb[i] - n0[i]);
+        let c = Self::forced(&etd.half, &a, 0.5 * h, &twice_b, &zero, &zero);
+        let (_, nc) = field(&c);
+        let d1: [f64; NB] = std::array::from_fn(|i| -3.0 * n0[i] + 2.0 * (na[i] + nb[i]) - nc[i]);
+        let d2: [f64; NB] = std::array::from_fn(|i| 2.0 * (n0[i] - (na[i] + nb[i]) + nc[i]));
+        let y1 = Self::forced(&etd.full, y, h, &n0, &d1, &d2);
+        let (dy1, n1) = field(&y1);
+        // The defect at the end, carried as a constant forcing through phi_3 (a sixth of the
+        // step on the components without a linear part).
+        let mut sum = 0.0;
+        for i in 0..NB {
+            let defect = n1[i] - (n0[i] + d1[i] + d2[i]);
+            let e = match i {
+                BL => h * etd.full.p[2][0] * (n1[BVL] - (n0[BVL] + d1[BVL] + d2[BVL])),
+                BVL => h * etd.full.p[2][1] * defect,
+                BP => h * defect / 6.0 - h * etd.full.p[2][0] * (n1[BVL] - (n0[BVL] + d1[BVL] + d2[BVL])),
+                _ => h * defect / 6.0,
+            };
+            let sc = rtol * (scale[i] + y[i].abs().max(y1[i].abs()));
+            sum += (e / sc) * (e / sc);
+        }
+        self.last_etd.set(Some(EtdStep { t0_s: t_s, h_s: h, y0: *y, n0, d1, d2, y1 }));
+        Some((y1, dy1, (sum / NB as f64).sqrt()))
+    }
+
+    /// The state at grid point `j` (of `Etd::points`) of the kept step, on the scheme's
+    /// continuous extension (the step's own end at the last).
+    pub(super) fn etd_point(&self, s: &EtdStep, j: u32) -> Option<[f64; NB]> {
+        let etd = self.etd.as_ref()?;
+        if j >= etd.grid.points {
+            return Some(s.y1);
+        }
+        let th = f64::from(j) / f64::from(etd.grid.points);
+        let d1 = s.d1.map(|d| th * d);
+        let d2 = s.d2.map(|d| th * th * d);
+        Some(Self::forced(etd.inside.get(j as usize - 1)?, &s.y0, th * s.h_s, &s.n0, &d1, &d2))
+    }
+
+    /// The lower tool's position and speed at grid point `j` of the kept step: `etd_point`'s,
+    /// without the other components (all the samples need).
+    pub(super) fn etd_lower(&self, s: &EtdStep, j: u32) -> Option<(f64, f64)> {
+        let etd = self.etd.as_ref()?;
+        if j >= etd.grid.points {
+            return Some((s.y1[BL], s.y1[BVL]));
+        }
+        let th = f64::from(j) / f64::from(etd.grid.points);
+        let phi = etd.inside.get(j as usize - 1)?;
+        let (x, v) = oscillator::apply(&phi.e, s.y0[BL], s.y0[BVL]);
+        let h = th * s.h_s;
+        let [p1, p2, p3] = phi.p;
+        let (f0, f1, f2) = (s.n0[BVL], th * s.d1[BVL], th * th * s.d2[BVL]);
+        let force = |k: usize| h * (p1[k] * f0 + p2[k] * f1 + 2.0 * p3[k] * f2);
+        Some((x + force(0), v + force(1)))
+    }
+
+    /// The load on the lower tool per its mass at fraction `th` of the kept step.
+    pub(super) fn etd_force(s: &EtdStep, th: f64) -> f64 {
+        s.n0[BVL] + th * (s.d1[BVL] + th * s.d2[BVL])
+    }
+}
