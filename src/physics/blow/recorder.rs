@@ -39,7 +39,7 @@ pub(super) trait Integrated<const M: usize>: Hybrid<M, Mode = Mode> {
     }
     /// In an exact step from a grid point (`BaseHammer::grid_points`), `f` at each grid
     /// point within it; false (the default), and no call, otherwise.
-    fn grid_points(&self, _t0: f64, _y0: &[f64; M], _mode: Mode, _h: f64, _f: &mut dyn FnMut(&GridPoint)) -> bool {
+    fn grid_points<F: FnMut(&GridPoint)>(&self, _t0: f64, _y0: &[f64; M], _mode: Mode, _h: f64, _f: F) -> bool {
         false
     }
     /// The whole state at a grid point `grid_points` gave.
@@ -82,7 +82,7 @@ impl Integrated<NB> for BaseHammer<'_> {
     ) -> f64 {
         BaseHammer::sensor_within(self, y0, dy0, y1, dy1, h, theta)
     }
-    fn grid_points(&self, t0: f64, y0: &[f64; NB], mode: Mode, h: f64, f: &mut dyn FnMut(&GridPoint)) -> bool {
+    fn grid_points<F: FnMut(&GridPoint)>(&self, t0: f64, y0: &[f64; NB], mode: Mode, h: f64, f: F) -> bool {
         BaseHammer::grid_points(self, t0, y0, mode, h, f)
     }
     fn grid_point_state(&self, t0: f64, y0: &[f64; NB], mode: Mode, p: &GridPoint) -> [f64; NB] {
@@ -256,7 +256,7 @@ fn exact_points<const M: usize, S: Integrated<M>>(
         }
     };
     let mut first = true;
-    let walked = sys.grid_points(t0, y0, mode, h, &mut |p| {
+    let walked = sys.grid_points(t0, y0, mode, h, |p: &GridPoint| {
         if first {
             sample(r, t0, s0, None);
             first = false;
@@ -279,6 +279,10 @@ fn exact_points<const M: usize, S: Integrated<M>>(
 /// slopes are both of the change's sign and at most 3 times it: such a cubic is monotone
 /// (Fritsch and Carlson 1980, the square of their monotonicity region), its largest value
 /// at an end.
+///
+/// The tests that skip are inlined into the walk over the grid points (once per point);
+/// the cubic's extrema are not.
+#[inline(always)]
 fn peak_between(peak: &mut f64, (ta, sa, ra): (f64, f64, f64), (tb, sb, rb): (f64, f64, f64)) {
     let h = tb - ta;
     let (r0, r1) = (ra * h, rb * h);
@@ -286,6 +290,12 @@ fn peak_between(peak: &mut f64, (ta, sa, ra): (f64, f64, f64), (tb, sb, rb): (f6
     if h <= 0.0 || sa.max(sb) + 0.15 * (r0.abs() + r1.abs()) < *peak {
         return;
     }
+    peak_inside(peak, sa, r0, sb, r1);
+}
+
+/// `peak_between` past its first test.
+#[inline(never)]
+fn peak_inside(peak: &mut f64, sa: f64, r0: f64, sb: f64, r1: f64) {
     let d = sb - sa;
     let within = |r: f64| if d > 0.0 { (0.0..=3.0 * d).contains(&r) } else { (3.0 * d..=0.0).contains(&r) };
     if d != 0.0 && within(r0) && within(r1) {

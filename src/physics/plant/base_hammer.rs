@@ -217,7 +217,7 @@ impl<'a> BaseHammer<'a> {
     /// point `(t0_s, y0)`: `f` at each in turn, the lower tool advanced
     /// by the one-point propagator (a 2×2 product per point). False, and no call, where the
     /// step is not such a step.
-    pub fn grid_points(&self, t0_s: f64, y0: &[f64; NB], mode: Mode, h_s: f64, f: &mut dyn FnMut(&GridPoint)) -> bool {
+    pub fn grid_points<F: FnMut(&GridPoint)>(&self, t0_s: f64, y0: &[f64; NB], mode: Mode, h_s: f64, mut f: F) -> bool {
         if mode.contact == Contact::Plastic {
             return self.etd_points(t0_s, h_s, f);
         }
@@ -228,10 +228,10 @@ impl<'a> BaseHammer<'a> {
         if n < 1.0 {
             return false;
         }
-        let (step, m_kg) = if mode.contact == Contact::Stuck {
-            (&e.stuck_step, self.m1_kg + self.m2_kg)
+        let (step, inv_m) = if mode.contact == Contact::Stuck {
+            (&e.stuck_step, 1.0 / (self.m1_kg + self.m2_kg))
         } else {
-            (&e.free_step, self.m2_kg)
+            (&e.free_step, e.inv_m2)
         };
         let (mut x, mut v) = (y0[BL], y0[BVL]);
         let mut j = 1.0;
@@ -239,7 +239,7 @@ impl<'a> BaseHammer<'a> {
             (x, v) = oscillator::apply(step, x, v);
             let sensor_n = self.k_n_per_m * x + self.c_ns_per_m * v;
             // The lower tool's acceleration: the frame's force over the mass it carries.
-            let rate = self.k_n_per_m * v - self.c_ns_per_m * sensor_n / m_kg;
+            let rate = self.k_n_per_m * v - self.c_ns_per_m * sensor_n * inv_m;
             f(&GridPoint { t_s: e.grid.t0_s + (k0 + j) * e.grid.dt_s, sensor_n, rate, lower_m: x, lower_mps: v });
             j += 1.0;
         }
@@ -249,7 +249,7 @@ impl<'a> BaseHammer<'a> {
     /// In an exponential plastic step (the last one taken, from `t0_s` over `h_s`), `f` at
     /// each grid point within it, on the scheme's continuous extension; false, and no call,
     /// where the step is not that one.
-    fn etd_points(&self, t0_s: f64, h_s: f64, f: &mut dyn FnMut(&GridPoint)) -> bool {
+    fn etd_points<F: FnMut(&GridPoint)>(&self, t0_s: f64, h_s: f64, mut f: F) -> bool {
         let (Some(etd), Some(s)) = (self.etd.as_ref(), self.last_etd.get()) else { return false };
         // The observer's step is `t1 - t0`, the span to roundoff.
         if !(s.t0_s == t0_s && (h_s - s.h_s).abs() <= 1e-9 * s.h_s) {
@@ -260,8 +260,7 @@ impl<'a> BaseHammer<'a> {
         for j in 1..=n {
             let Some((x, v)) = self.etd_lower(&s, j) else { return false };
             let sensor_n = self.k_n_per_m * x + self.c_ns_per_m * v;
-            let th = f64::from(j) / f64::from(n);
-            let acc = Self::etd_force(&s, th) - sensor_n / self.m2_kg;
+            let acc = Self::etd_force(&s, etd.fraction(j)) - sensor_n * etd.inv_m2;
             let rate = self.k_n_per_m * v + self.c_ns_per_m * acc;
             let t_s = etd.grid.t0_s + (k0 + f64::from(j)) * etd.grid.dt_s;
             f(&GridPoint { t_s, sensor_n, rate, lower_m: x, lower_mps: v });

@@ -39,6 +39,9 @@ use crate::physics::oscillator::{self, Oscillator, Phi};
 /// (ledger 1e-5); its error estimate stayed below 0.05 there.
 const ETD_STEP_RAD: f64 = 1.0;
 
+/// `1/3`, the quadratic term's integral over a step.
+const THIRD: f64 = 1.0 / 3.0;
+
 /// The weights of the plastic steps, for one blow.
 #[derive(Debug, Clone)]
 pub(super) struct Etd {
@@ -48,7 +51,9 @@ pub(super) struct Etd {
     half: Phi,
     /// At each grid point inside a step, `j / points` of it, j = 1 .. points - 1.
     inside: Vec<Phi>,
-    inv_m2: f64,
+    /// `j / points`, j = 0 ..= points, divided once (`fraction`).
+    fractions: Vec<f64>,
+    pub(super) inv_m2: f64,
 }
 
 impl Etd {
@@ -62,7 +67,13 @@ impl Etd {
         let grid = Grid { points, ..grid };
         let h = grid.span_s();
         let inside = (1..points).map(|j| free.phi(h * f64::from(j) / f64::from(points))).collect::<Option<_>>()?;
-        Some(Etd { grid, full: free.phi(h)?, half: free.phi(0.5 * h)?, inside, inv_m2 })
+        let fractions = (0..=points).map(|j| f64::from(j) / f64::from(points)).collect();
+        Some(Etd { grid, full: free.phi(h)?, half: free.phi(0.5 * h)?, inside, fractions, inv_m2 })
+    }
+
+    /// `j / points` of a step.
+    pub(super) fn fraction(&self, j: u32) -> f64 {
+        self.fractions.get(j as usize).copied().unwrap_or(1.0)
     }
 }
 
@@ -96,13 +107,27 @@ impl BaseHammer<'_> {
     fn forced(phi: &Phi, from: &[f64; NB], h: f64, f0: &[f64; NB], f1: &[f64; NB], f2: &[f64; NB]) -> [f64; NB] {
         let mut out = [0.0; NB];
         for i in 0..NB {
-            out[i] = from[i] + h * (f0[i] + f1[i] / 2.0 + f2[i] / 3.0);
+            out[i] = from[i] + h * (f0[i] + 0.5 * f1[i] + THIRD * f2[i]);
         }
         let (x, v) = oscillator::apply(&phi.e, from[BL], from[BVL]);
         let [p1, p2, p3] = phi.p;
         let force = |k: usize| h * (p1[k] * f0[BVL] + p2[k] * f1[BVL] + 2.0 * p3[k] * f2[BVL]);
         out[BL] = x + force(0);
         out[BVL] = v + force(1);
+        out[BP] -= out[BL] - from[BL];
+        out
+    }
+
+    /// `forced` under a constant forcing (the stages).
+    fn forced_const(phi: &Phi, from: &[f64; NB], h: f64, f0: &[f64; NB]) -> [f64; NB] {
+        let mut out = [0.0; NB];
+        for i in 0..NB {
+            out[i] = from[i] + h * f0[i];
+        }
+        let (x, v) = oscillator::apply(&phi.e, from[BL], from[BVL]);
+        let p1 = phi.p[0];
+        out[BL] = x + h * (p1[0] * f0[BVL]);
+        out[BVL] = v + h * (p1[1] * f0[BVL]);
         out[BP] -= out[BL] - from[BL];
         out
     }
@@ -130,14 +155,13 @@ impl BaseHammer<'_> {
             super::Hybrid::rhs(self, y, mode, &mut dy);
             (dy, self.nonlinear(etd.inv_m2, y, &dy))
         };
-        let zero = [0.0; NB];
         let n0 = self.nonlinear(etd.inv_m2, y, dy);
-        let a = Self::forced(&etd.half, y, 0.5 * h, &n0, &zero, &zero);
+        let a = Self::forced_const(&etd.half, y, 0.5 * h, &n0);
         let (_, na) = field(&a);
-        let b = Self::forced(&etd.half, y, 0.5 * h, &na, &zero, &zero);
+        let b = Self::forced_const(&etd.half, y, 0.5 * h, &na);
         let (_, nb) = field(&b);
         let twice_b = std::array::from_fn(|i| 2.0 * nb[i] - n0[i]);
-        let c = Self::forced(&etd.half, &a, 0.5 * h, &twice_b, &zero, &zero);
+        let c = Self::forced_const(&etd.half, &a, 0.5 * h, &twice_b);
         let (_, nc) = field(&c);
         let d1: [f64; NB] = std::array::from_fn(|i| -3.0 * n0[i] + 2.0 * (na[i] + nb[i]) - nc[i]);
         let d2: [f64; NB] = std::array::from_fn(|i| 2.0 * (n0[i] - (na[i] + nb[i]) + nc[i]));
@@ -168,7 +192,7 @@ impl BaseHammer<'_> {
         if j >= etd.grid.points {
             return Some(s.y1);
         }
-        let th = f64::from(j) / f64::from(etd.grid.points);
+        let th = etd.fraction(j);
         let d1 = s.d1.map(|d| th * d);
         let d2 = s.d2.map(|d| th * th * d);
         Some(Self::forced(etd.inside.get(j as usize - 1)?, &s.y0, th * s.h_s, &s.n0, &d1, &d2))
@@ -181,7 +205,7 @@ impl BaseHammer<'_> {
         if j >= etd.grid.points {
             return Some((s.y1[BL], s.y1[BVL]));
         }
-        let th = f64::from(j) / f64::from(etd.grid.points);
+        let th = etd.fraction(j);
         let phi = etd.inside.get(j as usize - 1)?;
         let (x, v) = oscillator::apply(&phi.e, s.y0[BL], s.y0[BVL]);
         let h = th * s.h_s;
