@@ -280,11 +280,12 @@ where
         let mut g1 = Guards::new();
         sys.guards(&y1, &dy1, mode, &mut g1);
         let mut earliest: Option<(f64, u8)> = None;
+        let mut fired_in_etd = false;
         for i in 0..guards.len.min(g1.len) {
             if g1.fired(i, guards.value[i]) {
                 if etd_taken.is_some() {
                     // Dormand–Prince takes the span and locates the event in it.
-                    earliest = Some((f64::NAN, g1.id[i]));
+                    fired_in_etd = true;
                     break;
                 }
                 // On the step's Hermite cubic, or on the exact flow of a linear phase.
@@ -299,7 +300,7 @@ where
             }
         }
 
-        if etd_taken.is_some() && earliest.is_some() {
+        if fired_in_etd {
             stats.rejected += 1;
             sys.etd_discard();
             etd_left_until = t1;

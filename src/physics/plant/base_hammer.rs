@@ -156,7 +156,7 @@ impl<'a> BaseHammer<'a> {
         };
         // The exponential plastic steps: not on a rate-dependent law (`etd`).
         let w0 = (self.k_n_per_m / self.m2_kg).sqrt();
-        let etd = (!self.law.is_rate_dependent()).then(|| Etd::new(&free, w0, grid, exact.inv_m2)).flatten();
+        let etd = (!self.law.is_rate_dependent()).then(|| Etd::new(&free, w0, grid)).flatten();
         BaseHammer { exact: Some(exact), etd, ..self }
     }
 
@@ -250,7 +250,10 @@ impl<'a> BaseHammer<'a> {
     /// each grid point within it, on the scheme's continuous extension; false, and no call,
     /// where the step is not that one.
     fn etd_points<F: FnMut(&GridPoint)>(&self, t0_s: f64, h_s: f64, mut f: F) -> bool {
-        let (Some(etd), Some(s)) = (self.etd.as_ref(), self.last_etd.get()) else { return false };
+        let (Some(etd), Some(e), Some(s)) = (self.etd.as_ref(), self.exact.as_ref(), self.last_etd.get()) else {
+            return false;
+        };
+        let inv_m2 = e.inv_m2;
         // The observer's step is `t1 - t0`, the span to roundoff.
         if !(s.t0_s == t0_s && (h_s - s.h_s).abs() <= 1e-9 * s.h_s) {
             return false;
@@ -260,7 +263,7 @@ impl<'a> BaseHammer<'a> {
         for j in 1..=n {
             let Some((x, v)) = self.etd_lower(&s, j) else { return false };
             let sensor_n = self.k_n_per_m * x + self.c_ns_per_m * v;
-            let acc = Self::etd_force(&s, etd.fraction(j)) - sensor_n * etd.inv_m2;
+            let acc = Self::etd_force(&s, etd.fraction(j)) - sensor_n * inv_m2;
             let rate = self.k_n_per_m * v + self.c_ns_per_m * acc;
             let t_s = etd.grid.t0_s + (k0 + f64::from(j)) * etd.grid.dt_s;
             f(&GridPoint { t_s, sensor_n, rate, lower_m: x, lower_mps: v });

@@ -53,13 +53,12 @@ pub(super) struct Etd {
     inside: Vec<Phi>,
     /// `j / points`, j = 0 ..= points, divided once (`fraction`).
     fractions: Vec<f64>,
-    pub(super) inv_m2: f64,
 }
 
 impl Etd {
     /// The weights for steps of whole points of `grid` (the exact phases'), none where the
     /// step would cover fewer than two points or the lower tool is not underdamped.
-    pub(super) fn new(free: &Oscillator, w0_per_s: f64, grid: Grid, inv_m2: f64) -> Option<Etd> {
+    pub(super) fn new(free: &Oscillator, w0_per_s: f64, grid: Grid) -> Option<Etd> {
         let points = ((ETD_STEP_RAD / (w0_per_s * grid.dt_s)).floor().min(f64::from(grid.points))) as u32;
         if points < 2 {
             return None;
@@ -68,7 +67,7 @@ impl Etd {
         let h = grid.span_s();
         let inside = (1..points).map(|j| free.phi(h * f64::from(j) / f64::from(points))).collect::<Option<_>>()?;
         let fractions = (0..=points).map(|j| f64::from(j) / f64::from(points)).collect();
-        Some(Etd { grid, full: free.phi(h)?, half: free.phi(0.5 * h)?, inside, fractions, inv_m2 })
+        Some(Etd { grid, full: free.phi(h)?, half: free.phi(0.5 * h)?, inside, fractions })
     }
 
     /// `j / points` of a step.
@@ -146,6 +145,7 @@ impl BaseHammer<'_> {
         rtol: f64,
     ) -> Option<([f64; NB], [f64; NB], f64)> {
         let etd = self.etd.as_ref()?;
+        let inv_m2 = self.exact.as_ref()?.inv_m2;
         if h != etd.grid.span_s() {
             return None;
         }
@@ -153,9 +153,9 @@ impl BaseHammer<'_> {
         let field = |y: &[f64; NB]| {
             let mut dy = [0.0; NB];
             super::Hybrid::rhs(self, y, mode, &mut dy);
-            (dy, self.nonlinear(etd.inv_m2, y, &dy))
+            (dy, self.nonlinear(inv_m2, y, &dy))
         };
-        let n0 = self.nonlinear(etd.inv_m2, y, dy);
+        let n0 = self.nonlinear(inv_m2, y, dy);
         let a = Self::forced_const(&etd.half, y, 0.5 * h, &n0);
         let (_, na) = field(&a);
         let b = Self::forced_const(&etd.half, y, 0.5 * h, &na);
@@ -169,14 +169,15 @@ impl BaseHammer<'_> {
         let (dy1, n1) = field(&y1);
         // The defect at the end, carried as a constant forcing through phi_3 (a sixth of the
         // step on the components without a linear part).
+        let defect = |i: usize| n1[i] - (n0[i] + d1[i] + d2[i]);
+        let lower_x = h * etd.full.p[2][0] * defect(BVL);
         let mut sum = 0.0;
         for i in 0..NB {
-            let defect = n1[i] - (n0[i] + d1[i] + d2[i]);
             let e = match i {
-                BL => h * etd.full.p[2][0] * (n1[BVL] - (n0[BVL] + d1[BVL] + d2[BVL])),
-                BVL => h * etd.full.p[2][1] * defect,
-                BP => h * defect / 6.0 - h * etd.full.p[2][0] * (n1[BVL] - (n0[BVL] + d1[BVL] + d2[BVL])),
-                _ => h * defect / 6.0,
+                BL => lower_x,
+                BVL => h * etd.full.p[2][1] * defect(BVL),
+                BP => h * defect(BP) / 6.0 - lower_x,
+                _ => h * defect(i) / 6.0,
             };
             let sc = rtol * (scale[i] + y[i].abs().max(y1[i].abs()));
             sum += (e / sc) * (e / sc);
