@@ -19,7 +19,7 @@
 //! the results move by the general plant's integration error there, which `blow`'s tests
 //! bound.
 
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 
 use super::*;
 use crate::physics::integrator::Grid;
@@ -66,6 +66,31 @@ struct Exact {
     /// `1 / m1` and `1 / m2`, kg⁻¹, for `rhs_fast`.
     inv_m1: f64,
     inv_m2: f64,
+}
+
+/// `with_exact_phases`' tables for one machine and grid step, on a grid from 0. A fit's
+/// cost function simulates its five blows with the same machine, and the tables (eleven
+/// exponential weights, four propagators) depend on nothing else: each thread keeps the
+/// last machine's.
+#[derive(Debug, Clone)]
+struct Tables {
+    /// The masses, the frame's stiffness and damping, the grid step (their bits), the points
+    /// per step, and whether the law is rate-dependent.
+    key: [u64; 7],
+    exact: Exact,
+    etd: Option<Etd>,
+}
+
+impl Tables {
+    fn key(b: &BaseHammer, dt_s: f64, points: u32) -> [u64; 7] {
+        let bits = [b.m1_kg, b.m2_kg, b.k_n_per_m, b.c_ns_per_m, dt_s].map(f64::to_bits);
+        let rate = u64::from(b.law.is_rate_dependent());
+        [bits[0], bits[1], bits[2], bits[3], bits[4], u64::from(points), rate]
+    }
+}
+
+thread_local! {
+    static TABLES: RefCell<Option<Tables>> = const { RefCell::new(None) };
 }
 
 /// The sensor at a grid point inside an exact step (`BaseHammer::grid_points`).
@@ -142,13 +167,24 @@ impl<'a> BaseHammer<'a> {
         }
         // At most u32::MAX points: a float-to-int cast saturates.
         let points = ((self.plant.max_step() / dt_s).floor() as u32).max(1);
-        let grid = Grid { t0_s, dt_s, points };
+        let key = Tables::key(&self, dt_s, points);
+        let tables = TABLES.with_borrow_mut(|last| match last {
+            Some(t) if t.key == key => t.clone(),
+            _ => last.insert(self.tables(free, stuck, Grid { t0_s: 0.0, dt_s, points }, key)).clone(),
+        });
+        let exact = Exact { grid: Grid { t0_s, ..tables.exact.grid }, ..tables.exact };
+        let etd = tables.etd.map(|e| e.from(t0_s));
+        BaseHammer { exact: Some(exact), etd, ..self }
+    }
+
+    /// The exact phases' propagators and the plastic steps' weights on `grid`.
+    fn tables(&self, free: Oscillator, stuck: Oscillator, grid: Grid, key: [u64; 7]) -> Tables {
         let exact = Exact {
             grid,
             free,
             stuck,
-            free_step: free.propagator(dt_s),
-            stuck_step: stuck.propagator(dt_s),
+            free_step: free.propagator(grid.dt_s),
+            stuck_step: stuck.propagator(grid.dt_s),
             free_span: free.propagator(grid.span_s()),
             stuck_span: stuck.propagator(grid.span_s()),
             inv_m1: 1.0 / self.m1_kg,
@@ -157,7 +193,7 @@ impl<'a> BaseHammer<'a> {
         // The exponential plastic steps: not on a rate-dependent law (`etd`).
         let w0 = (self.k_n_per_m / self.m2_kg).sqrt();
         let etd = (!self.law.is_rate_dependent()).then(|| Etd::new(&free, w0, grid)).flatten();
-        BaseHammer { exact: Some(exact), etd, ..self }
+        Tables { key, exact, etd }
     }
 
     /// The reduced state of a general one.
@@ -259,16 +295,14 @@ impl<'a> BaseHammer<'a> {
             return false;
         }
         let Some(k0) = etd.grid.on_grid(t0_s) else { return false };
-        let n = etd.grid.points;
-        for j in 1..=n {
-            let Some((x, v)) = self.etd_lower(&s, j) else { return false };
+        let mut k = k0;
+        self.etd_lower_points(&s, |x, v, force| {
             let sensor_n = self.k_n_per_m * x + self.c_ns_per_m * v;
-            let acc = Self::etd_force(&s, etd.fraction(j)) - sensor_n * inv_m2;
+            let acc = force - sensor_n * inv_m2;
             let rate = self.k_n_per_m * v + self.c_ns_per_m * acc;
-            let t_s = etd.grid.t0_s + (k0 + f64::from(j)) * etd.grid.dt_s;
-            f(&GridPoint { t_s, sensor_n, rate, lower_m: x, lower_mps: v });
-        }
-        true
+            k += 1.0;
+            f(&GridPoint { t_s: etd.grid.t0_s + k * etd.grid.dt_s, sensor_n, rate, lower_m: x, lower_mps: v });
+        })
     }
 
     /// The whole state at a grid point of an exact step from `(t0_s, y0)` (or of an

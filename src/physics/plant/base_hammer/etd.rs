@@ -28,6 +28,8 @@
 //!   where Dormand–Prince alone leaves 2e-12 m
 //!   (`blow::tests::the_fits_plastic_flow_takes_exponential_steps_where_they_hold`).
 
+use std::rc::Rc;
+
 use super::{BL, BP, BVL, BaseHammer, NB};
 use crate::physics::integrator::Grid;
 use crate::physics::oscillator::{self, Oscillator, Phi};
@@ -42,11 +44,18 @@ const ETD_STEP_RAD: f64 = 1.0;
 /// `1/3`, the quadratic term's integral over a step.
 const THIRD: f64 = 1.0 / 3.0;
 
-/// The weights of the plastic steps, for one blow.
+/// The plastic steps of one blow: the grid they start and end on, and their weights.
 #[derive(Debug, Clone)]
 pub(super) struct Etd {
     /// The grid the steps start and end on (the exact phases' points, `points` per step).
     pub(super) grid: Grid,
+    w: Rc<Weights>,
+}
+
+/// The weights of a step of `points` grid steps, which depend on the lower tool and the
+/// step alone: shared by every blow of a machine (`BaseHammer::with_exact_phases`' cache).
+#[derive(Debug)]
+struct Weights {
     full: Phi,
     half: Phi,
     /// At each grid point inside a step, `j / points` of it, j = 1 .. points - 1.
@@ -67,12 +76,18 @@ impl Etd {
         let h = grid.span_s();
         let inside = (1..points).map(|j| free.phi(h * f64::from(j) / f64::from(points))).collect::<Option<_>>()?;
         let fractions = (0..=points).map(|j| f64::from(j) / f64::from(points)).collect();
-        Some(Etd { grid, full: free.phi(h)?, half: free.phi(0.5 * h)?, inside, fractions })
+        let w = Weights { full: free.phi(h)?, half: free.phi(0.5 * h)?, inside, fractions };
+        Some(Etd { grid, w: Rc::new(w) })
+    }
+
+    /// The same weights on the grid from `t0_s`.
+    pub(super) fn from(&self, t0_s: f64) -> Etd {
+        Etd { grid: Grid { t0_s, ..self.grid }, w: Rc::clone(&self.w) }
     }
 
     /// `j / points` of a step.
     pub(super) fn fraction(&self, j: u32) -> f64 {
-        self.fractions.get(j as usize).copied().unwrap_or(1.0)
+        self.w.fractions.get(j as usize).copied().unwrap_or(1.0)
     }
 }
 
@@ -156,26 +171,26 @@ impl BaseHammer<'_> {
             (dy, self.nonlinear(inv_m2, y, &dy))
         };
         let n0 = self.nonlinear(inv_m2, y, dy);
-        let a = Self::forced_const(&etd.half, y, 0.5 * h, &n0);
+        let a = Self::forced_const(&etd.w.half, y, 0.5 * h, &n0);
         let (_, na) = field(&a);
-        let b = Self::forced_const(&etd.half, y, 0.5 * h, &na);
+        let b = Self::forced_const(&etd.w.half, y, 0.5 * h, &na);
         let (_, nb) = field(&b);
         let twice_b = std::array::from_fn(|i| 2.0 * nb[i] - n0[i]);
-        let c = Self::forced_const(&etd.half, &a, 0.5 * h, &twice_b);
+        let c = Self::forced_const(&etd.w.half, &a, 0.5 * h, &twice_b);
         let (_, nc) = field(&c);
         let d1: [f64; NB] = std::array::from_fn(|i| -3.0 * n0[i] + 2.0 * (na[i] + nb[i]) - nc[i]);
         let d2: [f64; NB] = std::array::from_fn(|i| 2.0 * (n0[i] - (na[i] + nb[i]) + nc[i]));
-        let y1 = Self::forced(&etd.full, y, h, &n0, &d1, &d2);
+        let y1 = Self::forced(&etd.w.full, y, h, &n0, &d1, &d2);
         let (dy1, n1) = field(&y1);
         // The defect at the end, carried as a constant forcing through phi_3 (a sixth of the
         // step on the components without a linear part).
         let defect = |i: usize| n1[i] - (n0[i] + d1[i] + d2[i]);
-        let lower_x = h * etd.full.p[2][0] * defect(BVL);
+        let lower_x = h * etd.w.full.p[2][0] * defect(BVL);
         let mut sum = 0.0;
         for i in 0..NB {
             let e = match i {
                 BL => lower_x,
-                BVL => h * etd.full.p[2][1] * defect(BVL),
+                BVL => h * etd.w.full.p[2][1] * defect(BVL),
                 BP => h * defect(BP) / 6.0 - lower_x,
                 _ => h * defect(i) / 6.0,
             };
@@ -196,28 +211,27 @@ impl BaseHammer<'_> {
         let th = etd.fraction(j);
         let d1 = s.d1.map(|d| th * d);
         let d2 = s.d2.map(|d| th * th * d);
-        Some(Self::forced(etd.inside.get(j as usize - 1)?, &s.y0, th * s.h_s, &s.n0, &d1, &d2))
+        Some(Self::forced(etd.w.inside.get(j as usize - 1)?, &s.y0, th * s.h_s, &s.n0, &d1, &d2))
     }
 
-    /// The lower tool's position and speed at grid point `j` of the kept step: `etd_point`'s,
-    /// without the other components (all the samples need).
-    pub(super) fn etd_lower(&self, s: &EtdStep, j: u32) -> Option<(f64, f64)> {
-        let etd = self.etd.as_ref()?;
-        if j >= etd.grid.points {
-            return Some((s.y1[BL], s.y1[BVL]));
+    /// The lower tool's position and speed, and the load on it per its mass, at each grid
+    /// point of the kept step after its start, in turn (the step's own end at the last):
+    /// `etd_point`'s, without the other components (all the samples need). False, and no
+    /// call, where the plant has no exponential steps.
+    pub(super) fn etd_lower_points(&self, s: &EtdStep, mut f: impl FnMut(f64, f64, f64)) -> bool {
+        let Some(etd) = self.etd.as_ref() else { return false };
+        let w = &*etd.w;
+        let (x0, v0) = (s.y0[BL], s.y0[BVL]);
+        let (f0, d1, d2) = (s.n0[BVL], s.d1[BVL], s.d2[BVL]);
+        for (phi, &th) in w.inside.iter().zip(&w.fractions[1..]) {
+            let (x, v) = oscillator::apply(&phi.e, x0, v0);
+            let h = th * s.h_s;
+            let [p1, p2, p3] = phi.p;
+            let (g1, g2) = (th * d1, th * th * d2);
+            let force = |k: usize| h * (p1[k] * f0 + p2[k] * g1 + 2.0 * p3[k] * g2);
+            f(x + force(0), v + force(1), f0 + th * (d1 + th * d2));
         }
-        let th = etd.fraction(j);
-        let phi = etd.inside.get(j as usize - 1)?;
-        let (x, v) = oscillator::apply(&phi.e, s.y0[BL], s.y0[BVL]);
-        let h = th * s.h_s;
-        let [p1, p2, p3] = phi.p;
-        let (f0, f1, f2) = (s.n0[BVL], th * s.d1[BVL], th * th * s.d2[BVL]);
-        let force = |k: usize| h * (p1[k] * f0 + p2[k] * f1 + 2.0 * p3[k] * f2);
-        Some((x + force(0), v + force(1)))
-    }
-
-    /// The load on the lower tool per its mass at fraction `th` of the kept step.
-    pub(super) fn etd_force(s: &EtdStep, th: f64) -> f64 {
-        s.n0[BVL] + th * (s.d1[BVL] + th * s.d2[BVL])
+        f(s.y1[BL], s.y1[BVL], f0 + (d1 + d2));
+        true
     }
 }
