@@ -271,13 +271,13 @@ fn run_until(
                 (Path::Exact, Method::Dopri5 { .. }) => b.with_exact_phases(trace_t0_s.max(0.0), opts.trace_dt_s),
                 _ => b,
             };
-            let mut obs = Recorder { plant, sys: &b, r };
+            let mut obs = Recorder { plant, sys: &b, r, points: Vec::new() };
             let stats =
                 integrator::integrate(&b, opts.method, &b.reduce(&scale), b.reduce(&y0), mode0, limits, &mut obs)?;
             (stats, obs.r)
         }
         None => {
-            let mut obs = Recorder { plant, sys: plant, r };
+            let mut obs = Recorder { plant, sys: plant, r, points: Vec::new() };
             (integrator::integrate(plant, opts.method, &scale, y0, mode0, limits, &mut obs)?, obs.r)
         }
     };

@@ -29,13 +29,19 @@ pub fn shifted(v: &[f64], n: usize, shift: f64) -> Vec<f64> {
     let k_f = shift.floor().clamp(-bound, bound);
     let f = if k_f == shift.floor() { shift - k_f } else { 0.0 };
     let k = k_f as i64;
-    (0..n as i64)
-        .map(|i| match usize::try_from(i + k) {
-            Err(_) => 0.0,
-            Ok(j) if j + 1 >= v.len() => last,
-            Ok(j) => v[j] * (1.0 - f) + v[j + 1] * f,
-        })
-        .collect()
+    // Sample i reads v at j = i + k: 0 while j < 0, the last value from j + 1 = len on, the
+    // interpolation between (a loop over slices the compiler vectorises).
+    let clamp = |j: i64| j.clamp(0, n as i64) as usize;
+    let (lead, tail) = (clamp(-k), clamp(v.len() as i64 - 1 - k).max(clamp(-k)));
+    let mut out = Vec::with_capacity(n);
+    out.resize(lead, 0.0);
+    if lead < tail {
+        // Here 0 <= i + k and i + k + 1 < len: both ends index v.
+        let (j0, j1) = ((lead as i64 + k) as usize, (tail as i64 + k) as usize);
+        out.extend(v[j0..j1].iter().zip(&v[j0 + 1..=j1]).map(|(a, b)| a * (1.0 - f) + b * f));
+    }
+    out.resize(n, last);
+    out
 }
 
 #[cfg(test)]

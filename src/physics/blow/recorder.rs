@@ -118,14 +118,20 @@ impl Record {
         Some(self.end_at_s.map_or(t_sep + self.post_s, |t| t.max(*t_sep)))
     }
 
-    /// Note the sample `sensor_n` at `t_s` (before `next_sample` moves on): the first one at
-    /// or above the trace end's threshold fixes where the trace may end.
+    /// Note the sample `sensor_n` at `t_s` (before `next_sample` moves on): `ends_at`.
     fn sampled(&mut self, t_s: f64, sensor_n: f64) {
-        if let (Some(e), None) = (self.trace_end, self.end_at_s)
-            && sensor_n >= e.threshold_n
-        {
-            self.end_at_s = Some(t_s + e.after_s);
-        }
+        ends_at(self.trace_end, &mut self.end_at_s, t_s, sensor_n);
+    }
+}
+
+/// The first sample at or above the trace end's threshold fixes where the trace may end
+/// (`Record::end_at_s`).
+#[inline(always)]
+fn ends_at(trace_end: Option<TraceEnd>, end_at_s: &mut Option<f64>, t_s: f64, sensor_n: f64) {
+    if let (Some(e), None) = (trace_end, *end_at_s)
+        && sensor_n >= e.threshold_n
+    {
+        *end_at_s = Some(t_s + e.after_s);
     }
 }
 
@@ -134,6 +140,8 @@ pub(super) struct Recorder<'a, S> {
     pub(super) plant: &'a Plant,
     pub(super) sys: &'a S,
     pub(super) r: Record,
+    /// The grid points of the last exact step (`exact_points`).
+    pub(super) points: Vec<GridPoint>,
 }
 
 impl<const M: usize, S: Integrated<M>> Observer<M, Mode> for Recorder<'_, S> {
@@ -159,7 +167,7 @@ impl<const M: usize, S: Integrated<M>> Observer<M, Mode> for Recorder<'_, S> {
         r.last_end = Some((t1, s1, rate1));
         let (r0, r1) = (rate0 * h, rate1 * h);
         r.peak_n = r.peak_n.max(s0).max(s1);
-        if exact_points(sys, self.plant, r, t0, y0, mode, h, (s0, rate0), (t1, s1, rate1)) {
+        if exact_points(sys, self.plant, r, &mut self.points, t0, y0, mode, h, (s0, rate0), (t1, s1, rate1)) {
             return r.stop_s();
         }
         if h > 0.0 {
@@ -225,11 +233,16 @@ const SAMPLE_SNAP: f64 = 1e-6;
 /// The peak and the trace samples of an exact step from a grid point, from the sensor at
 /// each grid point within it (exact) and the cubic between neighbours (for the peak);
 /// false, and nothing recorded, where the step is not one (`Integrated::grid_points`).
+///
+/// The points are gathered into `points` first (kept from step to step) and then walked
+/// twice, for the peak and for the samples: each pass is a short loop the compiler keeps
+/// in registers, where one pass interleaving both went through memory at every point.
 #[allow(clippy::too_many_arguments)]
 fn exact_points<const M: usize, S: Integrated<M>>(
     sys: &S,
     plant: &Plant,
     r: &mut Record,
+    points: &mut Vec<GridPoint>,
     t0: f64,
     y0: &[f64; M],
     mode: Mode,
@@ -237,40 +250,54 @@ fn exact_points<const M: usize, S: Integrated<M>>(
     (s0, rate0): (f64, f64),
     end: (f64, f64, f64),
 ) -> bool {
-    let snap = r.trace_dt.map_or(0.0, |dt| SAMPLE_SNAP * dt);
+    points.clear();
+    if !sys.grid_points(t0, y0, mode, h, |p: &GridPoint| points.push(*p)) {
+        return false;
+    }
+    let Some(last) = points.last() else { return true };
+    let mut peak = r.peak_n;
     let mut prev = (t0, s0, rate0);
-    // The samples up to a grid point (to roundoff): at the step's start (`None`, left by
-    // the previous step), or at a grid point inside it.
-    let sample = |r: &mut Record, t: f64, s: f64, point: Option<&GridPoint>| {
-        let Some(dt) = r.trace_dt else { return };
-        while r.next_sample <= t + snap {
-            match r.trace {
-                Trace::Sensor(ref mut v) => v.push(s),
-                Trace::Outputs(ref mut v) => {
-                    let y = point.map_or(*y0, |p| sys.grid_point_state(t0, y0, mode, p));
-                    v.push(TracePoint { t_s: r.next_sample, out: plant.outputs(&sys.full(&y), mode) })
+    for p in points.iter() {
+        let here = (p.t_s, p.sensor_n, p.rate);
+        peak_between(&mut peak, prev, here);
+        prev = here;
+    }
+    if end.0 > last.t_s {
+        // A step cut short of a grid point by the stop: no sample can fall after the last.
+        peak_between(&mut peak, prev, end);
+    }
+    r.peak_n = peak;
+    let Some(dt) = r.trace_dt else { return true };
+    let snap = SAMPLE_SNAP * dt;
+    // The samples up to each grid point (to roundoff): first those up to the step's start
+    // (left by the previous step), then those up to each point inside it.
+    let at = |k: usize| points.get(k.wrapping_sub(1));
+    let Record { trace, next_sample, trace_end, end_at_s, .. } = r;
+    for k in 0..=points.len() {
+        let (t, s) = at(k).map_or((t0, s0), |p| (p.t_s, p.sensor_n));
+        while *next_sample <= t + snap {
+            match trace {
+                Trace::Sensor(v) => v.push(s),
+                Trace::Outputs(v) => {
+                    let y = at(k).map_or(*y0, |p| sys.grid_point_state(t0, y0, mode, p));
+                    v.push(TracePoint { t_s: *next_sample, out: plant.outputs(&sys.full(&y), mode) })
                 }
             }
-            r.sampled(r.next_sample, s);
-            r.next_sample += dt;
+            ends_at(*trace_end, end_at_s, *next_sample, s);
+            *next_sample += dt;
         }
-    };
-    let mut first = true;
-    let walked = sys.grid_points(t0, y0, mode, h, |p: &GridPoint| {
-        if first {
-            sample(r, t0, s0, None);
-            first = false;
-        }
-        let here = (p.t_s, p.sensor_n, p.rate);
-        peak_between(&mut r.peak_n, prev, here);
-        prev = here;
-        sample(r, p.t_s, p.sensor_n, Some(p));
-    });
-    if walked && end.0 > prev.0 {
-        // A step cut short of a grid point by the stop: no sample can fall after the last.
-        peak_between(&mut r.peak_n, prev, end);
     }
-    walked
+    true
+}
+
+/// `*peak = peak.max(x)` for a peak that is not NaN (the recorder's starts at 0), as a
+/// predicted branch: `f64::max`'s NaN handling put five instructions per point on the
+/// walk's dependency chain.
+#[inline(always)]
+fn raise(peak: &mut f64, x: f64) {
+    if x > *peak {
+        *peak = x;
+    }
 }
 
 /// Raise `peak` to the largest value of the cubic Hermite through `(t, s, rate)` at both
@@ -286,8 +313,9 @@ fn exact_points<const M: usize, S: Integrated<M>>(
 fn peak_between(peak: &mut f64, (ta, sa, ra): (f64, f64, f64), (tb, sb, rb): (f64, f64, f64)) {
     let h = tb - ta;
     let (r0, r1) = (ra * h, rb * h);
-    *peak = peak.max(sa).max(sb);
-    if h <= 0.0 || sa.max(sb) + 0.15 * (r0.abs() + r1.abs()) < *peak {
+    raise(peak, sa);
+    raise(peak, sb);
+    if h <= 0.0 || (if sa > sb { sa } else { sb }) + 0.15 * (r0.abs() + r1.abs()) < *peak {
         return;
     }
     peak_inside(peak, sa, r0, sb, r1);
