@@ -165,6 +165,13 @@ fn blow_in<M: Measurement>(c: &mut Criterion<M>, group: &str) {
     let one = Objective::new(refs[..1].to_vec(), vec![true], setting.clone(), MachineKind::Hammer);
     let mut g = c.benchmark_group(group);
     g.bench_function("hammer_blow_as_fitted", |b| b.iter(|| one.simulate(&m).unwrap()));
+    // The five blows of the billet as one evaluation of a fit's cost function simulates
+    // them, with the chain of heights from blow to blow. Every iteration has the same
+    // machine, so the tables `BaseHammer::with_exact_phases` keeps per machine are never
+    // recomputed here; a fit's evaluations each have a new machine, and recompute them once
+    // per five blows.
+    let five = Objective::new(refs.clone(), vec![true; refs.len()], setting.clone(), MachineKind::Hammer);
+    g.bench_function("hammer_5_blows_as_fitted", |b| b.iter(|| five.simulate(&m).unwrap()));
     // The physics of that blow alone, as `Objective::simulate_to` asks for it, and ending
     // at its last compared sample (`simulate_blow_sensor_until`: the caller's change the
     // README's "Speed" section describes).
