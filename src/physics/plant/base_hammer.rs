@@ -499,3 +499,43 @@ impl Hybrid<NB> for BaseHammer<'_> {
         self.phase_state(y, mode, h_s, xl, vl)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::config::{parse_machine, parse_process};
+    use crate::physics::blow::{SimOptions, simulate_blow_sensor};
+    use crate::physics::effects::{Effect, EffectSet};
+    use crate::physics::integrator::Method;
+    use crate::physics::sequence::blow_plant;
+
+    #[test]
+    fn a_machine_never_gets_the_tables_of_the_one_before() {
+        // The fits' options; the paper's hammer and the suite's light one (another mass,
+        // frame and damper), and the paper's with a rate-dependent law (no exponential steps).
+        let fits =
+            SimOptions { method: Method::Dopri5 { rtol: 1e-6 }, trace_dt_s: Some(1e-5), ..SimOptions::default() };
+        let machine = |text: &str| parse_machine("m", text).unwrap().machine;
+        let paper = machine(include_str!("../../../config/hammer-lg1000.machine.toml"));
+        let small = machine("kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n");
+        let steel = parse_process("steel", include_str!("../../../config/steel-16NiCrMo13.process.toml")).unwrap();
+        let rate = EffectSet::from_effects(&[Effect::parse_spec("strain_rate:m=0.15").unwrap()]);
+        let cases = [(&paper, EffectSet::NONE), (&small, EffectSet::NONE), (&paper, rate)];
+        let blow = |i: usize| {
+            let (m, e) = &cases[i];
+            simulate_blow_sensor(&blow_plant(m, e, &steel, 1, 0.112), 4.0, &fits).unwrap()
+        };
+        // Each case on a thread of its own (no tables kept), then in turn on one thread, each
+        // finding the one before's: the same machine with another law, another machine, and
+        // back.
+        let fresh: Vec<_> =
+            (0..cases.len()).map(|i| std::thread::scope(|s| s.spawn(|| blow(i)).join().unwrap())).collect();
+        for i in [0, 2, 1, 0, 2] {
+            let (res, sensor) = blow(i);
+            assert_eq!(sensor, fresh[i].1, "case {i}");
+            assert_eq!(res, fresh[i].0, "case {i}");
+        }
+        // The rate-dependent law takes no exponential steps, the others do.
+        assert_eq!(fresh[2].0.stats.etd_steps, 0);
+        assert!(fresh[0].0.stats.etd_steps > 0 && fresh[1].0.stats.etd_steps > 0);
+    }
+}
