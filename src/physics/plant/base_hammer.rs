@@ -173,7 +173,7 @@ impl<'a> BaseHammer<'a> {
             _ => last.insert(self.tables(free, stuck, Grid { t0_s: 0.0, dt_s, points }, key)).clone(),
         });
         let exact = Exact { grid: Grid { t0_s, ..tables.exact.grid }, ..tables.exact };
-        let etd = tables.etd.map(|e| e.from(t0_s));
+        let etd = tables.etd.map(|e| e.starting_at(t0_s));
         BaseHammer { exact: Some(exact), etd, ..self }
     }
 

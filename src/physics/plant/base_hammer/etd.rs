@@ -81,7 +81,7 @@ impl Etd {
     }
 
     /// The same weights on the grid from `t0_s`.
-    pub(super) fn from(&self, t0_s: f64) -> Etd {
+    pub(super) fn starting_at(&self, t0_s: f64) -> Etd {
         Etd { grid: Grid { t0_s, ..self.grid }, w: Rc::clone(&self.w) }
     }
 
