@@ -7,8 +7,10 @@ use super::ledger::Ledger;
 use super::plant::{BaseHammer, N, Outputs, Plant, V3, VL, VR, VU, WD, WF, WP, Z};
 
 mod recorder;
+mod sensor;
 
 use recorder::{Record, Recorder, Trace, forming_indicators};
+pub use sensor::{FitBlow, simulate_blow_sensor, simulate_blow_sensor_until};
 
 /// Simulated time after the contact ends that a blow keeps running (CONTRACTS.md §6 `post`).
 pub const POST_WINDOW_S: f64 = 5e-3;
@@ -151,56 +153,6 @@ pub fn simulate_blow_traced_from(
     Ok(res)
 }
 
-/// `simulate_blow` keeping only the sensor's load at each trace sample (from first contact,
-/// every `opts.trace_dt_s`), N; the result's `trace` is empty. The samples are the
-/// `sensor_n` of the full trace, bit for bit, without evaluating the billet law for the
-/// outputs a fit does not compare; except on a base hammer under Dormand–Prince, whose blow
-/// runs here with its linear phases advanced exactly (`Path::Exact`: the fits' cost, issue
-/// 17), within the general plant's own integration error of it (`tests` below).
-pub fn simulate_blow_sensor(
-    plant: &Plant,
-    v0_mps: f64,
-    opts: &SimOptions,
-) -> Result<(BlowResult, Vec<f64>), BlowError> {
-    sensor_run(plant, v0_mps, opts, None)
-}
-
-/// `simulate_blow_sensor` ending at `end` instead of `opts.post_s` after the contact opens
-/// (`post_s` still ends it if the sensor never reaches `end.threshold_n`). The samples it
-/// keeps are `simulate_blow_sensor`'s (the steps before the stop are the same; on a plant
-/// without exact phases the last step, cut at the stop, may move its last samples by the
-/// step control's error) and so are the indicators, the peak and the ledger.
-pub fn simulate_blow_sensor_until(
-    plant: &Plant,
-    v0_mps: f64,
-    opts: &SimOptions,
-    end: TraceEnd,
-) -> Result<(BlowResult, Vec<f64>), BlowError> {
-    sensor_run(plant, v0_mps, opts, Some(end))
-}
-
-/// The fits' sensor-only blow (`Path::Exact`), to `end` when given.
-fn sensor_run(
-    plant: &Plant,
-    v0_mps: f64,
-    opts: &SimOptions,
-    end: Option<TraceEnd>,
-) -> Result<(BlowResult, Vec<f64>), BlowError> {
-    // Room for the post window's samples (a fit's whole window, at least), so that the
-    // trace is not moved as it grows; at most a million.
-    let room = match opts.trace_dt_s {
-        Some(dt) if dt > 0.0 && (opts.post_s / dt).is_finite() => (opts.post_s / dt).clamp(0.0, 1e6) as usize + 2,
-        _ => 0,
-    };
-    let trace = Trace::Sensor(Vec::with_capacity(room));
-    let (res, trace) = run_until(plant, v0_mps, opts, 0.0, trace, Path::Exact, end)?;
-    let sensor = match trace {
-        Trace::Sensor(v) => v,
-        Trace::Outputs(v) => v.iter().map(|p| p.out.sensor_n).collect(),
-    };
-    Ok((res, sensor))
-}
-
 /// Which plant integrates a base hammer's blow (`BaseHammer::of`); other plants always run
 /// on the general one. The tests compare the three.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -224,10 +176,19 @@ fn run(
     trace: Trace,
     path: Path,
 ) -> Result<(BlowResult, Trace), BlowError> {
-    run_until(plant, v0_mps, opts, trace_t0_s, trace, path, None)
+    let (blow, peak_n, trace) = run_until(plant, v0_mps, opts, trace_t0_s, trace, path, None, true)?;
+    let (trace, kept) = match trace {
+        Trace::Outputs(v) => (v, Trace::Outputs(Vec::new())),
+        sensor @ Trace::Sensor(_) => (Vec::new(), sensor),
+    };
+    let FitBlow { v0_mps, h_start_m, forming, contact_time_s, energy, stats } = blow;
+    let peak_load_n = peak_n.expect("`run` keeps the peak");
+    Ok((BlowResult { v0_mps, h_start_m, forming, peak_load_n, contact_time_s, energy, stats, trace }, kept))
 }
 
-/// `run`, ending at `end` when given (`simulate_blow_sensor_until`).
+/// `run`, ending at `end` when given (`simulate_blow_sensor_until`), and keeping the
+/// sensor's peak when `peak` is (then the middle of the answer).
+#[allow(clippy::too_many_arguments)]
 fn run_until(
     plant: &Plant,
     v0_mps: f64,
@@ -236,7 +197,8 @@ fn run_until(
     trace: Trace,
     path: Path,
     end: Option<TraceEnd>,
-) -> Result<(BlowResult, Trace), BlowError> {
+    peak: bool,
+) -> Result<(FitBlow, Option<f64>, Trace), BlowError> {
     if !(v0_mps.is_finite() && v0_mps > 0.0) {
         return Err(BlowError::BadSpeed { v0_mps });
     }
@@ -247,7 +209,7 @@ fn run_until(
     let kinetic_in_j = plant.kinetic_in(&y0);
     let r = Record {
         post_s: opts.post_s,
-        peak_n: 0.0,
+        peak_n: peak.then_some(0.0),
         plastic_exits: Vec::new(),
         sensor_zeros: Vec::new(),
         separation: None,
@@ -293,21 +255,8 @@ fn run_until(
         .billet
         .as_ref()
         .map(|_| forming_indicators(&rec.plastic_exits, &rec.sensor_zeros, plant.h_start_m, t_sep));
-    let (trace, kept) = match rec.trace {
-        Trace::Outputs(v) => (v, Trace::Outputs(Vec::new())),
-        sensor @ Trace::Sensor(_) => (Vec::new(), sensor),
-    };
-    let res = BlowResult {
-        v0_mps,
-        h_start_m: plant.h_start_m,
-        forming,
-        peak_load_n: rec.peak_n,
-        contact_time_s: t_sep,
-        energy,
-        stats,
-        trace,
-    };
-    Ok((res, kept))
+    let blow = FitBlow { v0_mps, h_start_m: plant.h_start_m, forming, contact_time_s: t_sep, energy, stats };
+    Ok((blow, rec.peak_n, rec.trace))
 }
 
 #[cfg(test)]
@@ -543,7 +492,7 @@ mod tests {
         // a 17 ms window as the suite's hammer captures have, 100 ms on the press (its contact
         // lasts 65 ms): ending the blow 16 ms (80 ms) after the first sample at a tenth of
         // the peak (the window less the 1 ms the fits keep before it) keeps the indicators, the ledger and
-        // the samples up to there, and saves steps: the hammer's tools ride together for
+        // the samples up to there, and saves steps (it keeps no peak): the hammer's tools ride together for
         // 12.6 ms, so the post window ran 17 ms past the 16 ms the fits compare.
         let small = machine("kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n");
         let press = machine(include_str!("../../config/screw-press-spr400.machine.toml"));
@@ -561,7 +510,7 @@ mod tests {
             let last = ((k as f64 * dt + end.after_s) / dt * (1.0 + 1e-9)).floor() as usize;
             assert!(full.contact_time_s < (last as f64) * dt, "{:?} {}", m.kind(), full.contact_time_s);
             assert_eq!(s_cut.len(), last + 1, "{:?}", m.kind());
-            assert_eq!(BlowResult { stats: full.stats, ..cut.clone() }, full, "{:?}", m.kind());
+            assert_eq!(FitBlow { stats: full.stats, ..cut.clone() }, FitBlow::from(&full), "{:?}", m.kind());
             assert!(cut.stats.steps < full.stats.steps, "{:?} vs {:?}", cut.stats, full.stats);
             // Samples of the steps before the stop are the same; the last, cut short, moves
             // its samples by the step control's error on the press (its own 1e-6).
@@ -577,6 +526,12 @@ mod tests {
                 full.stats.steps
             );
             assert!(largest <= 1e-6 * full.peak_load_n, "{largest} N");
+            // The hammer's exact steps give the cut blow's samples as they are computed
+            // (`recorder::sensor_points`, no peak kept) and the full blow's from the points
+            // gathered for its peak: the same, bit for bit, up to the stop.
+            if m.kind() == crate::physics::machine::MachineKind::Hammer {
+                assert_eq!(moved, 0, "{largest} N");
+            }
         }
     }
 

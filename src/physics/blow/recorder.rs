@@ -93,7 +93,9 @@ impl Integrated<NB> for BaseHammer<'_> {
 /// What a blow records while the integrator runs.
 pub(super) struct Record {
     pub(super) post_s: f64,
-    pub(super) peak_n: f64,
+    /// The sensor's peak so far; `None` where it is not kept (a fit's blow,
+    /// `simulate_blow_sensor_until`: a walk over every sample that no fit reads).
+    pub(super) peak_n: Option<f64>,
     /// Every exit from plastic flow: (t, h, sensor load).
     pub(super) plastic_exits: Vec<(f64, f64, f64)>,
     /// Every instant the sensor load reached zero outside plastic flow, after the first exit.
@@ -166,14 +168,17 @@ impl<const M: usize, S: Integrated<M>> Observer<M, Mode> for Recorder<'_, S> {
         let rate1 = sys.sensor_rate(y1, dy1, mode);
         r.last_end = Some((t1, s1, rate1));
         let (r0, r1) = (rate0 * h, rate1 * h);
-        r.peak_n = r.peak_n.max(s0).max(s1);
+        if let Some(p) = &mut r.peak_n {
+            *p = p.max(s0).max(s1);
+        }
         if exact_points(sys, self.plant, r, &mut self.points, t0, y0, mode, h, (s0, rate0), (t1, s1, rate1)) {
             return r.stop_s();
         }
-        if h > 0.0 {
+        if let Some(p) = &mut r.peak_n
+            && h > 0.0
+        {
             for theta in cubic_extrema(s0, r0, s1, r1) {
-                let s = hermite_scalar(s0, r0, s1, r1, theta);
-                r.peak_n = r.peak_n.max(s);
+                *p = p.max(hermite_scalar(s0, r0, s1, r1, theta));
             }
         }
         if let Some(dt) = r.trace_dt {
@@ -234,9 +239,10 @@ const SAMPLE_SNAP: f64 = 1e-6;
 /// each grid point within it (exact) and the cubic between neighbours (for the peak);
 /// false, and nothing recorded, where the step is not one (`Integrated::grid_points`).
 ///
-/// The points are gathered into `points` first (kept from step to step) and then walked
-/// twice, for the peak and for the samples: each pass is a short loop the compiler keeps
-/// in registers, where one pass interleaving both went through memory at every point.
+/// Where the peak is kept, the points are gathered into `points` first (kept from step to
+/// step) and then walked twice, for the peak and for the samples: each pass is a short loop
+/// the compiler keeps in registers, where one pass interleaving both went through memory at
+/// every point. A fit's blow keeps no peak and only the sensor (`sensor_points`).
 #[allow(clippy::too_many_arguments)]
 fn exact_points<const M: usize, S: Integrated<M>>(
     sys: &S,
@@ -250,23 +256,29 @@ fn exact_points<const M: usize, S: Integrated<M>>(
     (s0, rate0): (f64, f64),
     end: (f64, f64, f64),
 ) -> bool {
+    if r.peak_n.is_none()
+        && let (Some(dt), Trace::Sensor(v)) = (r.trace_dt, &mut r.trace)
+    {
+        return sensor_points(sys, v, (&mut r.next_sample, &mut r.end_at_s, r.trace_end), dt, t0, y0, mode, h, s0);
+    }
     points.clear();
     if !sys.grid_points(t0, y0, mode, h, |p: &GridPoint| points.push(*p)) {
         return false;
     }
     let Some(last) = points.last() else { return true };
-    let mut peak = r.peak_n;
-    let mut prev = (t0, s0, rate0);
-    for p in points.iter() {
-        let here = (p.t_s, p.sensor_n, p.rate);
-        peak_between(&mut peak, prev, here);
-        prev = here;
+    if let Some(mut peak) = r.peak_n {
+        let mut prev = (t0, s0, rate0);
+        for p in points.iter() {
+            let here = (p.t_s, p.sensor_n, p.rate);
+            peak_between(&mut peak, prev, here);
+            prev = here;
+        }
+        if end.0 > last.t_s {
+            // A step cut short of a grid point by the stop: no sample can fall after the last.
+            peak_between(&mut peak, prev, end);
+        }
+        r.peak_n = Some(peak);
     }
-    if end.0 > last.t_s {
-        // A step cut short of a grid point by the stop: no sample can fall after the last.
-        peak_between(&mut peak, prev, end);
-    }
-    r.peak_n = peak;
     let Some(dt) = r.trace_dt else { return true };
     let snap = SAMPLE_SNAP * dt;
     // The samples up to each grid point (to roundoff): first those up to the step's start
@@ -287,6 +299,42 @@ fn exact_points<const M: usize, S: Integrated<M>>(
             *next_sample += dt;
         }
     }
+    true
+}
+
+/// `exact_points` with no peak to keep and the sensor's samples alone: each grid point's
+/// sample is pushed as the point is computed, with the sample clock and the trace's end
+/// held in registers and handed back at the end; false, and nothing recorded, where the
+/// step is not an exact one from a grid point.
+#[allow(clippy::too_many_arguments)]
+fn sensor_points<const M: usize, S: Integrated<M>>(
+    sys: &S,
+    v: &mut Vec<f64>,
+    (next_sample, end_at_s, trace_end): (&mut f64, &mut Option<f64>, Option<TraceEnd>),
+    dt: f64,
+    t0: f64,
+    y0: &[f64; M],
+    mode: Mode,
+    h: f64,
+    s0: f64,
+) -> bool {
+    let kept = v.len();
+    let snap = SAMPLE_SNAP * dt;
+    let (mut next, mut end_at) = (*next_sample, *end_at_s);
+    let mut take = |t: f64, s: f64| {
+        while next <= t + snap {
+            v.push(s);
+            ends_at(trace_end, &mut end_at, next, s);
+            next += dt;
+        }
+    };
+    // The samples up to the step's start (left by the previous step), then up to each point.
+    take(t0, s0);
+    if !sys.grid_points(t0, y0, mode, h, |p: &GridPoint| take(p.t_s, p.sensor_n)) {
+        v.truncate(kept);
+        return false;
+    }
+    (*next_sample, *end_at_s) = (next, end_at);
     true
 }
 
