@@ -181,9 +181,7 @@ fn run(
         Trace::Outputs(v) => (v, Trace::Outputs(Vec::new())),
         sensor @ Trace::Sensor(_) => (Vec::new(), sensor),
     };
-    let FitBlow { v0_mps, h_start_m, forming, contact_time_s, energy, stats } = blow;
-    let peak_load_n = peak_n.expect("`run` keeps the peak");
-    Ok((BlowResult { v0_mps, h_start_m, forming, peak_load_n, contact_time_s, energy, stats, trace }, kept))
+    Ok((blow.with_peak(peak_n.expect("`run` keeps the peak"), trace), kept))
 }
 
 /// `run`, ending at `end` when given (`simulate_blow_sensor_until`), and keeping the

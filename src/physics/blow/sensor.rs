@@ -2,7 +2,7 @@
 //! same blow run to its post window with its peak (`simulate_blow_sensor`, which the tests
 //! hold the fits' against).
 
-use super::{BlowError, BlowResult, Forming, Path, SimOptions, Trace, TraceEnd, run_until};
+use super::{BlowError, BlowResult, Forming, Path, SimOptions, Trace, TraceEnd, TracePoint, run_until};
 use crate::physics::integrator::Stats;
 use crate::physics::ledger::Ledger;
 use crate::physics::plant::Plant;
@@ -21,6 +21,14 @@ pub struct FitBlow {
     pub contact_time_s: f64,
     pub energy: Ledger,
     pub stats: Stats,
+}
+
+impl FitBlow {
+    /// The whole `BlowResult`: this blow with its peak and its trace.
+    pub(super) fn with_peak(self, peak_load_n: f64, trace: Vec<TracePoint>) -> BlowResult {
+        let FitBlow { v0_mps, h_start_m, forming, contact_time_s, energy, stats } = self;
+        BlowResult { v0_mps, h_start_m, forming, peak_load_n, contact_time_s, energy, stats, trace }
+    }
 }
 
 impl From<&BlowResult> for FitBlow {
@@ -49,10 +57,7 @@ pub fn simulate_blow_sensor(
     opts: &SimOptions,
 ) -> Result<(BlowResult, Vec<f64>), BlowError> {
     let (blow, peak_n, sensor) = sensor_run(plant, v0_mps, opts, None, true)?;
-    let FitBlow { v0_mps, h_start_m, forming, contact_time_s, energy, stats } = blow;
-    let peak_load_n = peak_n.expect("a blow run with its peak");
-    let res = BlowResult { v0_mps, h_start_m, forming, peak_load_n, contact_time_s, energy, stats, trace: Vec::new() };
-    Ok((res, sensor))
+    Ok((blow.with_peak(peak_n.expect("a blow run with its peak"), Vec::new()), sensor))
 }
 
 /// `simulate_blow_sensor` ending at `end` instead of `opts.post_s` after the contact opens
