@@ -35,6 +35,10 @@ use std::sync::Arc;
 
 use realfft::num_complex::Complex;
 use realfft::{RealFftPlanner, RealToComplex};
+use rustfft::FftPlanner;
+
+mod band;
+use band::Band;
 
 /// Longest FFT computed, points (128 MiB of input). A longer request gives an empty spectrum.
 pub const MAX_FFT_LEN: usize = 1 << 24;
@@ -121,6 +125,9 @@ pub struct SpectrumPlanner {
     input: Vec<f64>,
     output: Vec<Complex<f64>>,
     scratch: Vec<Complex<f64>>,
+    /// `amplitudes_up_to`'s low bins without the rest (`band`), and its plans.
+    band_planner: FftPlanner<f64>,
+    band: Option<Band>,
 }
 
 impl fmt::Debug for SpectrumPlanner {
@@ -143,6 +150,8 @@ impl SpectrumPlanner {
             input: Vec::new(),
             output: Vec::new(),
             scratch: Vec::new(),
+            band_planner: FftPlanner::new(),
+            band: None,
         }
     }
 
@@ -176,6 +185,8 @@ impl SpectrumPlanner {
     /// Bins 1, 2, ... of [`SpectrumPlanner::spectrum`] up to the last at or below
     /// `f_max_hz`, to the bit, without the amplitudes above it (a fit's cost function
     /// compares about a tenth of a padded spectrum's bins, and takes one per simulated blow).
+    /// A band below a quarter of the padded length (a fit's) is split out of the complex
+    /// transform alone (`band`); a wider one takes the whole spectrum.
     pub fn amplitudes_up_to(
         &mut self,
         signal: &[f64],
@@ -184,13 +195,27 @@ impl SpectrumPlanner {
         min_len: usize,
         f_max_hz: f64,
     ) -> Vec<f64> {
-        let Some(m) = self.transform(signal, dt_s, pad_factor, min_len) else { return Vec::new() };
-        let scale = 2.0 / signal.len() as f64;
+        let n = signal.len();
+        if n == 0 || !(dt_s.is_finite() && dt_s > 0.0) || signal.iter().any(|x| !x.is_finite()) {
+            return Vec::new();
+        }
+        let Some(m) = padded_len(n, pad_factor, min_len) else { return Vec::new() };
+        let scale = 2.0 / n as f64;
         let df_hz = 1.0 / (m as f64 * dt_s);
-        (1..self.output.len())
-            .take_while(|&k| k as f64 * df_hz <= f_max_hz)
-            .map(|k| self.output[k].norm_sqr().sqrt() * scale)
-            .collect()
+        let last = (1..=m / 2).take_while(|&k| k as f64 * df_hz <= f_max_hz).last().unwrap_or(0);
+        let band = match &mut self.band {
+            Some(b) if b.len() == m => b,
+            slot => slot.insert(Band::new(&mut self.band_planner, m)),
+        };
+        if last <= band.max_bin() {
+            let mut out = Vec::with_capacity(last);
+            band.amplitudes(signal, last, scale, &mut out);
+            return out;
+        }
+        if self.transform(signal, dt_s, pad_factor, min_len).is_none() {
+            return Vec::new();
+        }
+        self.output[1..=last].iter().map(|c| c.norm_sqr().sqrt() * scale).collect()
     }
 
     /// The zero-padded FFT of `signal` into `self.output`; its padded length, or `None` (and
@@ -507,6 +532,34 @@ mod tests {
             assert_eq!(planner.amplitudes_up_to(&x, dt, 4, 0, f_max), want, "f_max {f_max}");
         }
         assert!(planner.amplitudes_up_to(&[1.0, f64::NAN], dt, 4, 0, 5000.0).is_empty());
+    }
+
+    #[test]
+    fn the_band_split_alone_is_realffts_split_to_the_bit() {
+        // Odd and even lengths (an odd one leaves its last sample unpaired), paddings that
+        // leave 1/4 to 1/8 of the transform filled, and band edges from the first bin to
+        // either side of a quarter of the padded length, where the band split stops and the
+        // whole spectrum is taken; a second planner length in between.
+        let dt = 1e-5;
+        let mut planner = SpectrumPlanner::new();
+        for n in [1715, 1716, 301, 4] {
+            let x: Vec<f64> = half_sine(n as f64 * 0.6 * dt, dt, n)
+                .iter()
+                .zip(sine(2050.0, 0.05, dt, n))
+                .map(|(a, b)| a + b + 1e-3 * (n as f64).sin())
+                .collect();
+            for (pad, min_len) in [(4, 0), (1, 0), (2, 4096)] {
+                let s = amplitude_spectrum(&x, dt, pad, min_len);
+                let quarter = (s.len() - 1) / 2;
+                for last in [1, 2, quarter / 3, quarter - 1, quarter, quarter + 1, s.len() - 1] {
+                    let last = last.clamp(1, s.len() - 1);
+                    // Half a bin above `last`: the edge falls between bins.
+                    let f_max = (last as f64 + 0.5) * s.df_hz;
+                    let got = planner.amplitudes_up_to(&x, dt, pad, min_len, f_max);
+                    assert_eq!(got, s.amplitude[1..=last], "n {n}, pad {pad}, min_len {min_len}, last bin {last}");
+                }
+            }
+        }
     }
 
     #[test]
