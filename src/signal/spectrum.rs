@@ -182,50 +182,11 @@ impl SpectrumPlanner {
         Spectrum { df_hz: 1.0 / (m as f64 * dt_s), resolution_hz: 1.0 / (n as f64 * dt_s), amplitude }
     }
 
-    /// Bins 1, 2, ... of [`SpectrumPlanner::spectrum`] up to the last at or below
-    /// `f_max_hz`, to the bit, without the amplitudes above it (a fit's cost function
-    /// compares about a tenth of a padded spectrum's bins, and takes one per simulated blow).
-    /// A band below a quarter of the padded length (a fit's) is split out of the complex
-    /// transform alone (`band`); a wider one takes the whole spectrum.
-    pub fn amplitudes_up_to(
-        &mut self,
-        signal: &[f64],
-        dt_s: f64,
-        pad_factor: usize,
-        min_len: usize,
-        f_max_hz: f64,
-    ) -> Vec<f64> {
-        let n = signal.len();
-        if n == 0 || !(dt_s.is_finite() && dt_s > 0.0) || signal.iter().any(|x| !x.is_finite()) {
-            return Vec::new();
-        }
-        let Some(m) = padded_len(n, pad_factor, min_len) else { return Vec::new() };
-        let scale = 2.0 / n as f64;
-        let df_hz = 1.0 / (m as f64 * dt_s);
-        let last = (1..=m / 2).take_while(|&k| k as f64 * df_hz <= f_max_hz).last().unwrap_or(0);
-        let band = match &mut self.band {
-            Some(b) if b.len() == m => b,
-            slot => slot.insert(Band::new(&mut self.band_planner, m)),
-        };
-        if last <= band.max_bin() {
-            let mut out = Vec::with_capacity(last);
-            band.amplitudes(signal, last, scale, &mut out);
-            return out;
-        }
-        if self.transform(signal, dt_s, pad_factor, min_len).is_none() {
-            return Vec::new();
-        }
-        self.output[1..=last].iter().map(|c| c.norm_sqr().sqrt() * scale).collect()
-    }
-
     /// The zero-padded FFT of `signal` into `self.output`; its padded length, or `None` (and
     /// nothing computed) on bad input (`spectrum`'s doc).
-    fn transform(&mut self, signal: &[f64], dt_s: f64, pad_factor: usize, min_len: usize) -> Option<usize> {
+    pub(super) fn transform(&mut self, signal: &[f64], dt_s: f64, pad_factor: usize, min_len: usize) -> Option<usize> {
         let n = signal.len();
-        if n == 0 || !(dt_s.is_finite() && dt_s > 0.0) || signal.iter().any(|x| !x.is_finite()) {
-            return None;
-        }
-        let m = padded_len(n, pad_factor, min_len)?;
+        let m = checked_len(signal, dt_s, pad_factor, min_len)?;
         let fft = match &self.fft {
             Some(f) if f.len() == m => Arc::clone(f),
             _ => {
@@ -242,6 +203,12 @@ impl SpectrumPlanner {
         // Only fails on buffers of the wrong length, which the plan made itself.
         fft.process_with_scratch(&mut self.input, &mut self.output, &mut self.scratch).ok().map(|()| m)
     }
+}
+
+/// `padded_len` of a signal that can be transformed: `None` for bad input (`spectrum`'s doc).
+pub(super) fn checked_len(signal: &[f64], dt_s: f64, pad_factor: usize, min_len: usize) -> Option<usize> {
+    let good = !signal.is_empty() && dt_s.is_finite() && dt_s > 0.0 && signal.iter().all(|x| x.is_finite());
+    good.then(|| padded_len(signal.len(), pad_factor, min_len)).flatten()
 }
 
 /// FFT length for `n` samples: the next power of two ≥ max(`min_len`, `pad_factor` · `n`, 2),
@@ -439,12 +406,12 @@ mod tests {
     use crate::config::{parse_machine, parse_process};
     use crate::physics::{BlowResult, EffectSet, Machine, SimOptions, simulate_bare, simulate_sequence};
 
-    fn sine(f_hz: f64, amplitude: f64, dt_s: f64, n: usize) -> impl Iterator<Item = f64> {
+    pub(super) fn sine(f_hz: f64, amplitude: f64, dt_s: f64, n: usize) -> impl Iterator<Item = f64> {
         (0..n).map(move |i| amplitude * (2.0 * PI * f_hz * i as f64 * dt_s).sin())
     }
 
     /// A half-sine pulse of `pulse_s` at the start of a record of `n` samples.
-    fn half_sine(pulse_s: f64, dt_s: f64, n: usize) -> Vec<f64> {
+    pub(super) fn half_sine(pulse_s: f64, dt_s: f64, n: usize) -> Vec<f64> {
         (0..n)
             .map(|i| {
                 let t = i as f64 * dt_s;
@@ -513,53 +480,6 @@ mod tests {
         // A constant reads twice itself at 0 Hz (uniform 2/N scaling, see `spectrum`).
         let s = planner.spectrum(&[1.5; 100], dt, 1, 0);
         assert!((s.amplitude[0] - 3.0).abs() < 1e-12);
-    }
-
-    #[test]
-    fn the_band_up_to_a_frequency_is_the_spectrums_bins_to_the_bit() {
-        // A 9.6 ms half-sine pulse with a 2 kHz ring, 1715 samples at 100 kHz (a fitted
-        // hammer blow's window), padded 4×: the bins a fit compares, from both methods.
-        let dt = 1e-5;
-        let x: Vec<f64> =
-            half_sine(9.6e-3, dt, 1715).iter().zip(sine(2050.0, 0.05, dt, 1715)).map(|(a, b)| a + b).collect();
-        let mut planner = SpectrumPlanner::new();
-        let s = planner.spectrum(&x, dt, 4, 0);
-        // A band edge between bins, one exactly on a bin's frequency, and past Nyquist.
-        for f_max in [5000.0, 40.0 * s.df_hz, 1e9] {
-            let want: Vec<f64> =
-                (1..s.len()).take_while(|&k| s.frequency_hz(k) <= f_max).map(|k| s.amplitude[k]).collect();
-            assert!(!want.is_empty());
-            assert_eq!(planner.amplitudes_up_to(&x, dt, 4, 0, f_max), want, "f_max {f_max}");
-        }
-        assert!(planner.amplitudes_up_to(&[1.0, f64::NAN], dt, 4, 0, 5000.0).is_empty());
-    }
-
-    #[test]
-    fn the_band_split_alone_is_realffts_split_to_the_bit() {
-        // Odd and even lengths (an odd one leaves its last sample unpaired), paddings that
-        // leave 1/4 to 1/8 of the transform filled, and band edges from the first bin to
-        // either side of a quarter of the padded length, where the band split stops and the
-        // whole spectrum is taken; a second planner length in between.
-        let dt = 1e-5;
-        let mut planner = SpectrumPlanner::new();
-        for n in [1715, 1716, 301, 4] {
-            let x: Vec<f64> = half_sine(n as f64 * 0.6 * dt, dt, n)
-                .iter()
-                .zip(sine(2050.0, 0.05, dt, n))
-                .map(|(a, b)| a + b + 1e-3 * (n as f64).sin())
-                .collect();
-            for (pad, min_len) in [(4, 0), (1, 0), (2, 4096)] {
-                let s = amplitude_spectrum(&x, dt, pad, min_len);
-                let quarter = (s.len() - 1) / 2;
-                for last in [1, 2, quarter / 3, quarter - 1, quarter, quarter + 1, s.len() - 1] {
-                    let last = last.clamp(1, s.len() - 1);
-                    // Half a bin above `last`: the edge falls between bins.
-                    let f_max = (last as f64 + 0.5) * s.df_hz;
-                    let got = planner.amplitudes_up_to(&x, dt, pad, min_len, f_max);
-                    assert_eq!(got, s.amplitude[1..=last], "n {n}, pad {pad}, min_len {min_len}, last bin {last}");
-                }
-            }
-        }
     }
 
     #[test]

@@ -6,12 +6,46 @@
 //! its `RealToComplexEven` (3.5) for the first bins alone: the same complex FFT of half the
 //! length (rustfft's planner, as realfft plans it, on the even and odd samples as one
 //! complex signal), realfft's twiddles, and its split's expressions in its order, so the
-//! bins are realfft's to the bit (`spectrum`'s tests compare every bin).
+//! bins are realfft's to the bit (the tests below compare every bin).
 
 use std::sync::Arc;
 
 use realfft::num_complex::Complex;
 use rustfft::{Fft, FftPlanner};
+
+use super::{SpectrumPlanner, checked_len};
+
+impl SpectrumPlanner {
+    /// Bins 1, 2, ... of [`SpectrumPlanner::spectrum`] up to the last at or below
+    /// `f_max_hz`, to the bit, without the amplitudes above it (a fit's cost function
+    /// compares about a tenth of a padded spectrum's bins, and takes one per simulated blow).
+    /// A band below a quarter of the padded length (a fit's) is split out of the complex
+    /// transform alone (`band`); a wider one takes the whole spectrum.
+    pub fn amplitudes_up_to(
+        &mut self,
+        signal: &[f64],
+        dt_s: f64,
+        pad_factor: usize,
+        min_len: usize,
+        f_max_hz: f64,
+    ) -> Vec<f64> {
+        let Some(m) = checked_len(signal, dt_s, pad_factor, min_len) else { return Vec::new() };
+        let scale = 2.0 / signal.len() as f64;
+        let df_hz = 1.0 / (m as f64 * dt_s);
+        let last = (1..=m / 2).take_while(|&k| k as f64 * df_hz <= f_max_hz).last().unwrap_or(0);
+        let band = match &mut self.band {
+            Some(b) if b.len() == m => b,
+            slot => slot.insert(Band::new(&mut self.band_planner, m)),
+        };
+        if last <= band.max_bin() {
+            return band.amplitudes(signal, last, scale);
+        }
+        match self.transform(signal, dt_s, pad_factor, min_len) {
+            Some(_) => self.output[1..=last].iter().map(|c| c.norm_sqr().sqrt() * scale).collect(),
+            None => Vec::new(),
+        }
+    }
+}
 
 /// The band's plan for one padded length, and its buffers.
 pub(super) struct Band {
@@ -59,8 +93,8 @@ impl Band {
     }
 
     /// `|X_k| * scale` for k = 1 ..= `last` (at most `max_bin`) of `signal` (at most `len`
-    /// samples) zero-padded to `len`, into `out`.
-    pub(super) fn amplitudes(&mut self, signal: &[f64], last: usize, scale: f64, out: &mut Vec<f64>) {
+    /// samples) zero-padded to `len`.
+    pub(super) fn amplitudes(&mut self, signal: &[f64], last: usize, scale: f64) -> Vec<f64> {
         debug_assert!(signal.len() <= self.len && last <= self.max_bin());
         // realfft reads its real input as complex pairs (even sample, odd sample).
         let pairs = signal.chunks_exact(2);
@@ -78,21 +112,76 @@ impl Band {
         self.input[filled..].fill(Complex::default());
         self.fft.process_outofplace_with_scratch(&mut self.input, &mut self.output, &mut self.scratch);
         let half = self.len / 2;
-        out.clear();
-        out.extend((1..=last).map(|k| {
-            // realfft's split of bin k (and of bin half - k, not kept), term for term.
-            let (x, x_rev, tw) = (self.output[k], self.output[half - k], self.twiddles[k - 1]);
-            let sum = x + x_rev;
-            let diff = x - x_rev;
-            let twiddled_re_sum = sum * tw.re;
-            let twiddled_im_sum = sum * tw.im;
-            let twiddled_re_diff = diff * tw.re;
-            let twiddled_im_diff = diff * tw.im;
-            let half_sum_re = 0.5 * sum.re;
-            let half_diff_im = 0.5 * diff.im;
-            let re = half_sum_re + (twiddled_re_sum.im + twiddled_im_diff.re);
-            let im = half_diff_im + (twiddled_im_sum.im - twiddled_re_diff.re);
-            Complex { re, im }.norm_sqr().sqrt() * scale
-        }));
+        (1..=last)
+            .map(|k| {
+                // realfft's split of bin k (and of bin half - k, not kept), term for term.
+                let (x, x_rev, tw) = (self.output[k], self.output[half - k], self.twiddles[k - 1]);
+                let sum = x + x_rev;
+                let diff = x - x_rev;
+                let twiddled_re_sum = sum * tw.re;
+                let twiddled_im_sum = sum * tw.im;
+                let twiddled_re_diff = diff * tw.re;
+                let twiddled_im_diff = diff * tw.im;
+                let half_sum_re = 0.5 * sum.re;
+                let half_diff_im = 0.5 * diff.im;
+                let re = half_sum_re + (twiddled_re_sum.im + twiddled_im_diff.re);
+                let im = half_diff_im + (twiddled_im_sum.im - twiddled_re_diff.re);
+                Complex { re, im }.norm_sqr().sqrt() * scale
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::tests::{half_sine, sine};
+    use super::super::{SpectrumPlanner, amplitude_spectrum};
+
+    #[test]
+    fn the_band_up_to_a_frequency_is_the_spectrums_bins_to_the_bit() {
+        // A 9.6 ms half-sine pulse with a 2 kHz ring, 1715 samples at 100 kHz (a fitted
+        // hammer blow's window), padded 4×: the bins a fit compares, from both methods.
+        let dt = 1e-5;
+        let x: Vec<f64> =
+            half_sine(9.6e-3, dt, 1715).iter().zip(sine(2050.0, 0.05, dt, 1715)).map(|(a, b)| a + b).collect();
+        let mut planner = SpectrumPlanner::new();
+        let s = planner.spectrum(&x, dt, 4, 0);
+        // A band edge between bins, one exactly on a bin's frequency, and past Nyquist.
+        for f_max in [5000.0, 40.0 * s.df_hz, 1e9] {
+            let want: Vec<f64> =
+                (1..s.len()).take_while(|&k| s.frequency_hz(k) <= f_max).map(|k| s.amplitude[k]).collect();
+            assert!(!want.is_empty());
+            assert_eq!(planner.amplitudes_up_to(&x, dt, 4, 0, f_max), want, "f_max {f_max}");
+        }
+        assert!(planner.amplitudes_up_to(&[1.0, f64::NAN], dt, 4, 0, 5000.0).is_empty());
+    }
+
+    #[test]
+    fn the_band_split_alone_is_realffts_split_to_the_bit() {
+        // A half-sine pulse with a 2 kHz ring and an offset, at odd and even lengths (an odd
+        // one leaves its last sample unpaired); paddings that leave 1/8 to all of the
+        // transform filled; band edges from the first bin to either side of a quarter of
+        // the padded length, where the band split stops and the whole spectrum is taken,
+        // with the planner's length changing in between.
+        let dt = 1e-5;
+        let mut planner = SpectrumPlanner::new();
+        for n in [1715, 1716, 301, 4] {
+            let x: Vec<f64> = half_sine(n as f64 * 0.6 * dt, dt, n)
+                .iter()
+                .zip(sine(2050.0, 0.05, dt, n))
+                .map(|(a, b)| a + b + 1e-3)
+                .collect();
+            for (pad, min_len) in [(4, 0), (1, 0), (2, 4096)] {
+                let s = amplitude_spectrum(&x, dt, pad, min_len);
+                let quarter = (s.len() - 1) / 2;
+                for last in [1, 2, quarter / 3, quarter - 1, quarter, quarter + 1, s.len() - 1] {
+                    let last = last.clamp(1, s.len() - 1);
+                    // Half a bin above `last`: the band's edge falls between bins.
+                    let f_max = (last as f64 + 0.5) * s.df_hz;
+                    let got = planner.amplitudes_up_to(&x, dt, pad, min_len, f_max);
+                    assert_eq!(got, s.amplitude[1..=last], "n {n}, pad {pad}, min_len {min_len}, last bin {last}");
+                }
+            }
+        }
     }
 }
