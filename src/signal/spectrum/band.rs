@@ -33,11 +33,11 @@ impl SpectrumPlanner {
         let scale = 2.0 / signal.len() as f64;
         let df_hz = 1.0 / (m as f64 * dt_s);
         let last = (1..=m / 2).take_while(|&k| k as f64 * df_hz <= f_max_hz).last().unwrap_or(0);
-        let band = match &mut self.band {
-            Some(b) if b.len() == m => b,
-            slot => slot.insert(Band::new(&mut self.band_planner, m)),
-        };
-        if last <= band.max_bin() {
+        if last <= Band::max_bin(m) {
+            let band = match &mut self.band {
+                Some(b) if b.len == m => b,
+                slot => slot.insert(Band::new(&mut self.band_planner, m)),
+            };
             return band.amplitudes(signal, last, scale);
         }
         match self.transform(signal, dt_s, pad_factor, min_len) {
@@ -60,7 +60,7 @@ pub(super) struct Band {
 }
 
 impl Band {
-    /// The plan for a real transform of `len` points (even, ≥ 4).
+    /// The plan for a real transform of `len` points (even).
     pub(super) fn new(planner: &mut FftPlanner<f64>, len: usize) -> Band {
         let half = len / 2;
         let fft = planner.plan_fft_forward(half);
@@ -82,20 +82,16 @@ impl Band {
         }
     }
 
-    pub(super) fn len(&self) -> usize {
-        self.len
-    }
-
-    /// The highest bin `amplitudes` can give: below a quarter of the length, where realfft's
-    /// split pairs each bin with one from the top half.
-    pub(super) fn max_bin(&self) -> usize {
-        self.twiddles.len()
+    /// The highest bin `amplitudes` gives for a transform of `len` points: below a quarter
+    /// of the length, where realfft's split pairs each bin with one from the top half.
+    fn max_bin(len: usize) -> usize {
+        (len / 4).saturating_sub(1)
     }
 
     /// `|X_k| * scale` for k = 1 ..= `last` (at most `max_bin`) of `signal` (at most `len`
     /// samples) zero-padded to `len`.
     pub(super) fn amplitudes(&mut self, signal: &[f64], last: usize, scale: f64) -> Vec<f64> {
-        debug_assert!(signal.len() <= self.len && last <= self.max_bin());
+        debug_assert!(signal.len() <= self.len && last <= Band::max_bin(self.len));
         // realfft reads its real input as complex pairs (even sample, odd sample).
         let pairs = signal.chunks_exact(2);
         let odd = pairs.remainder().first().copied();
