@@ -184,9 +184,14 @@ impl SpectrumPlanner {
 
     /// The zero-padded FFT of `signal` into `self.output`; its padded length, or `None` (and
     /// nothing computed) on bad input (`spectrum`'s doc).
-    pub(super) fn transform(&mut self, signal: &[f64], dt_s: f64, pad_factor: usize, min_len: usize) -> Option<usize> {
-        let n = signal.len();
+    fn transform(&mut self, signal: &[f64], dt_s: f64, pad_factor: usize, min_len: usize) -> Option<usize> {
         let m = checked_len(signal, dt_s, pad_factor, min_len)?;
+        self.transform_to(signal, m)
+    }
+
+    /// `transform` of a signal `checked_len` passed, to its length `m`.
+    fn transform_to(&mut self, signal: &[f64], m: usize) -> Option<usize> {
+        let n = signal.len();
         let fft = match &self.fft {
             Some(f) if f.len() == m => Arc::clone(f),
             _ => {
@@ -206,7 +211,7 @@ impl SpectrumPlanner {
 }
 
 /// `padded_len` of a signal that can be transformed: `None` for bad input (`spectrum`'s doc).
-pub(super) fn checked_len(signal: &[f64], dt_s: f64, pad_factor: usize, min_len: usize) -> Option<usize> {
+fn checked_len(signal: &[f64], dt_s: f64, pad_factor: usize, min_len: usize) -> Option<usize> {
     let good = !signal.is_empty() && dt_s.is_finite() && dt_s > 0.0 && signal.iter().all(|x| x.is_finite());
     good.then(|| padded_len(signal.len(), pad_factor, min_len)).flatten()
 }

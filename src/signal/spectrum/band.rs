@@ -40,7 +40,7 @@ impl SpectrumPlanner {
             };
             return band.amplitudes(signal, last, scale);
         }
-        match self.transform(signal, dt_s, pad_factor, min_len) {
+        match self.transform_to(signal, m) {
             Some(_) => self.output[1..=last].iter().map(|c| c.norm_sqr().sqrt() * scale).collect(),
             None => Vec::new(),
         }
@@ -93,16 +93,10 @@ impl Band {
     pub(super) fn amplitudes(&mut self, signal: &[f64], last: usize, scale: f64) -> Vec<f64> {
         debug_assert!(signal.len() <= self.len && last <= Band::max_bin(self.len));
         // realfft reads its real input as complex pairs (even sample, odd sample).
-        let pairs = signal.chunks_exact(2);
-        let odd = pairs.remainder().first().copied();
-        let mut filled = 0;
-        for (c, p) in self.input.iter_mut().zip(pairs) {
-            *c = Complex { re: p[0], im: p[1] };
-            filled += 1;
-        }
-        if let Some(x) = odd {
-            self.input[filled] = Complex { re: x, im: 0.0 };
-            filled += 1;
+        // An odd last sample is paired with the padding's first zero.
+        let filled = signal.len().div_ceil(2);
+        for (c, p) in self.input.iter_mut().zip(signal.chunks(2)) {
+            *c = Complex { re: p[0], im: p.get(1).copied().unwrap_or(0.0) };
         }
         // The transform uses its input as scratch: the padding is written every time.
         self.input[filled..].fill(Complex::default());
@@ -155,8 +149,8 @@ mod tests {
     #[test]
     fn the_band_split_alone_is_realffts_split_to_the_bit() {
         // A half-sine pulse with a 2 kHz ring and an offset, at odd and even lengths (an odd
-        // one leaves its last sample unpaired); paddings that leave 1/8 to all of the
-        // transform filled; band edges from the first bin to either side of a quarter of
+        // one leaves its last sample unpaired); paddings that leave from 7 % (301 of 4096) to all
+        // of the transform filled; band edges from the first bin to either side of a quarter of
         // the padded length, where the band split stops and the whole spectrum is taken,
         // with the planner's length changing in between.
         let dt = 1e-5;
