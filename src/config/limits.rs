@@ -35,6 +35,10 @@ pub const BILLET_DIMENSION_M: Limits = Limits { min: 1e-3, max: 2.0, unit: "m" }
 /// plate can end thinner than any billet starts.
 pub const MEASURED_HEIGHT_M: Limits = Limits { min: 1e-4, max: 2.0, unit: "m" };
 
+/// `[caliper] tolerance_m`: how far a hand-measured height may rise, m: from nothing (the
+/// sheet's heights are exact) to 10 mm (more is no measurement of a forged part).
+pub const CALIPER_TOLERANCE_M: Limits = Limits { min: 0.0, max: 0.01, unit: "m" };
+
 /// Flow stress, Pa: from 1e4 (modelling clay, the soft model material of forging
 /// experiments, flows near 0.1 MPa) to 1e10 (five times a hardened tool steel's 2 GPa).
 pub const FLOW_STRESS_PA: Limits = Limits { min: 1e4, max: 1e10, unit: "Pa" };

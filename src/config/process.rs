@@ -2,14 +2,16 @@
 //! measured heights after each blow. Every table denies unknown keys.
 //!
 //! Measured heights are hand-measured and noisy: a height that rises from one blow to the
-//! next is kept as measured, with a warning naming the blows ([`parse_process_sheet`]).
+//! next, or after blow 1 stands above the billet's, by no more than `[caliper] tolerance_m`
+//! is kept as measured, with a warning naming the blows ([`parse_process_sheet`]); a larger
+//! rise is no caliper's scatter, and the sheet is refused at that key (issue 36).
 
 use serde::Deserialize;
 use serde::de::IgnoredAny;
 
 use super::document::Document;
 use super::limits::{
-    BILLET_DIMENSION_M, FLOW_STRESS_PA, FRICTION, HANSEL_SPITTEL_A_PA, HANSEL_SPITTEL_EXPONENT,
+    BILLET_DIMENSION_M, CALIPER_TOLERANCE_M, FLOW_STRESS_PA, FRICTION, HANSEL_SPITTEL_A_PA, HANSEL_SPITTEL_EXPONENT,
     HANSEL_SPITTEL_M1_PER_C, MEASURED_HEIGHT_M, TEMPERATURE_C,
 };
 use super::{ConfigError, Parsed};
@@ -29,7 +31,18 @@ struct RawSheet {
     interface: RawInterface,
     #[serde(default)]
     blows: Vec<RawBlow>,
+    caliper: Option<RawCaliper>,
 }
+
+/// `[caliper]`: how the measured heights were taken.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCaliper {
+    tolerance_m: f64,
+}
+
+/// `[caliper] tolerance_m` when the sheet does not set it (`process::CALIPER_TOLERANCE_M`).
+pub const DEFAULT_CALIPER_TOLERANCE_M: f64 = crate::physics::process::CALIPER_TOLERANCE_M;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -112,27 +125,52 @@ pub fn parse_process_sheet(origin: &str, text: &str) -> Result<Parsed<Process>, 
         }
     };
     let friction = doc.in_range("interface.friction", raw.interface.friction, &FRICTION)?;
+    let tolerance_m = match &raw.caliper {
+        Some(c) => doc.in_range("caliper.tolerance_m", c.tolerance_m, &CALIPER_TOLERANCE_M)?,
+        None => DEFAULT_CALIPER_TOLERANCE_M,
+    };
     let mut measured = Vec::with_capacity(raw.blows.len());
     let mut warnings = Vec::new();
     for (i, blow) in raw.blows.iter().enumerate() {
         let key = format!("blows[{}].final_height_m", i + 1);
         let h = doc.in_range(&key, blow.final_height_m, &MEASURED_HEIGHT_M)?;
         let place = doc.place(&key);
-        match measured.last().copied() {
-            None if h > billet.height_m => warnings.push(format!(
-                "{place}: the measured height after blow 1 ({:.2} mm) is above the billet's height_m ({:.2} mm): \
-                 caliper noise? kept as measured",
-                h * 1e3,
-                billet.height_m * 1e3
-            )),
-            Some(previous) if h > previous => warnings.push(format!(
-                "{place}: measured heights rise between blow {i} ({:.2} mm) and blow {} ({:.2} mm): caliper noise? \
-                 kept as measured",
-                previous * 1e3,
-                i + 1,
-                h * 1e3
-            )),
-            _ => {}
+        // What it rises above, in words: the billet's height after blow 1, the blow before's
+        // measured height after that. A billet only gets flatter.
+        let (above_m, what) = match measured.last().copied() {
+            None => (billet.height_m, "the billet's height_m".to_string()),
+            Some(previous) => (previous, format!("blow {i}'s")),
+        };
+        let rise_m = h - above_m;
+        if rise_m > tolerance_m {
+            return Err(doc.invalid(
+                &key,
+                format!(
+                    "is {:.2} mm, {:.2} mm above {what} ({:.2} mm): a billet only gets flatter, and that is more \
+                     than a caliper's scatter ([caliper] tolerance_m = {:.2} mm)",
+                    h * 1e3,
+                    rise_m * 1e3,
+                    above_m * 1e3,
+                    tolerance_m * 1e3
+                ),
+            ));
+        }
+        if rise_m > 0.0 {
+            warnings.push(match i {
+                0 => format!(
+                    "{place}: the measured height after blow 1 ({:.2} mm) is above the billet's height_m ({:.2} mm): \
+                     caliper noise? kept as measured",
+                    h * 1e3,
+                    billet.height_m * 1e3
+                ),
+                _ => format!(
+                    "{place}: measured heights rise between blow {i} ({:.2} mm) and blow {} ({:.2} mm): caliper noise? \
+                     kept as measured",
+                    above_m * 1e3,
+                    i + 1,
+                    h * 1e3
+                ),
+            });
         }
         measured.push(h);
     }
@@ -239,8 +277,36 @@ mod tests {
                     .to_string()
             ]
         );
-        let e = parse_process_sheet("p.toml", &format!("{STEEL}[[blows]]\nfinal_height_m = 0.113\n")).unwrap();
-        assert_eq!(e.value.measured_final_heights_m, vec![0.113]);
-        assert!(e.warnings[0].contains("after blow 1 (113.00 mm) is above the billet's height_m (112.00 mm)"), "{e:?}");
+        let e = parse_process_sheet("p.toml", &format!("{STEEL}[[blows]]\nfinal_height_m = 0.1123\n")).unwrap();
+        assert_eq!(e.value.measured_final_heights_m, vec![0.1123]);
+        assert!(e.warnings[0].contains("after blow 1 (112.30 mm) is above the billet's height_m (112.00 mm)"), "{e:?}");
+    }
+
+    /// Issue 36: a measured height of 500 mm on a 112 mm billet was kept as "caliper noise".
+    /// A rise beyond `[caliper] tolerance_m` (1 mm unless set) is refused at its key.
+    #[test]
+    fn a_rise_beyond_the_calipers_tolerance_is_refused_at_its_key() {
+        let e = err(&format!("{STEEL}[[blows]]\nfinal_height_m = 0.5\n"));
+        assert_eq!(
+            e,
+            "p.toml:11:1: key 'blows[1].final_height_m' is 500.00 mm, 388.00 mm above the billet's height_m \
+             (112.00 mm): a billet only gets flatter, and that is more than a caliper's scatter ([caliper] \
+             tolerance_m = 1.00 mm)"
+        );
+        let three = format!(
+            "{STEEL}[[blows]]\nfinal_height_m = 0.0889\n[[blows]]\nfinal_height_m = 0.0612\n\
+             [[blows]]\nfinal_height_m = 0.0625\n"
+        );
+        let e = err(&three);
+        assert!(e.starts_with("p.toml:15:1: key 'blows[3].final_height_m' is 62.50 mm, 1.30 mm above blow 2's"), "{e}");
+        // A wider tolerance, set: kept with its warning; a narrower one refuses 0.3 mm.
+        let wide = format!("{three}[caliper]\ntolerance_m = 0.002\n");
+        let p = parse_process_sheet("p.toml", &wide).unwrap();
+        assert_eq!(p.value.measured_final_heights_m, vec![0.0889, 0.0612, 0.0625]);
+        assert_eq!(p.warnings.len(), 1);
+        let tight = format!("{STEEL}[[blows]]\nfinal_height_m = 0.1123\n[caliper]\ntolerance_m = 0.0002\n");
+        assert!(err(&tight).contains("key 'blows[1].final_height_m' is 112.30 mm"), "{}", err(&tight));
+        let e = err(&format!("{STEEL}[caliper]\ntolerance_m = 0.5\n"));
+        assert!(e.contains("key 'caliper.tolerance_m' must be within 0..0.01 m"), "{e}");
     }
 }

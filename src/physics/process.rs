@@ -3,6 +3,16 @@
 use super::billet::{BilletGeometry, FlowStress};
 use super::machine::MachineKind;
 
+/// How far a hand-measured height may rise above the one before it (or, after blow 1, above
+/// the billet's height) and still be taken as the measurement's scatter, m: the default of
+/// `process.toml`'s `[caliper] tolerance_m`. A billet measured hot, through scale, at 1100 °C
+/// (seed 000's steel) reads 0.1–0.3 mm off from one try to the next (issue 36's caliper
+/// noise), and a part measured before it has cooled evenly may read another few tenths high;
+/// 1 mm is several times both. A rise can only be the measurement: the hardest blows still
+/// flatten the part (the SPR 400's tenth copper blow by 0.15 mm, `forgemon simulate` on the
+/// example sheet), never raise it.
+pub const CALIPER_TOLERANCE_M: f64 = 1e-3;
+
 /// What was forged: the billet before the sheet's first blow, its material and interface.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Process {
