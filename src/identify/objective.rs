@@ -20,7 +20,7 @@ use crate::physics::effects::EffectSet;
 use crate::physics::integrator::Method;
 use crate::physics::machine::{Machine, MachineKind};
 use crate::physics::plant::Plant;
-use crate::physics::process::Process;
+use crate::physics::process::{CALIPER_TOLERANCE_M, Process};
 use crate::physics::sequence::blow_plant;
 use crate::signal::resample::{moving_average, shifted};
 use crate::signal::segment::Blow;
@@ -273,7 +273,9 @@ pub enum Heights {
     /// Where the sheet gives measured heights: the encoder's chain, as the live estimator
     /// keeps it, from the first blow's start (the sheet's billet): the blow before's start
     /// less how much lower the ram met the billet this time, when the blow before is the
-    /// reference before and the chain is plausible (`chained_height`). Where the ram met
+    /// reference before, the chain is plausible (`chained_height`) and it agrees with the
+    /// hand-measured height within `CALIPER_TOLERANCE_M` (a capture whose encoder was zeroed
+    /// anew, CONTRACTS §1, breaks it; issue 36). Where the ram met
     /// the billet is the model's first contact placed on the measured clock by the
     /// alignment, read off the encoder's approach (`EncoderApproach::at`): a load-level
     /// contact comes late where the load rises from nothing (a fresh copper billet on the
@@ -461,9 +463,13 @@ impl Objective {
                     let sheet =
                         n.checked_sub(2).and_then(|k| p.measured_final_heights_m.get(k).copied()).unwrap_or(h_start);
                     let measured = !p.measured_final_heights_m.is_empty();
+                    // The chain where it agrees with the hand-measured height: each capture may
+                    // carry its own encoder offset (CONTRACTS §1), and a link it breaks is a
+                    // jump the calipers do not see.
                     let encoder = match (self.heights, prev, r.approach) {
                         (Heights::Encoder, Some((k, h_prev, Some(x_prev))), Some(a)) if measured && k + 1 == n => {
                             chained_height((h_prev, x_prev), a.x_m(), contact_tolerance_m(r))
+                                .filter(|h| (h - sheet).abs() <= CALIPER_TOLERANCE_M)
                         }
                         _ => None,
                     };
