@@ -77,7 +77,7 @@ pub fn billet_stats(results: &[BlowEstimate]) -> Vec<BilletStats> {
     by_billet
         .into_iter()
         .map(|(billet, blows)| {
-            let complete: Vec<&&BlowEstimate> = blows.iter().filter(|r| r.is_complete()).collect();
+            let complete: Vec<&&BlowEstimate> = blows.iter().filter(|r| r.has_energies()).collect();
             let (efficiency_mean, efficiency_sd) =
                 mean_sd(&complete.iter().filter_map(|r| r.efficiency).collect::<Vec<_>>());
             let (plastic_j_mean, plastic_j_sd) =
@@ -124,6 +124,8 @@ impl std::fmt::Display for BilletStats {
 
 #[derive(Default)]
 struct SourceSummary {
+    /// The capture files it gathers (`capture/<file>` sources, `cli::for_each_capture_batch`).
+    captures: std::collections::BTreeSet<String>,
     batches: u64,
     samples: u64,
     period_ns: f64,
@@ -146,7 +148,13 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
     for m in reader.by_ref() {
         match m?.payload {
             Payload::Samples(b) => {
-                let s = sources.entry(b.source.clone()).or_default();
+                // A capture directory's files, each a source of its own, are one machine.
+                let (name, file) = match b.source.split_once('/') {
+                    Some((group, file)) if group == super::CAPTURE_SOURCE => (group.to_string(), Some(file)),
+                    _ => (b.source.clone(), None),
+                };
+                let s = sources.entry(name).or_default();
+                s.captures.extend(file.map(str::to_string));
                 s.batches += 1;
                 s.samples += b.len() as u64;
                 s.period_ns = b.period_ns;
@@ -179,7 +187,7 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
         .map(|(name, s)| {
             let duration_s = s.first_ns.map_or(0.0, |f| (s.end_ns - f as f64) * 1e-9);
             json!({"source": name, "channels": s.channels, "rate_hz": 1e9 / s.period_ns, "samples": s.samples,
-                   "batches": s.batches, "duration_s": duration_s})
+                   "batches": s.batches, "duration_s": duration_s, "captures": s.captures.len()})
         })
         .collect();
     let out = json!({
@@ -232,9 +240,13 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
         writeln!(w, "  CORRUPT: {} chunks skipped (named on stderr)", report.corrupt_chunks.len())?;
     }
     for s in out["sources"].as_array().into_iter().flatten() {
+        let captures = match s["captures"].as_u64() {
+            Some(n @ 1..) => format!(" ({n} captures)"),
+            _ => String::new(),
+        };
         writeln!(
             w,
-            "  source {:<12} {} at {:.0} Hz: {} samples, {:.3} s",
+            "  source {:<12} {} at {:.0} Hz: {} samples, {:.3} s{captures}",
             s["source"].as_str().unwrap_or(""),
             s["channels"].as_str().unwrap_or(""),
             s["rate_hz"].as_f64().unwrap_or(0.0),
@@ -322,6 +334,9 @@ mod tests {
             method: None,
             gap_s: 0.0,
             h_start_m: None,
+            height_source: crate::estimate::HeightSource::Unknown,
+            implausible: None,
+            at_bound: Default::default(),
             height_check: None,
             billet: crate::estimate::BilletTag { billet, billet_blow, ..Default::default() },
         }
