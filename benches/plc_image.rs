@@ -34,6 +34,9 @@ fn blow() -> BlowEstimate {
         method: None,
         gap_s: 0.0,
         h_start_m: Some(0.03),
+        height_source: forgemon::estimate::HeightSource::Unknown,
+        implausible: None,
+        at_bound: Default::default(),
         height_check: None,
         billet: Default::default(),
     }

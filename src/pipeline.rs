@@ -13,12 +13,14 @@ use crate::recipe::{Recipe, Signature, signature};
 use crate::signal::sample::SampleBatch;
 use crate::signal::segment::{Blow, SegmentConfig, SegmentStats, Segmenter};
 
-/// Where the segmenter cut a blow, device times in s.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Where the segmenter cut a blow, device times in s, and the source whose samples held it
+/// (a capture's file, `cli::CAPTURE_SOURCE`), for the messages about it.
+#[derive(Debug, Clone, PartialEq)]
 pub struct Cut {
     pub t_trigger_s: f64,
     pub t_contact_s: f64,
     pub t_end_s: f64,
+    pub source: std::sync::Arc<str>,
 }
 
 /// What the pipeline reports.
@@ -72,6 +74,8 @@ pub struct Pipeline {
     ring_period_s: f64,
     /// The last blow estimated, drawn for a screen (`BlowCurve`).
     last_curve: Option<std::sync::Arc<BlowCurve>>,
+    /// The source of the samples being segmented (the last batch's).
+    source: std::sync::Arc<str>,
 }
 
 impl Pipeline {
@@ -87,11 +91,15 @@ impl Pipeline {
             recipe: None,
             signatures: None,
             last_curve: None,
+            source: std::sync::Arc::from(""),
         }
     }
 
     /// Feed one batch of samples.
     pub fn push(&mut self, batch: &SampleBatch, out: &mut Vec<PipelineEvent>) {
+        if *self.source != *batch.source {
+            self.source = std::sync::Arc::from(batch.source.as_str());
+        }
         self.segmenter.push(batch, &mut self.cut);
         self.drain(out);
     }
@@ -105,9 +113,12 @@ impl Pipeline {
 
     /// The samples stop (end of a triggered capture, end of a file, link lost): a blow in
     /// progress is closed as it stands and the trigger re-arms for the next capture.
+    /// When samples come again, the encoder's continuity is checked, never assumed
+    /// (`Estimator::stream_break`).
     pub fn end_of_stream(&mut self, out: &mut Vec<PipelineEvent>) {
         self.segmenter.finish(&mut self.cut);
         self.drain(out);
+        self.estimator.stream_break();
     }
 
     /// A new billet is in the dies (a signal): the height tracking and the alert memory
@@ -131,6 +142,12 @@ impl Pipeline {
     /// Billets started so far, by the encoder or a signal.
     pub fn billets(&self) -> u32 {
         self.estimator.billets()
+    }
+
+    /// Blows whose encoder was found counting up and read negated
+    /// (`Estimator::reversed_blows`).
+    pub fn reversed_encoder_blows(&self) -> u64 {
+        self.estimator.reversed_blows()
     }
 
     /// New alert thresholds (SIGHUP).
@@ -172,6 +189,7 @@ impl Pipeline {
                 t_trigger_s: blow.samples[blow.i_trigger].t_s,
                 t_contact_s: blow.samples[blow.i_contact].t_s,
                 t_end_s: blow.samples[blow.i_end].t_s,
+                source: self.source.clone(),
             };
             match self.estimator.estimate(&blow) {
                 Ok(mut estimate) => {

@@ -48,6 +48,7 @@ fn class_code(c: BlowClass) -> u32 {
         BlowClass::Intermediate => 2,
         BlowClass::Hard => 3,
         BlowClass::Incomplete => 4,
+        BlowClass::Implausible => 5,
     }
 }
 

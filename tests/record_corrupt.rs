@@ -110,41 +110,19 @@ fn intact_recording(dir: &Path) -> (PathBuf, Vec<Value>) {
     (rec, blows)
 }
 
-/// What a blow's own samples determine: the impact, the loads, the energies taken from
-/// the measured load and displacement, the fit. Its number, the billet height it ends at
-/// and what depends on that height (plastic and friction work, efficiency, class, alert)
-/// follow from the blows before it, so a lost blow shifts them for every later blow.
-fn measured(blow: &Value) -> Value {
-    const OWN: [&str; 9] = [
-        "t_contact_s",
-        "t_end_s",
-        "v_impact_mps",
-        "kinetic_in_J",
-        "damped_J",
-        "elastic_J",
-        "final_load_N",
-        "peak_load_N",
-        "residual",
-    ];
-    OWN.iter().map(|k| ((*k).to_string(), blow[*k].clone())).collect::<serde_json::Map<_, _>>().into()
-}
-
-/// The blow's own figures agree: exactly for an observed blow; for a fitted one within the
-/// fit's convergence. The model fit starts from the billet's tracked height, which a lost
-/// chunk before the blow changes, and Levenberg–Marquardt stops at a relative cost change of
-/// 1e-5 (`estimate::fit::COST_RTOL`), so its optimum moves a little with its start:
-/// measured on this recording, 40 ns of contact time, 0.04 % of elastic energy, 0.02 % of
-/// final load, 3e-6 of residual. Bounds: 1 µs, 0.2 % relative, 5e-5 of residual.
+/// What a blow's own samples determine whatever the billet's height: where it ended, its
+/// peak load, and its impact (speed and kinetic energy). The rest follows from the blows
+/// before it: its number, and through its start height the model's fit (issue 36: a blow
+/// lost at a capture's boundary leaves the next capture's encoder offset unverified, so its
+/// height comes from the sheet or the model, `height_source`, and the fit moves with it).
+/// The impact: exactly for blows estimated alike; the model fit moves the contact with its
+/// start height, and with it the impact speed, by well under 0.2 % (measured on this
+/// recording: 40 ns of contact time).
 fn same_measured(a: &Value, b: &Value) -> bool {
-    if a["method"] != "model_fit" || b["method"] != "model_fit" {
-        return measured(a) == measured(b);
-    }
-    let close = |k: &str, abs: f64, rel: f64| (f(a, k) - f(b, k)).abs() <= abs + rel * f(b, k).abs();
+    let close = |k: &str, rel: f64| (f(a, k) - f(b, k)).abs() <= rel * f(b, k).abs();
     a["t_end_s"] == b["t_end_s"]
         && a["peak_load_N"] == b["peak_load_N"]
-        && close("t_contact_s", 1e-6, 0.0)
-        && close("residual", 5e-5, 0.0)
-        && ["v_impact_mps", "kinetic_in_J", "damped_J", "elastic_J", "final_load_N"].iter().all(|k| close(k, 0.0, 2e-3))
+        && ["v_impact_mps", "kinetic_in_J"].iter().all(|k| close(k, 2e-3))
 }
 
 fn f(v: &Value, k: &str) -> f64 {
@@ -193,6 +171,11 @@ fn a_flipped_bit_in_a_chunk_is_skipped_named_and_exits_3_the_other_blows_unchang
     for b in blows.iter().filter(|b| !lost(b)) {
         assert!(got.iter().any(|g| same_measured(g, b)), "blow outside the corrupt chunk changed or lost: {b}");
     }
+    // The first blow after it starts a capture whose encoder offset nothing verifies (its
+    // contact is not where the last blow seen left the billet): its height is not the
+    // encoder's.
+    let after = &got[first_lost];
+    assert!(after["height_source"] == "sheet" || after["height_source"] == "model", "{after}");
     // Nothing invented: every blow reported is one of the intact replay's, or one cut short
     // by the lost chunk, whose figures are still physical.
     for b in &got {

@@ -67,6 +67,9 @@ fn result(blow: u32) -> BlowEstimate {
         method: None,
         gap_s: 0.0,
         h_start_m: None,
+        height_source: forgemon::estimate::HeightSource::Unknown,
+        implausible: None,
+        at_bound: Default::default(),
         height_check: None,
         billet: Default::default(),
     }

@@ -64,6 +64,9 @@ fn result(blow: u32, with_sheet: bool) -> BlowEstimate {
         method: with_sheet.then_some(forgemon::estimate::Method::Observer),
         gap_s: if whole { 0.0 } else { 0.0125 },
         h_start_m: with_sheet.then_some(0.0151),
+        height_source: forgemon::estimate::HeightSource::Unknown,
+        implausible: None,
+        at_bound: Default::default(),
         height_check: None,
         billet: Default::default(),
     }
@@ -77,6 +80,7 @@ fn billet(n: u32, whole: bool) -> BilletSummary {
         t_end_s: 10.5 * f64::from(n) + 3.25,
         blows: if whole { 8 } else { 1 },
         incomplete_blows: u32::from(!whole),
+        implausible_blows: 0,
         energies_partial: !whole,
         h_start_m: whole.then_some(0.1121),
         h_start_off_sheet_m: whole.then_some(1.5e-4),

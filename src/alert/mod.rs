@@ -7,6 +7,7 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
+use crate::estimate::plausibility::Implausible;
 use crate::estimate::{BlowClass, BlowEstimate};
 
 // The alert itself is part of a blow's result (`estimate::result`), where the estimate that
@@ -81,11 +82,19 @@ pub struct AlertRules {
     /// billets: the sensors stay when the part changes.
     sensor_recent: VecDeque<bool>,
     last_fired: BTreeMap<&'static str, u32>,
+    /// Whether the present billet has raised its alert for an implausible blow.
+    implausible_alerted: bool,
 }
 
 impl AlertRules {
     pub fn new(cfg: AlertConfig) -> Self {
-        AlertRules { cfg, recent: VecDeque::new(), sensor_recent: VecDeque::new(), last_fired: BTreeMap::new() }
+        AlertRules {
+            cfg,
+            recent: VecDeque::new(),
+            sensor_recent: VecDeque::new(),
+            last_fired: BTreeMap::new(),
+            implausible_alerted: false,
+        }
     }
 
     /// Replace the thresholds (SIGHUP reload); the memory of recent blows is kept.
@@ -97,6 +106,7 @@ impl AlertRules {
     /// sensor checks nor the sensor alert's debounce: the sensors are the same).
     pub fn reset(&mut self) {
         self.recent.clear();
+        self.implausible_alerted = false;
         self.last_fired.retain(|kind, _| *kind == AlertKind::Sensor.as_str());
     }
 
@@ -106,6 +116,9 @@ impl AlertRules {
     /// incomplete blow (no efficiency) raises none and is not remembered: it neither counts
     /// toward the low-efficiency window nor breaks it.
     pub fn on_blow(&mut self, b: &BlowEstimate) -> Option<Alert> {
+        if let Some(why) = &b.implausible {
+            return self.on_implausible(b.blow, why);
+        }
         let (Some(efficiency), Some(plastic_j), Some(kinetic_in_j), Some(elastic_j), Some(residual)) =
             (b.efficiency, b.plastic_j, b.kinetic_in_j, b.elastic_j, b.residual)
         else {
@@ -190,13 +203,34 @@ impl AlertRules {
             })
         };
         let (kind, reason) = candidate?;
+        self.fire(kind, b.blow, reason, figures)
+    }
+
+    /// An implausible blow (issue 36): no efficiency alert, and one alert per billet, of the
+    /// kind its check names (`Check::alert_kind`: an input is the sensors', an output the
+    /// model's), with its reason. It is not remembered by the efficiency window.
+    fn on_implausible(&mut self, blow: u32, why: &Implausible) -> Option<Alert> {
+        if std::mem::replace(&mut self.implausible_alerted, true) {
+            return None;
+        }
+        let reason = format!(
+            "blow {blow} is implausible ({}): {}; its energies are withheld, and later implausible blows of \
+             this billet raise no further alert",
+            why.check.as_str(),
+            why.reason
+        );
+        Some(Alert { kind: why.check.alert_kind(), blow, reason, figures: BTreeMap::new() })
+    }
+
+    /// Raise `kind` unless it fired within the debounce.
+    fn fire(&mut self, kind: AlertKind, blow: u32, reason: String, figures: BTreeMap<String, f64>) -> Option<Alert> {
         if let Some(&last) = self.last_fired.get(kind.as_str())
-            && b.blow <= last + c.debounce_blows
+            && blow <= last + self.cfg.debounce_blows
         {
             return None;
         }
-        self.last_fired.insert(kind.as_str(), b.blow);
-        Some(Alert { kind, blow: b.blow, reason, figures })
+        self.last_fired.insert(kind.as_str(), blow);
+        Some(Alert { kind, blow, reason, figures })
     }
 }
 
@@ -228,6 +262,9 @@ mod tests {
             method: None,
             gap_s: 0.0,
             h_start_m: None,
+            height_source: crate::estimate::HeightSource::Unknown,
+            implausible: None,
+            at_bound: Default::default(),
             height_check: None,
             billet: Default::default(),
         }

@@ -334,6 +334,9 @@ mod tests {
             method: None,
             gap_s: 0.01,
             h_start_m: None,
+            height_source: crate::estimate::HeightSource::Unknown,
+            implausible: None,
+            at_bound: Default::default(),
             height_check: None,
             billet: Default::default(),
         }

@@ -92,8 +92,11 @@ pub(crate) fn parse_process_warn(
     Ok(sheet.value)
 }
 
-/// Source name of samples read from capture files: the captures of a directory are one
-/// machine, whatever file each came from.
+/// Source name of samples read from capture files, before the file's name: each file is a
+/// capture of its own (`capture/blow_02.csv`), with its own clock origin and encoder offset
+/// (CONTRACTS §1), so a new file ends the stream (`pipeline::Feeder`: another source) in a
+/// replay of the directory and of its import alike. The path before the name is left out,
+/// so a directory replays the same wherever it lies.
 pub(crate) const CAPTURE_SOURCE: &str = "capture";
 
 /// The blow files of a capture directory (CONTRACTS.md §1), in blow order.
@@ -108,7 +111,7 @@ pub(crate) fn capture_dir_files(dir: &Path) -> anyhow::Result<Vec<std::path::Pat
     Ok(files)
 }
 
-/// Each batch of a capture file, as the source `CAPTURE_SOURCE`.
+/// Each batch of a capture file, as the source `CAPTURE_SOURCE/<file name>`.
 pub(crate) fn for_each_capture_batch(
     path: &Path,
     mut f: impl FnMut(crate::signal::sample::SampleBatch) -> anyhow::Result<()>,
@@ -116,8 +119,10 @@ pub(crate) fn for_each_capture_batch(
     use crate::signal::capture::{CaptureReader, DEFAULT_BATCH_S};
     let file = std::fs::File::open(path).with_context(|| format!("{}: cannot read", path.display()))?;
     let mut reader = CaptureReader::new(path.display().to_string(), std::io::BufReader::new(file), DEFAULT_BATCH_S)?;
+    let name = path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned());
+    let source = format!("{CAPTURE_SOURCE}/{name}");
     while let Some(mut batch) = reader.next_batch()? {
-        batch.source = CAPTURE_SOURCE.to_string();
+        batch.source.clone_from(&source);
         f(batch)?;
     }
     Ok(())

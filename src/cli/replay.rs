@@ -14,6 +14,7 @@ use super::{parse_process_warn, read_text};
 use crate::config::parse_machine;
 use crate::config::service::parse_tuning;
 use crate::daemon::{CONTROL_SOURCE, NEW_BILLET_STATE, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, tuned_config};
+use crate::estimate::EncoderDirection;
 use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline, PipelineEvent};
 use crate::record::{BlowBoundary, Payload, RecordReader, RecordWriter, Rotation};
@@ -47,6 +48,15 @@ pub struct ReplayArgs {
     /// `judgement`, and `nok` alerts, as the service would.
     #[arg(long, value_name = "PART.recipe.toml")]
     pub recipe: Option<PathBuf>,
+    /// Which way the ram encoder counts: `down` (towards the lower die, CONTRACTS §1), `up`
+    /// (away from it: read negated), or `auto` (each blow's approach tells); overrides the
+    /// service file's `[encoder] direction`.
+    #[arg(long, value_name = "auto|down|up", value_parser = parse_direction)]
+    pub encoder_direction: Option<EncoderDirection>,
+}
+
+fn parse_direction(s: &str) -> Result<EncoderDirection, String> {
+    EncoderDirection::parse(s).ok_or_else(|| format!("must be one of {}", EncoderDirection::WORDS.join(", ")))
 }
 
 /// A source of sample batches, whatever the input.
@@ -124,10 +134,13 @@ pub(crate) fn replay_into<W: Write>(
     };
     // The alert rules and billet detection the live run used, unless the caller gives others.
     let service_text = pick(&args.service, stored.service, &args.input, SERVICE_CONFIG_NAME)?;
-    let tuning = match &service_text {
+    let mut tuning = match &service_text {
         Some((origin, text)) => parse_tuning(origin, text)?,
         None => parse_tuning("defaults", "")?,
     };
+    if let Some(d) = args.encoder_direction {
+        tuning.encoder_direction = d;
+    }
     let writer = match &args.out {
         Some(path) => {
             let mut w = RecordWriter::create(path, Rotation::default())
@@ -166,6 +179,7 @@ pub(crate) fn replay_into<W: Write>(
         merged: Vec::new(),
         events: Vec::new(),
         writer,
+        input: args.input.clone(),
         out: std::io::BufWriter::new(out),
         json: args.json,
         blows: 0,
@@ -233,6 +247,8 @@ struct Replay<W: Write> {
     merged: Vec<SampleBatch>,
     events: Vec<PipelineEvent>,
     writer: Option<RecordWriter>,
+    /// The input, for the messages.
+    input: PathBuf,
     out: W,
     json: bool,
     blows: u64,
@@ -295,7 +311,17 @@ impl<W: Write> Replay<W> {
                 }
                 PipelineEvent::Rejected { cut, error } => {
                     self.rejected += 1;
-                    eprintln!("forgemon: blow at t = {:.6} s not estimated: {error}", cut.t_contact_s);
+                    // A directory's blow is placed in its file (`cli::for_each_capture_batch`).
+                    let file = cut.source.strip_prefix(super::CAPTURE_SOURCE).and_then(|n| n.strip_prefix('/'));
+                    let place = match file {
+                        Some(name) if self.input.is_dir() => self.input.join(name),
+                        _ => self.input.clone(),
+                    };
+                    eprintln!(
+                        "forgemon: {}: blow at t = {:.6} s not estimated: {error}",
+                        place.display(),
+                        cut.t_contact_s
+                    );
                 }
             }
         }
@@ -312,6 +338,13 @@ impl<W: Write> Replay<W> {
             for f in rec.finish()? {
                 eprintln!("forgemon: recorded {}", f.display());
             }
+        }
+        let reversed = self.feeder.pipeline_mut().reversed_encoder_blows();
+        if reversed > 0 {
+            eprintln!(
+                "forgemon: the ram encoder counts up (away from the die) in {reversed} blows: read negated; \
+                 --encoder-direction up (or [encoder] direction = \"up\") says so"
+            );
         }
         let s = self.feeder.pipeline_mut().segment_stats();
         eprintln!(

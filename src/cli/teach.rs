@@ -81,6 +81,7 @@ pub fn run(args: TeachArgs) -> anyhow::Result<ExitCode> {
             out: None,
             json: true,
             recipe: None,
+            encoder_direction: None,
         };
         let (_, mut feeder) = replay_into(&replay, std::io::sink(), |p| p.keep_signatures())
             .with_context(|| format!("--reference {}", input.display()))?;

@@ -19,6 +19,7 @@ use super::limits::{
 use super::{ConfigError, source};
 use crate::acquire::ChannelSpec;
 use crate::alert::AlertConfig;
+use crate::estimate::EncoderDirection;
 
 /// Default status/metrics address: loopback only.
 pub const DEFAULT_HTTP_LISTEN: &str = "127.0.0.1:9187";
@@ -100,6 +101,9 @@ pub struct ServiceConfig {
     /// `[billets] encoder_at_die_m`: the encoder's reading with the ram on the lower die, m
     /// (`None`: not known; `estimate::EstimatorConfig::encoder_at_die_m`).
     pub encoder_at_die_m: Option<f64>,
+    /// `[encoder] direction`: which way the ram encoder counts (`Auto`: told by each blow's
+    /// approach).
+    pub encoder_direction: EncoderDirection,
     pub sources: Vec<SourceSpec>,
     /// `[advisor]`: replan the billet's next blows after each one (issue 20).
     pub advisor: Option<super::advisor::AdvisorConfig>,
@@ -130,6 +134,7 @@ impl ServiceConfig {
             plc_coil: None,
             new_billet_rise_m: None,
             encoder_at_die_m: None,
+            encoder_direction: EncoderDirection::Auto,
             idle_new_billet_s: crate::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
             sources: Vec::new(),
             advisor: None,
@@ -151,6 +156,7 @@ struct RawService {
     opcua: Option<super::opcua::RawOpcua>,
     alerts: Option<RawAlerts>,
     billets: Option<RawBillets>,
+    encoder: Option<RawEncoder>,
     advisor: Option<super::advisor::RawAdvisor>,
     /// Each read by its `kind` (`source.rs`).
     sources: Vec<IgnoredAny>,
@@ -205,6 +211,15 @@ struct RawBillets {
     idle_s: Option<f64>,
 }
 
+/// `[encoder]`: how the ram encoder is mounted; its value is read as a choice
+/// (`parse_encoder`), so the error names the allowed words.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawEncoder {
+    #[allow(dead_code)]
+    direction: Option<String>,
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawPlcCoil {
@@ -227,6 +242,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         None => (AlertConfig::default(), None, None),
     };
     let (new_billet_rise_m, idle_new_billet_s, encoder_at_die_m) = parse_billets(&doc, raw.billets.as_ref())?;
+    let encoder_direction = parse_encoder(&doc, raw.encoder.as_ref())?;
     let sources = parse_sources(&doc, raw.sources.len(), base)?;
     let advisor = super::advisor::parse_advisor(&doc, raw.advisor.as_ref())?;
     Ok(ServiceConfig {
@@ -247,6 +263,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         new_billet_rise_m,
         idle_new_billet_s,
         encoder_at_die_m,
+        encoder_direction,
         sources,
         advisor,
         uplink_mqtt: super::uplink::parse_uplink(&doc)?,
@@ -315,6 +332,7 @@ pub struct PipelineTuning {
     pub new_billet_rise_m: Option<f64>,
     pub idle_new_billet_s: f64,
     pub encoder_at_die_m: Option<f64>,
+    pub encoder_direction: EncoderDirection,
 }
 
 /// Only the tables a [`PipelineTuning`] reads; the rest of the file is not looked at (a
@@ -323,10 +341,11 @@ pub struct PipelineTuning {
 struct RawTuning {
     alerts: Option<RawAlerts>,
     billets: Option<RawBillets>,
+    encoder: Option<RawEncoder>,
 }
 
-/// `[alerts]` and `[billets]` of the service configuration text `origin`, checked like the
-/// whole file is by [`parse_service`].
+/// `[alerts]`, `[billets]` and `[encoder]` of the service configuration text `origin`,
+/// checked like the whole file is by [`parse_service`].
 pub fn parse_tuning(origin: &str, text: &str) -> Result<PipelineTuning, ConfigError> {
     let doc = Document::parse(origin, text)?;
     let raw: RawTuning = doc.read()?;
@@ -335,7 +354,8 @@ pub fn parse_tuning(origin: &str, text: &str) -> Result<PipelineTuning, ConfigEr
         None => AlertConfig::default(),
     };
     let (new_billet_rise_m, idle_new_billet_s, encoder_at_die_m) = parse_billets(&doc, raw.billets.as_ref())?;
-    Ok(PipelineTuning { alerts, new_billet_rise_m, idle_new_billet_s, encoder_at_die_m })
+    let encoder_direction = parse_encoder(&doc, raw.encoder.as_ref())?;
+    Ok(PipelineTuning { alerts, new_billet_rise_m, idle_new_billet_s, encoder_at_die_m, encoder_direction })
 }
 
 impl ServiceConfig {
@@ -346,8 +366,19 @@ impl ServiceConfig {
             new_billet_rise_m: self.new_billet_rise_m,
             idle_new_billet_s: self.idle_new_billet_s,
             encoder_at_die_m: self.encoder_at_die_m,
+            encoder_direction: self.encoder_direction,
         }
     }
+}
+
+/// `[encoder] direction`: `"auto"` (the default: each blow's approach tells), `"down"` or
+/// `"up"` (CONTRACTS §1: an encoder that counts the other way is a configuration matter).
+fn parse_encoder(doc: &Document<'_>, encoder: Option<&RawEncoder>) -> Result<EncoderDirection, ConfigError> {
+    if encoder.and_then(|e| e.direction.as_ref()).is_none() {
+        return Ok(EncoderDirection::Auto);
+    }
+    let word = doc.choice("encoder.direction", &EncoderDirection::WORDS)?;
+    Ok(EncoderDirection::parse(word).expect("one of the words"))
 }
 
 /// `[billets]`: the new-billet rise (`None`: the estimator's default), idle gap and the

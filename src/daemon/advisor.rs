@@ -113,7 +113,7 @@ fn job_for(ev: &LiveEvent, sheet_height_m: f64) -> Option<Job> {
 }
 
 fn job_after(b: &BlowEstimate) -> Job {
-    let known = b.is_complete().then_some(b.h_end_m).flatten();
+    let known = b.has_energies().then_some(b.h_end_m).flatten();
     Job { billet: b.billet.billet, after_blow: b.billet.billet_blow, h_now_m: known }
 }
 

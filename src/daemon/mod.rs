@@ -258,6 +258,7 @@ pub fn tuned_config(tuning: &PipelineTuning, machine: &Machine) -> PipelineConfi
     p.estimate.new_billet_rise_m = tuning.new_billet_rise_m;
     p.estimate.idle_new_billet_s = tuning.idle_new_billet_s;
     p.estimate.encoder_at_die_m = tuning.encoder_at_die_m;
+    p.estimate.encoder_direction = tuning.encoder_direction;
     p
 }
 

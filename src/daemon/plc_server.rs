@@ -67,6 +67,8 @@ pub mod bit {
     pub const LAST_INCOMPLETE: u16 = 1 << 4;
     pub const MODEL_HEALTH: u16 = 1 << 5;
     pub const SENSOR: u16 = 1 << 6;
+    /// The last blow was implausible (issue 36; an addition to CONTRACTS §8's bits 0–6).
+    pub const LAST_IMPLAUSIBLE: u16 = 1 << 7;
 }
 
 /// Register 17 when the blows still needed are not known (no advisor, no measured height,
@@ -116,7 +118,8 @@ fn put_u32(words: &mut [u16; IMAGE_WORDS], at: usize, v: u32) {
     words[at + 1] = (v & 0xFFFF) as u16;
 }
 
-/// Register 6: 0 none yet, 1 soft, 2 intermediate, 3 hard, 4 incomplete.
+/// Register 6: 0 none yet, 1 soft, 2 intermediate, 3 hard, 4 incomplete, 5 implausible (an
+/// addition to CONTRACTS §8's codes, issue 36).
 pub fn class_code(class: Option<BlowClass>) -> u16 {
     match class {
         None => 0,
@@ -124,6 +127,7 @@ pub fn class_code(class: Option<BlowClass>) -> u16 {
         Some(BlowClass::Intermediate) => 2,
         Some(BlowClass::Hard) => 3,
         Some(BlowClass::Incomplete) => 4,
+        Some(BlowClass::Implausible) => 5,
     }
 }
 
@@ -146,6 +150,7 @@ pub fn encode(
         | flag(healthy, bit::SOURCES_HEALTHY)
         | flag(status.latched_alert.is_some(), bit::ALERT_LATCHED)
         | flag(last.is_some_and(|b| !b.is_complete()), bit::LAST_INCOMPLETE)
+        | flag(last.is_some_and(|b| b.class == BlowClass::Implausible), bit::LAST_IMPLAUSIBLE)
         | flag(last.and_then(|b| b.judgement.as_ref()).is_some_and(|j| !j.ok), bit::LAST_NOK)
         | flag(warn.model_health, bit::MODEL_HEALTH)
         | flag(warn.sensor, bit::SENSOR);
@@ -471,6 +476,14 @@ pub(crate) mod tests {
         let w = encode(0, &s, Some(&b), Warnings::default());
         assert_eq!(w[reg::CLASS], 4);
         assert_eq!(w[reg::STATUS_BITS] & bit::LAST_INCOMPLETE, bit::LAST_INCOMPLETE);
+        assert_eq!((w[reg::EFFICIENCY], u32_at(&w, reg::PLASTIC_J), w[reg::HEIGHT_10UM]), (0, 0, 0));
+        // An implausible blow: likewise, with its own bit and class.
+        let mut b = blow();
+        (b.class, b.efficiency, b.plastic_j, b.kinetic_in_j, b.h_end_m) =
+            (BlowClass::Implausible, None, None, None, None);
+        let w = encode(0, &s, Some(&b), Warnings::default());
+        assert_eq!(w[reg::CLASS], 5);
+        assert_eq!(w[reg::STATUS_BITS] & (bit::LAST_IMPLAUSIBLE | bit::LAST_INCOMPLETE), bit::LAST_IMPLAUSIBLE);
         assert_eq!((w[reg::EFFICIENCY], u32_at(&w, reg::PLASTIC_J), w[reg::HEIGHT_10UM]), (0, 0, 0));
         // Before the first blow: class 0, every value 0.
         let w = encode(0, &StatusSnapshot::new("hammer"), None, Warnings::default());

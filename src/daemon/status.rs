@@ -69,6 +69,8 @@ pub struct StatusSnapshot {
     pub alerts: u64,
     /// Blows reported incomplete (samples lost inside them).
     pub incomplete_blows: u64,
+    /// Blows reported implausible (a value outside its physical range, issue 36).
+    pub implausible_blows: u64,
     /// Events the live queue dropped because the pipeline fell behind.
     pub dropped_events: u64,
     /// Recording writes that failed (logged; the service goes on).
@@ -113,6 +115,7 @@ impl StatusSnapshot {
             blows: 0,
             alerts: 0,
             incomplete_blows: 0,
+            implausible_blows: 0,
             dropped_events: 0,
             record_errors: 0,
             last_efficiency: None,
@@ -163,6 +166,7 @@ impl StatusSnapshot {
         self.billet_blows = u64::from(e.billet.billet_blow);
         self.alerts += u64::from(e.alert.is_some());
         self.incomplete_blows += u64::from(!e.is_complete());
+        self.implausible_blows += u64::from(e.class == crate::estimate::BlowClass::Implausible);
         self.last_efficiency = e.efficiency;
         self.last_class = Some(e.class.as_str().to_string());
         self.last_blow = Some(e.clone());
@@ -250,6 +254,12 @@ impl StatusSnapshot {
             "counter",
             "Blows with samples lost inside them, reported without energies.",
             vec![(String::new(), self.incomplete_blows as f64)],
+        );
+        metric(
+            "implausible_blows_total",
+            "counter",
+            "Blows with a value outside its physical range, reported without energies.",
+            vec![(String::new(), self.implausible_blows as f64)],
         );
         metric("gaps_total", "counter", "Gaps in the sample stream.", per_source(&|s| s.gaps as f64));
         metric("samples_lost_total", "counter", "Samples lost in gaps.", per_source(&|s| s.samples_lost as f64));

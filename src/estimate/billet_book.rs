@@ -21,7 +21,9 @@ pub struct BilletSummary {
     pub blows: u32,
     /// Blows with samples lost inside them: not in the energies.
     pub incomplete_blows: u32,
-    /// Whether the energies leave out incomplete blows.
+    /// Blows with a value outside its physical range (issue 36): not in the energies.
+    pub implausible_blows: u32,
+    /// Whether the energies leave out incomplete or implausible blows.
     pub energies_partial: bool,
     /// Height before the first blow, m (the sheet's, or the encoder's when they differ).
     pub h_start_m: Option<f64>,
@@ -58,6 +60,7 @@ impl BilletSummary {
             t_end_s: e.t_end_s,
             blows: 0,
             incomplete_blows: 0,
+            implausible_blows: 0,
             energies_partial: false,
             h_start_m: e.h_start_m,
             h_start_off_sheet_m: e.billet.h_start_off_sheet_m,
@@ -81,14 +84,18 @@ impl BilletSummary {
         self.alerts += u32::from(e.alert.is_some());
         self.checked_blows += u32::from(e.billet.billet_check.is_some());
         match (e.kinetic_in_j, e.plastic_j) {
-            (Some(kinetic), Some(plastic)) if e.is_complete() => {
+            (Some(kinetic), Some(plastic)) if e.has_energies() => {
                 self.kinetic_in_j += kinetic;
                 self.plastic_j += plastic;
                 self.friction_j = self.friction_j.zip(e.friction_j).map(|(a, b)| a + b);
                 self.efficiency = (self.kinetic_in_j > 0.0).then(|| self.plastic_j / self.kinetic_in_j);
             }
             _ => {
-                self.incomplete_blows += 1;
+                if e.class == BlowClass::Implausible {
+                    self.implausible_blows += 1;
+                } else {
+                    self.incomplete_blows += 1;
+                }
                 self.energies_partial = true;
             }
         }
@@ -110,6 +117,9 @@ impl std::fmt::Display for BilletSummary {
         write!(f, ": {} blows", self.blows)?;
         if self.incomplete_blows > 0 {
             write!(f, " ({} incomplete)", self.incomplete_blows)?;
+        }
+        if self.implausible_blows > 0 {
+            write!(f, " ({} implausible)", self.implausible_blows)?;
         }
         write!(f, ", height {} -> {} mm, plastic {:.0} J", mm(self.h_start_m), mm(self.h_end_m), self.plastic_j)?;
         if self.energies_partial {
@@ -194,6 +204,9 @@ mod tests {
             residual: None,
             gap_s: 0.0,
             h_start_m: Some(0.1 - 0.01 * f64::from(billet_blow - 1)),
+            height_source: crate::estimate::HeightSource::Unknown,
+            implausible: None,
+            at_bound: Default::default(),
             height_check: None,
             sensor_check: None,
             method: None,

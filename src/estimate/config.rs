@@ -31,6 +31,40 @@ pub struct EstimatorConfig {
     /// first contact is measured, the first billet's too; `None`: the first billet is taken
     /// to be the sheet's height and teaches the reference.
     pub encoder_at_die_m: Option<f64>,
+    /// Which way the ram encoder counts (CONTRACTS §1: `disp_m` is positive towards the lower
+    /// die; an encoder mounted the other way is a configuration matter).
+    pub encoder_direction: EncoderDirection,
+}
+
+/// Which way the ram encoder counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum EncoderDirection {
+    /// Each blow's approach tells: the ram falls, or is driven, towards the die before
+    /// contact, so an encoder whose reading falls then counts up and is read negated.
+    #[default]
+    Auto,
+    /// Positive towards the lower die (CONTRACTS §1).
+    Down,
+    /// Positive away from the die: read negated.
+    Up,
+}
+
+impl EncoderDirection {
+    /// The words of `[encoder] direction` and `--encoder-direction`.
+    pub const WORDS: [&'static str; 3] = ["auto", "down", "up"];
+
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            EncoderDirection::Auto => "auto",
+            EncoderDirection::Down => "down",
+            EncoderDirection::Up => "up",
+        }
+    }
+
+    /// The direction named `s` (`as_str`).
+    pub fn parse(s: &str) -> Option<Self> {
+        [EncoderDirection::Auto, EncoderDirection::Down, EncoderDirection::Up].into_iter().find(|d| d.as_str() == s)
+    }
 }
 
 impl EstimatorConfig {
@@ -58,6 +92,7 @@ impl EstimatorConfig {
             new_billet_rise_m: None,
             idle_new_billet_s: billet::DEFAULT_IDLE_NEW_BILLET_S,
             encoder_at_die_m: None,
+            encoder_direction: EncoderDirection::Auto,
         }
     }
 

@@ -68,6 +68,7 @@ pub fn decimate(blow: &Blow, f: usize) -> Blow {
         load_zero_n: blow.load_zero_n,
         period_s: blow.period_s * fl,
         lost_s: blow.lost_s,
+        open_end_n: blow.open_end_n,
     }
 }
 
@@ -86,7 +87,16 @@ mod tests {
                 Sample { t_s: t, load_n: tone + alias, disp_m: k as f64, acc_mps2: tone, filled: false }
             })
             .collect();
-        Blow { samples, i_trigger: i_contact, i_contact, i_end: n - 10, load_zero_n: 0.0, period_s: dt, lost_s: 0.0 }
+        Blow {
+            samples,
+            i_trigger: i_contact,
+            i_contact,
+            i_end: n - 10,
+            load_zero_n: 0.0,
+            period_s: dt,
+            lost_s: 0.0,
+            open_end_n: None,
+        }
     }
 
     #[test]

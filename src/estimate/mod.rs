@@ -21,11 +21,12 @@ pub mod curve;
 pub mod decimate;
 pub mod fit;
 pub mod observer;
+pub mod plausibility;
 pub mod result;
 pub mod sensor;
 
-pub use config::EstimatorConfig;
-pub use result::{BilletTag, BlowClass, BlowEstimate, HeightCheck};
+pub use config::{EncoderDirection, EstimatorConfig};
+pub use result::{BilletTag, BlowClass, BlowEstimate, HeightCheck, HeightSource};
 
 use crate::physics::billet::{BilletLaw, LoadEffects};
 use crate::physics::machine::Machine;
@@ -85,6 +86,14 @@ pub enum EstimateError {
         #[source]
         source: ApproachError,
     },
+    /// The encoder's reading fell as the ram approached the die while its direction is set
+    /// to down.
+    #[error(
+        "blow {blow}: the ram encoder's reading falls as the ram approaches the die ({v_mps:.3} m/s before \
+         contact): it counts up, away from the die, where CONTRACTS §1 counts disp_m down towards it. Set \
+         [encoder] direction = \"up\" in the service file (--encoder-direction up for replay), or \"auto\""
+    )]
+    EncoderCountsUp { blow: u32, v_mps: f64 },
 }
 
 /// Estimates blow after blow, tracking the billet's height from the process sheet.
@@ -100,6 +109,11 @@ pub struct Estimator {
     cfg: EstimatorConfig,
     /// Billet height before the next blow, from the model observer's compression.
     h_m: Option<f64>,
+    /// Where `h_m` came from.
+    h_source: HeightSource,
+    /// The stream broke since the last blow (`stream_break`: a new capture, a new timeline):
+    /// the encoder's offset is not known to be the last blow's until a contact shows it.
+    unverified: bool,
     /// The last blow's encoder contact position and start height, m: the link of the
     /// encoder's height chain.
     chain: Option<(f64, f64)>,
@@ -124,6 +138,10 @@ pub struct Estimator {
     scale: f64,
     /// How the last blow was estimated.
     last_method: Option<Method>,
+    /// Blows whose encoder counted up, read negated (`EncoderDirection::Auto`).
+    reversed_blows: u64,
+    /// The present billet's height before its first blow, m (the plausible range's top).
+    billet_height_m: Option<f64>,
     /// What the last blow's estimate saw of its course (the dashboard's curve).
     last_course: Option<curve::Course>,
 }
@@ -149,6 +167,8 @@ impl Estimator {
             process,
             cfg,
             h_m,
+            h_source: HeightSource::Sheet,
+            unverified: false,
             chain: None,
             blows: 0,
             billet_blows: 0,
@@ -161,7 +181,15 @@ impl Estimator {
             scale: 1.0,
             last_method: None,
             last_course: None,
+            reversed_blows: 0,
+            billet_height_m: None,
         }
+    }
+
+    /// Blows whose encoder was found counting up (away from the die) and read negated, under
+    /// `EncoderDirection::Auto`.
+    pub fn reversed_blows(&self) -> u64 {
+        self.reversed_blows
     }
 
     /// How the last blow's energies were estimated (`None` before the first, and for an
@@ -205,8 +233,17 @@ impl Estimator {
         }
     }
 
+    /// The samples stopped (the end of a capture, a link lost, a new timeline): when they
+    /// resume, the encoder may have been zeroed again (CONTRACTS §1: the offset may differ
+    /// from file to file). The next contact is compared with where the last blow left the
+    /// billet: only a match shows the encoder continuous (`Continuity`).
+    pub fn stream_break(&mut self) {
+        self.unverified = true;
+    }
+
     fn start_billet(&mut self) {
         self.h_m = self.process.as_ref().map(|p| p.billet.height_m);
+        self.h_source = HeightSource::Sheet;
         self.billet_process = self.process.clone();
         self.chain = None;
         self.billet += 1;
@@ -215,12 +252,37 @@ impl Estimator {
         self.last_end = None;
     }
 
-    /// Whether this contact starts a new billet (counting it), and what it could not explain.
-    fn follow_billet(&mut self, x_contact_m: f64, t_contact_s: f64, tolerance_m: f64) -> Option<BilletCheck> {
+    /// Whether this contact starts a new billet (counting it), what it could not explain, and
+    /// how it relates to the encoder's reading of the blow before (`Continuity`).
+    fn follow_billet(
+        &mut self,
+        x_contact_m: f64,
+        t_contact_s: f64,
+        tolerance_m: f64,
+    ) -> (Option<BilletCheck>, Continuity) {
+        let unverified = std::mem::take(&mut self.unverified);
         let (transition, check) = match self.last_end {
-            _ if std::mem::take(&mut self.signalled) => return None,
+            _ if std::mem::take(&mut self.signalled) => {
+                // A break before a billet's first blow leaves a learnt die reference in the
+                // old offset: this contact teaches it again.
+                if unverified && self.cfg.encoder_at_die_m.is_none() {
+                    self.die_x_m = None;
+                }
+                return (None, Continuity::NewBillet);
+            }
             None if self.billet == 0 => (Transition::New, None),
             None => (Transition::Same, None),
+            // Across a break only a contact where the last blow left the billet shows the
+            // encoder continuous. Any other is an offset the encoder cannot tell from a new
+            // billet, so the billet goes on (a capture directory is one billet, CONTRACTS §1;
+            // a stream's next billet after a restart needs its signal).
+            Some(end) if unverified => {
+                let rise_m = end.x_m - x_contact_m;
+                return match self.detect.classify(rise_m, 0.0, tolerance_m) {
+                    (Transition::Same, _) => (None, Continuity::Shown),
+                    _ => (None, Continuity::OffsetUnknown),
+                };
+            }
             Some(end) => {
                 let rise_m = end.x_m - x_contact_m;
                 match self.detect.classify(rise_m, t_contact_s - end.t_s, tolerance_m) {
@@ -232,16 +294,30 @@ impl Estimator {
         };
         match transition {
             Transition::Same => {}
-            Transition::New => self.start_billet(),
+            Transition::New => {
+                self.start_billet();
+                // A break before a billet's first blow leaves a learnt die reference in the
+                // old offset: this contact teaches it again.
+                if unverified && self.cfg.encoder_at_die_m.is_none() {
+                    self.die_x_m = None;
+                }
+                return (check, Continuity::NewBillet);
+            }
             Transition::Rebase => {
                 // The encoder's word for the part in the dies: the die reference, or the
                 // last end raised by the rise.
                 let from_end = self.last_end.and_then(|e| e.h_end_m.map(|h| h + (e.x_m - x_contact_m)));
-                self.h_m = self.die_x_m.map(|d| d - x_contact_m).or(from_end).or(self.h_m);
+                let (h, source) = match (self.die_x_m, from_end) {
+                    (Some(d), _) => (Some(d - x_contact_m), HeightSource::Encoder),
+                    (None, Some(h)) => (Some(h), HeightSource::Encoder),
+                    (None, None) => (self.h_m, self.h_source),
+                };
+                self.h_m = h;
+                self.h_source = source;
                 self.chain = None;
             }
         }
-        check
+        (check, Continuity::Shown)
     }
 
     /// A billet's first blow: its height is the sheet's unless the encoder's (the die
@@ -260,6 +336,7 @@ impl Estimator {
         // off the sheet by more than the measurement.
         if self.cfg.encoder_at_die_m.is_some() || off_m.abs() > tolerance_m {
             self.h_m = Some(nominal_m + off_m);
+            self.h_source = HeightSource::Encoder;
             // The billet's own law only on a configured reference: with a learnt one, a
             // "billet" off the sheet may be the same billet taken up again after lost data
             // (its strain does not start again), whose blows must keep the intact run's
@@ -285,8 +362,32 @@ impl Estimator {
         self.last_method = None;
         self.last_course = None;
         let n = self.blows;
-        let approach = fit_impact_speed(&blow.samples, blow.i_contact, self.cfg.fit_s, blow.period_s)
-            .map_err(|source| EstimateError::Approach { blow: n, source })?;
+        // The encoder as configured to count (`EncoderDirection`); under `Auto`, one whose
+        // reading fell before contact counts up, and is read negated if then it rises.
+        let fit = |b: &Blow| {
+            fit_impact_speed(&b.samples, b.i_contact, self.cfg.fit_s, b.period_s)
+                .map_err(|source| EstimateError::Approach { blow: n, source })
+        };
+        let negated;
+        let (blow, approach) = match (self.cfg.encoder_direction, fit(blow)) {
+            (EncoderDirection::Up, _) => {
+                negated = negate_encoder(blow);
+                (&negated, fit(&negated)?)
+            }
+            (_, Ok(a)) => (blow, a),
+            (direction, Err(e @ EstimateError::Approach { source: ApproachError::NotApproaching { v_mps }, .. }))
+                if v_mps < 0.0 =>
+            {
+                if direction == EncoderDirection::Down {
+                    return Err(EstimateError::EncoderCountsUp { blow: n, v_mps });
+                }
+                negated = negate_encoder(blow);
+                let a = fit(&negated).map_err(|_| e)?;
+                self.reversed_blows += 1;
+                (&negated, a)
+            }
+            (_, Err(e)) => return Err(e),
+        };
         let mut h_guess_m = self.h_m.or(self.process.as_ref().map(|p| p.billet.height_m));
         // Contact between samples: from the load's rise, or where the model fits it.
         let delta0 = self.locate_contact(blow, approach.v_impact_mps, h_guess_m);
@@ -314,7 +415,7 @@ impl Estimator {
         let v0 = fit.v_impact_mps;
         let t_contact_s = blow.samples[blow.i_contact].t_s + delta * blow.period_s;
         let tolerance_m = self.contact_tolerance_m(v0 * blow.period_s);
-        let mut billet_check = self.follow_billet(fit.x_contact_m, t_contact_s, tolerance_m);
+        let (mut billet_check, continuity) = self.follow_billet(fit.x_contact_m, t_contact_s, tolerance_m);
         let mut h_start_off_sheet_m = None;
         // Whether this contact measured the billet's height (the die reference), or taught
         // the reference (the first billet's first blow, taken at the sheet's height).
@@ -328,8 +429,16 @@ impl Estimator {
             }
         }
         self.billet_blows += 1;
-        let (mut h_start_m, height_check, chained) = self.start_height(fit.x_contact_m, v0 * blow.period_s);
-        measured |= chained;
+        let first = self.billet_blows == 1;
+        let (mut h_start_m, height_check, height_source) =
+            self.start_height(fit.x_contact_m, v0 * blow.period_s, continuity == Continuity::OffsetUnknown);
+        measured |= !first && height_source == HeightSource::Encoder;
+        // An encoder zeroed anew: the height came from elsewhere, and this contact is where
+        // the ram meets a billet of that height in the new offset (the die reference too).
+        if continuity == Continuity::OffsetUnknown && self.cfg.encoder_at_die_m.is_none() {
+            self.die_x_m = h_start_m.map(|h| fit.x_contact_m + h);
+            taught = self.die_x_m.is_some();
+        }
         let mut x_contact_m = fit.x_contact_m;
         let mut e = BlowEstimate {
             judgement: None,
@@ -353,6 +462,7 @@ impl Estimator {
             method: None,
             gap_s,
             h_start_m,
+            height_source,
             height_check,
             billet: BilletTag {
                 billet: self.billet,
@@ -360,6 +470,8 @@ impl Estimator {
                 billet_check,
                 h_start_off_sheet_m,
             },
+            implausible: None,
+            at_bound: Default::default(),
         };
         self.chain = h_start_m.map(|h| (fit.x_contact_m, h));
         let t_end_s = e.t_end_s;
@@ -409,6 +521,45 @@ impl Estimator {
             None => self.fill_from_observer(&mut e, blow, h_start_m, delta0),
         };
         e.sensor_check = sensor::sensor_check(&self.machine, blow, e.v_impact_mps).ok();
+        // The stream ended before the load had held quiet (a capture's end, a stop): the blow
+        // is whole only if its samples show the spring-back, the load back under the end
+        // level after the blow's own end of forming (CONTRACTS §5: cut by the end of the
+        // stream, it is incomplete).
+        let h_end_m = match blow.open_end_n {
+            Some(level) if !self.spring_back_seen(blow, e.t_contact_s, level) => {
+                e.class = BlowClass::Incomplete;
+                (e.kinetic_in_j, e.plastic_j, e.friction_j, e.damped_j, e.elastic_j) = (None, None, None, None, None);
+                (e.efficiency, e.residual, e.method, e.h_end_m, e.sensor_check) = (None, None, None, None, None);
+                self.h_m = None;
+                self.last_method = None;
+                self.last_course = None;
+                None
+            }
+            _ => h_end_m,
+        };
+        if first {
+            self.billet_height_m = e.h_start_m;
+        }
+        let ranges = plausibility::Ranges {
+            v_max_mps: plausibility::v_max_mps(self.machine.kind()),
+            sheet_height_m: self.process.as_ref().map(|p| p.billet.height_m),
+            billet_height_m: self.billet_height_m,
+            height_tolerance_m: tolerance_m,
+        };
+        let cfg = self.cfg;
+        plausibility::settle(&mut e, &ranges, |x| cfg.classify(x));
+        // An implausible blow's end is not known: the encoder's chain takes the billet up
+        // again from its contact at the next blow (its start height too, when that was in
+        // range), as after an incomplete one.
+        let h_end_m = if e.class == BlowClass::Implausible {
+            self.h_m = None;
+            self.chain = e.h_start_m.map(|h| (x_contact_m, h));
+            self.last_method = None;
+            self.last_course = None;
+            None
+        } else {
+            h_end_m
+        };
         // The next contact on this billet comes lower by what the billet lost; without a
         // height, by the ram's deepest travel past contact is all that is known.
         self.last_end = Some(match (h_start_m, h_end_m) {
@@ -495,9 +646,11 @@ impl Estimator {
             (l.plastic_j + l.friction_j, None, None)
         } else {
             self.h_m = h_end;
+            self.h_source = HeightSource::Model;
             (l.plastic_j, Some(l.friction_j), h_end)
         };
-        let efficiency = (plastic_j / l.kinetic_in_j).clamp(0.0, 1.0);
+        // Checked, not clamped: `plausibility::settle`.
+        let efficiency = plastic_j / l.kinetic_in_j;
         e.t_contact_s = f.t_contact_s;
         e.v_impact_mps = f.v0_mps;
         e.kinetic_in_j = Some(l.kinetic_in_j);
@@ -561,14 +714,15 @@ impl Estimator {
                     (o.deform_j, None, None)
                 } else {
                     self.h_m = Some(h_end);
+                    self.h_source = HeightSource::Model;
                     (plastic, Some(friction), Some(h_end))
                 }
             }
             _ => (o.deform_j, None, None),
         };
         // Noise can make a soft blow's work a hair above the energy in, or a bounce's below
-        // zero; a fraction outside [0, 1] is never reported (CONTRACTS.md §5).
-        let efficiency = (plastic_j / o.kinetic_in_j).clamp(0.0, 1.0);
+        // zero: `plausibility::settle` reports it at the bound, or the blow implausible.
+        let efficiency = plastic_j / o.kinetic_in_j;
         e.kinetic_in_j = Some(o.kinetic_in_j);
         e.plastic_j = Some(plastic_j);
         e.friction_j = friction_j;
@@ -591,26 +745,44 @@ impl Estimator {
         blow.filled_in(from..blow.i_end + 1) as f64 * blow.period_s + blow.lost_s
     }
 
+    /// Whether the blow's samples show its spring-back: after the end of forming its estimate
+    /// found (`last_course`), the zeroed load falls below `level`.
+    fn spring_back_seen(&self, blow: &Blow, t_contact_s: f64, level_n: f64) -> bool {
+        let forming_end_s = self.last_course.as_ref().and_then(|c| c.forming_time_s).map(|f| t_contact_s + f);
+        forming_end_s.is_some_and(|t| blow.samples.iter().any(|s| s.t_s > t && s.load_n - blow.load_zero_n < level_n))
+    }
+
     /// How well a contact position compares with a height: the encoder's and the caliper's
     /// resolutions and one sample's travel at impact, m.
     fn contact_tolerance_m(&self, sample_travel_m: f64) -> f64 {
         self.cfg.encoder_resolution_m + self.cfg.caliper_resolution_m + sample_travel_m
     }
 
-    /// The billet's height before this blow: the one tracked through the last blow, or, when
-    /// that was lost (an incomplete blow), the encoder's chain from the last contact: the ram
-    /// meets the billet lower by exactly the height the billet lost. The chain is also
-    /// checked against the sheet's measured height after the blow before. The last is
-    /// whether the height is the chain's.
-    fn start_height(&self, x_contact_m: f64, sample_travel_m: f64) -> (Option<f64>, Option<HeightCheck>, bool) {
+    /// The billet's height before this blow and where it came from: the encoder's chain from
+    /// the last contact (the ram meets the billet lower by exactly the height the billet
+    /// lost), else the one tracked through the last blow. With the encoder's offset unknown
+    /// (`offset_unknown`: a break the contact could not bridge) there is no chain: the sheet's
+    /// measured height after the blow before, else the tracked one. The chain is also checked
+    /// against the sheet's measured height after the blow before.
+    fn start_height(
+        &self,
+        x_contact_m: f64,
+        sample_travel_m: f64,
+        offset_unknown: bool,
+    ) -> (Option<f64>, Option<HeightCheck>, HeightSource) {
+        if self.process.is_none() {
+            return (None, None, HeightSource::Unknown);
+        }
         let tolerance_m = self.contact_tolerance_m(sample_travel_m);
         // A billet does not grow: a contact higher than the last one (beyond the tolerance)
-        // breaks the chain (another billet, or the part turned over).
+        // breaks the chain (another billet, or the part turned over); within it, the billet
+        // kept its height (the rise is the contact's own scatter).
         let chained = self
             .chain
+            .filter(|_| !offset_unknown)
             .map(|(x_prev, h_prev)| (h_prev - (x_contact_m - x_prev), h_prev))
             .filter(|(h, h_prev)| *h <= h_prev + tolerance_m && *h > 0.0)
-            .map(|(h, _)| h);
+            .map(|(h, h_prev)| h.min(h_prev));
         let sheet = self
             .process
             .as_ref()
@@ -621,9 +793,37 @@ impl Estimator {
             tolerance_m,
             agree: (sheet_m - encoder_m).abs() <= tolerance_m,
         });
-        let h = if self.process.is_some() { chained.or(self.h_m) } else { None };
-        (h, check, chained.is_some() && self.process.is_some())
+        match (chained, sheet) {
+            (Some(h), _) => (Some(h), check, HeightSource::Encoder),
+            (None, Some(h)) if offset_unknown => (Some(h), check, HeightSource::Sheet),
+            (None, _) => match self.h_m {
+                Some(h) => (Some(h), check, self.h_source),
+                None => (None, check, HeightSource::Unknown),
+            },
+        }
     }
+}
+
+/// `blow` with its encoder read negated (an encoder counting up, away from the die).
+fn negate_encoder(blow: &Blow) -> Blow {
+    let mut b = blow.clone();
+    for s in &mut b.samples {
+        s.disp_m = -s.disp_m;
+    }
+    b
+}
+
+/// How a blow's contact relates to the encoder's reading of the blow before.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Continuity {
+    /// The same offset: the contact is where the last blow left the billet, or the stream
+    /// never broke.
+    Shown,
+    /// The stream broke and the contact is not where the last blow left the billet: the
+    /// encoder was zeroed again, by an offset it cannot measure.
+    OffsetUnknown,
+    /// The billet's first blow.
+    NewBillet,
 }
 
 /// A fit whose start height differs from the billet's by more than this is run again, m:

@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use crate::estimate::billet::BilletCheck;
+use crate::estimate::plausibility::{AtBound, Implausible};
 
 /// Which rule fired.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -54,6 +55,9 @@ pub enum BlowClass {
     /// Samples were lost inside the blow and it could not be estimated through the hole
     /// (CONTRACTS.md §5): no energies, no efficiency, never an alert.
     Incomplete,
+    /// An input or an output lies outside its physical range (`plausibility`): no energies,
+    /// no efficiency, no efficiency alert; `reason` says which.
+    Implausible,
 }
 
 impl BlowClass {
@@ -63,7 +67,15 @@ impl BlowClass {
             BlowClass::Intermediate => "intermediate",
             BlowClass::Hard => "hard",
             BlowClass::Incomplete => "incomplete",
+            BlowClass::Implausible => "implausible",
         }
+    }
+
+    /// The class named `s` (`as_str`), `None` for a name this version does not know.
+    pub fn parse(s: &str) -> Option<Self> {
+        [BlowClass::Soft, BlowClass::Intermediate, BlowClass::Hard, BlowClass::Incomplete, BlowClass::Implausible]
+            .into_iter()
+            .find(|c| c.as_str() == s)
     }
 }
 
@@ -79,6 +91,40 @@ pub struct HeightCheck {
     pub tolerance_m: f64,
     /// `|sheet_m - encoder_m| <= tolerance_m`.
     pub agree: bool,
+}
+
+/// Where a blow's start height came from (CONTRACTS §5 `height_source`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HeightSource {
+    /// The ram encoder: the chain from the blow before's contact on a continuous encoder, or
+    /// the die reference less the contact.
+    Encoder,
+    /// The process sheet: its billet height (a billet's first blow), or its measured height
+    /// after the blow before (the encoder's offset unknown).
+    Sheet,
+    /// The model's own end height of the blow before.
+    Model,
+    /// Not known (no process sheet, or the billet's track was lost).
+    Unknown,
+}
+
+impl HeightSource {
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            HeightSource::Encoder => "encoder",
+            HeightSource::Sheet => "sheet",
+            HeightSource::Model => "model",
+            HeightSource::Unknown => "unknown",
+        }
+    }
+
+    /// The source named `s` (`as_str`), `None` for a name this version does not know.
+    pub fn parse(s: &str) -> Option<Self> {
+        [HeightSource::Encoder, HeightSource::Sheet, HeightSource::Model, HeightSource::Unknown]
+            .into_iter()
+            .find(|h| h.as_str() == s)
+    }
 }
 
 /// Which billet a blow forged, as the encoder (or a new-billet signal) told it (issue 22).
@@ -147,17 +193,39 @@ pub struct BlowEstimate {
     pub gap_s: f64,
     /// Billet height before the blow, m, when known.
     pub h_start_m: Option<f64>,
+    /// Where `h_start_m` came from.
+    pub height_source: HeightSource,
     /// The encoder's start height against the sheet's measurement, where both exist.
     pub height_check: Option<HeightCheck>,
     /// The billet the blow forged.
     #[serde(flatten)]
     pub billet: BilletTag,
+    /// Why the blow is `implausible` (CONTRACTS §5 `reason`), `None` otherwise.
+    #[serde(rename = "reason", serialize_with = "reason_text")]
+    pub implausible: Option<Implausible>,
+    /// The values reported at a bound of their range, as computed (`plausibility`): within
+    /// the estimate's accuracy of it. Left out of the JSON when empty.
+    #[serde(skip_serializing_if = "AtBound::is_empty")]
+    pub at_bound: AtBound,
+}
+
+/// The reason of an implausible blow, as its words.
+fn reason_text<S: serde::Serializer>(i: &Option<Implausible>, s: S) -> Result<S::Ok, S::Error> {
+    match i {
+        Some(i) => s.serialize_some(&i.reason),
+        None => s.serialize_none(),
+    }
 }
 
 impl BlowEstimate {
     /// Whether the blow was estimated whole (not `incomplete`).
     pub fn is_complete(&self) -> bool {
         self.class != BlowClass::Incomplete
+    }
+
+    /// Whether its energies and efficiency are reported: neither incomplete nor implausible.
+    pub fn has_energies(&self) -> bool {
+        !matches!(self.class, BlowClass::Incomplete | BlowClass::Implausible)
     }
 }
 
@@ -191,7 +259,10 @@ pub(crate) mod examples {
             method: None,
             gap_s: 0.0,
             h_start_m: None,
+            height_source: HeightSource::Unknown,
             height_check: None,
+            implausible: None,
+            at_bound: AtBound::new(),
             billet: Default::default(),
         }
     }
@@ -220,7 +291,10 @@ pub(crate) mod examples {
             method: None,
             gap_s: 0.0,
             h_start_m: None,
+            height_source: HeightSource::Unknown,
             height_check: None,
+            implausible: None,
+            at_bound: AtBound::new(),
             billet: Default::default(),
         }
     }

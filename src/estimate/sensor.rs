@@ -177,7 +177,16 @@ mod tests {
                 }
             })
             .collect();
-        Blow { samples, i_trigger: 95, i_contact: 101, i_end: n - 1, load_zero_n: 1000.0, period_s: DT, lost_s: 0.0 }
+        Blow {
+            samples,
+            i_trigger: 95,
+            i_contact: 101,
+            i_end: n - 1,
+            load_zero_n: 1000.0,
+            period_s: DT,
+            lost_s: 0.0,
+            open_end_n: None,
+        }
     }
 
     #[test]

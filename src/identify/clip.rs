@@ -86,7 +86,16 @@ mod tests {
                 Sample { t_s: i as f64 * 1e-5, load_n, disp_m: 0.0, acc_mps2: 0.0, filled: false }
             })
             .collect();
-        Blow { samples, i_trigger: 500, i_contact: 1000, i_end: 3500, load_zero_n: 0.0, period_s: 1e-5, lost_s: 0.0 }
+        Blow {
+            samples,
+            i_trigger: 500,
+            i_contact: 1000,
+            i_end: 3500,
+            load_zero_n: 0.0,
+            period_s: 1e-5,
+            lost_s: 0.0,
+            open_end_n: None,
+        }
     }
 
     fn peak_index(b: &Blow) -> usize {

@@ -46,7 +46,16 @@ mod tests {
                 }
             })
             .collect();
-        Blow { samples, i_trigger: 3000, i_contact: 3000, i_end: 3010, load_zero_n: 0.0, period_s: dt, lost_s: 0.0 }
+        Blow {
+            samples,
+            i_trigger: 3000,
+            i_contact: 3000,
+            i_end: 3010,
+            load_zero_n: 0.0,
+            period_s: dt,
+            lost_s: 0.0,
+            open_end_n: None,
+        }
     }
 
     /// 200 approaches that differ in the accelerometer's noise and the encoder's zero. A

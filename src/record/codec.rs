@@ -13,7 +13,8 @@ use prost::Message;
 
 use crate::alert::{Alert, AlertKind};
 use crate::estimate::billet::BilletCheck;
-use crate::estimate::{BilletTag, BlowClass, BlowEstimate, HeightCheck};
+use crate::estimate::plausibility::{Check, Implausible};
+use crate::estimate::{BilletTag, BlowClass, BlowEstimate, HeightCheck, HeightSource};
 use crate::signal::sample::{Role, SampleBatch};
 
 use super::error::DecodeError;
@@ -265,6 +266,10 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
         h_start_off_sheet_m: r.billet.h_start_off_sheet_m,
         sensor_check: r.sensor_check,
         method: r.method.map(|m| m.as_str().to_string()),
+        height_source: Some(r.height_source.as_str().to_string()),
+        implausible: r.implausible.as_ref().map(|i| i.check.as_str().to_string()),
+        reason: r.implausible.as_ref().map(|i| i.reason.clone()),
+        at_bound: r.at_bound.iter().map(|(k, v)| (k.clone(), *v)).collect(),
         judgement: r.judgement.as_ref().map(|j| pb::Judgement {
             ok: j.ok,
             recipe: j.recipe.clone(),
@@ -274,16 +279,17 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
 }
 
 fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
-    let class = match r.class.as_str() {
-        "soft" => BlowClass::Soft,
-        "intermediate" => BlowClass::Intermediate,
-        "hard" => BlowClass::Hard,
-        "incomplete" => BlowClass::Incomplete,
-        _ => return Err(DecodeError::UnknownClass { class: r.class }),
+    let Some(class) = BlowClass::parse(&r.class) else {
+        return Err(DecodeError::UnknownClass { class: r.class });
     };
-    // A complete blow always has its energies; a writer from before they were optional left
-    // a 0 out.
-    let energy = |v: Option<f64>| if class == BlowClass::Incomplete { v } else { Some(v.unwrap_or(0.0)) };
+    // A complete, plausible blow always has its energies; a writer from before they were
+    // optional left a 0 out.
+    let reported = !matches!(class, BlowClass::Incomplete | BlowClass::Implausible);
+    let energy = |v: Option<f64>| if reported { Some(v.unwrap_or(0.0)) } else { v };
+    let implausible = match (r.implausible.as_deref().and_then(Check::parse), r.reason) {
+        (Some(check), Some(reason)) => Some(Implausible { check, reason }),
+        _ => None,
+    };
     Ok(BlowEstimate {
         judgement: r.judgement.map(|j| crate::recipe::Judgement { ok: j.ok, recipe: j.recipe, reasons: j.reasons }),
         blow: r.blow,
@@ -306,6 +312,7 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
         method: r.method.as_deref().and_then(crate::estimate::Method::parse),
         gap_s: r.gap_s,
         h_start_m: r.h_start_m,
+        height_source: r.height_source.as_deref().and_then(HeightSource::parse).unwrap_or(HeightSource::Unknown),
         height_check: r.height_check.map(|h| HeightCheck {
             sheet_m: h.sheet_m,
             encoder_m: h.encoder_m,
@@ -319,6 +326,8 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
             billet_check: r.billet_check.as_deref().and_then(BilletCheck::parse),
             h_start_off_sheet_m: r.h_start_off_sheet_m,
         },
+        implausible,
+        at_bound: r.at_bound.into_iter().collect(),
     })
 }
 
@@ -541,6 +550,13 @@ mod tests {
             method: with_optional.then_some(crate::estimate::Method::ModelFit),
             gap_s: if with_optional { 2e-5 } else { 0.0 },
             h_start_m: with_optional.then_some(0.0151),
+            height_source: if with_optional {
+                crate::estimate::HeightSource::Encoder
+            } else {
+                crate::estimate::HeightSource::Unknown
+            },
+            implausible: None,
+            at_bound: if with_optional { [("damped_J".to_string(), -3.5)].into() } else { Default::default() },
             height_check: with_optional.then_some(HeightCheck {
                 sheet_m: 0.0150,
                 encoder_m: 0.0151,
@@ -566,6 +582,7 @@ mod tests {
             blows: 8,
             incomplete_blows: u32::from(!with_optional),
             energies_partial: !with_optional,
+            implausible_blows: u32::from(!with_optional),
             h_start_m: some(0.112),
             h_start_off_sheet_m: some(-0.0021),
             h_end_m: some(0.0401),
@@ -618,6 +635,21 @@ mod tests {
                 method: None,
                 gap_s: 0.01,
                 ..estimate(false)
+            })),
+            Payload::Result(Box::new(BlowEstimate {
+                class: BlowClass::Implausible,
+                kinetic_in_j: None,
+                plastic_j: None,
+                damped_j: None,
+                elastic_j: None,
+                efficiency: None,
+                residual: None,
+                h_start_m: None,
+                implausible: Some(Implausible {
+                    check: Check::StartHeight,
+                    reason: "start height -6.76 mm outside (0, 90.05] mm".into(),
+                }),
+                ..estimate(true)
             })),
             Payload::Alert(alert(AlertKind::ElasticBlow)),
             Payload::Alert(alert(AlertKind::ModelHealth)),

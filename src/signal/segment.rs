@@ -98,6 +98,12 @@ pub struct Blow {
     /// longer than a blow, a link pulled, the end of a file) while the tools were still
     /// loaded. A blow with any is cut short and cannot be estimated whole.
     pub lost_s: f64,
+    /// The stream ended before the load had stayed below the end level for the hold time (a
+    /// triggered capture's or a file's end, a stop, a link lost for good), with the tools no
+    /// longer loaded at its last sample: the end level, N. The estimator then looks for the
+    /// spring-back after the blow's own end of forming (`None`: the blow ended by its hold,
+    /// at its maximum length, or was cut loaded, `lost_s`).
+    pub open_end_n: Option<f64>,
 }
 
 impl Blow {
@@ -123,6 +129,13 @@ pub struct SegmentStats {
     pub samples_filled: u64,
     /// Blows cut short by a break in the stream while the tools were loaded.
     pub blows_cut_short: u64,
+}
+
+/// How a blow's samples ended: `Blow::lost_s` and `Blow::open_end_n`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Tail {
+    lost_s: f64,
+    open_end_n: Option<f64>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -289,7 +302,8 @@ impl Segmenter {
             } else {
                 0.0
             };
-            self.close_with(i_trigger, zero, contact, n.saturating_sub(1), lost_s, out);
+            let open_end_n = (contact.is_some() && !loaded).then_some(self.cfg.end_load_n);
+            self.close_with(i_trigger, zero, contact, n.saturating_sub(1), Tail { lost_s, open_end_n }, out);
         }
         self.state = State::Armed;
         self.ring.clear();
@@ -389,7 +403,7 @@ impl Segmenter {
     }
 
     fn close(&mut self, i_trigger: usize, load_zero_n: f64, contact: Option<usize>, i_end: usize, out: &mut Vec<Blow>) {
-        self.close_with(i_trigger, load_zero_n, contact, i_end, 0.0, out);
+        self.close_with(i_trigger, load_zero_n, contact, i_end, Tail { lost_s: 0.0, open_end_n: None }, out);
     }
 
     fn close_with(
@@ -398,7 +412,7 @@ impl Segmenter {
         load_zero_n: f64,
         contact: Option<usize>,
         i_end: usize,
-        lost_s: f64,
+        Tail { lost_s, open_end_n }: Tail,
         out: &mut Vec<Blow>,
     ) {
         match contact {
@@ -413,6 +427,7 @@ impl Segmenter {
                     load_zero_n,
                     period_s: self.period_s,
                     lost_s,
+                    open_end_n,
                 });
             }
             _ => {

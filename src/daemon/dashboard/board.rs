@@ -79,6 +79,9 @@ mod tests {
             method: None,
             gap_s: 0.0,
             h_start_m: None,
+            height_source: crate::estimate::HeightSource::Unknown,
+            implausible: None,
+            at_bound: Default::default(),
             height_check: None,
             billet: BilletTag { billet, billet_blow: n, billet_check: None, h_start_off_sheet_m: None },
         }

@@ -9,9 +9,9 @@
 const $ = (id) => document.getElementById(id);
 const token = new URLSearchParams(location.search).get("token");
 const headers = token ? { Authorization: "Bearer " + token } : {};
-const CLASSES = ["soft", "intermediate", "hard", "incomplete"];
+const CLASSES = ["soft", "intermediate", "hard", "incomplete", "implausible"];
 // The class words under the bars, short enough for a bar 40 px wide (the full word is its title).
-const SHORT = { soft: "soft", intermediate: "interm.", hard: "hard", incomplete: "incompl." };
+const SHORT = { soft: "soft", intermediate: "interm.", hard: "hard", incomplete: "incompl.", implausible: "implaus." };
 
 let lastHealth = null; // {t_ms, samples by source}: the sample rate between two polls
 
