@@ -282,3 +282,22 @@ fn ascii_garbage_and_a_wild_stamp_never_make_a_blow() {
     let wild = through_the_service("ascii-wild", true, ascii_stream(&rows, Fault::WildStamp, hit));
     assert_like_intact(&wild, &intact, None, "a wild stamp");
 }
+
+/// Issue 36: SIGTERM while a blow is under way. The DAQ's stream stops inside the third
+/// blow, where the lower tool's ring at impact carries the sensor's load under the
+/// segmenter's end level (so the stream's end looks quiet), and the service is stopped: the
+/// blow the stop cut is `incomplete`, with no energies and no alert, not a whole blow (it
+/// was reported `hard`, with an elastic-blow alert, before the spring-back was looked for).
+#[test]
+fn a_stop_while_a_blow_is_under_way_leaves_it_incomplete() {
+    let rows = rows();
+    let hit = inside_blow_3(&rows);
+    // The first sample after the contact whose load is under the hammer's end level, 10 kN.
+    let dip = (hit - 300..hit + 300).find(|&i| rows[i].load_n < 10e3).expect("the impact's ring dips under 10 kN");
+    let blows = through_the_service("bin-stop-mid-blow", false, binary_stream(&rows[..=dip], Fault::None, usize::MAX));
+    assert_eq!(blows.len(), 3, "{blows:?}");
+    assert!(blows[..2].iter().all(|b| b["efficiency"].as_f64().is_some()), "{blows:?}");
+    let cut = &blows[2];
+    assert_eq!(cut["class"], "incomplete", "{cut}");
+    assert!(cut["efficiency"].is_null() && cut["plastic_J"].is_null() && cut["alert"].is_null(), "{cut}");
+}

@@ -29,6 +29,8 @@
 
 #![allow(dead_code)]
 
+pub mod captures;
+
 use forgemon::config::{parse_machine, parse_process};
 use forgemon::identify::objective::{Reference, Setting};
 use forgemon::physics::machine::Machine;
@@ -187,6 +189,9 @@ struct Fine {
     ram_m: Vec<f64>,
     ram_acc: Vec<f64>,
     h_end_m: f64,
+    /// The work of the frictionless part of the yield load over the plastic compression, J
+    /// (CONTRACTS §4's plastic energy).
+    plastic_j: f64,
 }
 
 /// The billet's yield load at height `h_m` (plastic compression `p` from `h_start`) and
@@ -212,10 +217,29 @@ fn yield_load(process: &Process, hidden: &Hidden, h_m: f64, rate_per_s: f64) -> 
     std::f64::consts::PI * r_sq * sigma * factor
 }
 
-/// Integrate one blow from contact at `v0` on a billet of height `h0`.
+/// π r² σ at height `h_m`: the yield load without its friction factor.
+fn frictionless_load(process: &Process, hidden: &Hidden, h_m: f64, rate_per_s: f64) -> f64 {
+    let g = &process.billet;
+    let r_sq = (0.5 * g.diameter_m).powi(2) * g.height_m / h_m;
+    let eps = (g.height_m / h_m).ln();
+    let rate = rate_per_s.max(1e-3);
+    let mut sigma = process.material.sigma_pa(eps, rate);
+    if let Hidden::StrainRate { m, rate_ref_per_s } = *hidden {
+        sigma *= (rate / rate_ref_per_s).powf(m);
+    }
+    std::f64::consts::PI * r_sq * sigma
+}
+
+/// Integrate one blow from contact at `v0` on a billet of height `h0`, over the window
+/// `PRE_S` before contact to `POST_S` after it.
 fn blow(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64) -> Fine {
+    blow_over(rig, process, hidden, v0, h0, PRE_S, POST_S)
+}
+
+/// `blow` over `pre_s` before contact to `post_s` after it.
+fn blow_over(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64, pre_s: f64, post_s: f64) -> Fine {
     let dt = 1.0 / (rig.sample_rate_hz * FINE as f64);
-    let n = ((POST_S + PRE_S) / dt) as usize;
+    let n = ((post_s + pre_s) / dt) as usize;
     let k_b = match hidden {
         Hidden::Compliant { k_n_per_m } => *k_n_per_m,
         _ => K_BILLET_STIFF,
@@ -229,8 +253,8 @@ fn blow(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64) -> Fine
         _ => None,
     };
     let gravity = if rig.kind == Kind::Hammer { G } else { 0.0 };
-    let pre = (PRE_S / dt).round() as usize;
-    // Start `PRE_S` before contact, the ram falling (hammer) or driven (press) onto the billet.
+    let pre = (pre_s / dt).round() as usize;
+    // Start `pre_s` before contact, the ram falling (hammer) or driven (press) onto the billet.
     let t0 = -(pre as f64) * dt;
     // x(t) = v0 t + g t²/2, x(0) = 0 at contact: at t0 < 0 the ram is above the billet.
     let mut s = State { vu: v0 + gravity * t0, xu: v0 * t0 + 0.5 * gravity * t0 * t0, ..State::default() };
@@ -242,6 +266,7 @@ fn blow(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64) -> Fine
         ram_m: Vec::with_capacity(n),
         ram_acc: Vec::with_capacity(n),
         h_end_m: h0,
+        plastic_j: 0.0,
     };
     let forces = |s: &State, rate: f64, gravity: f64| -> (f64, f64, f64, f64, f64, f64) {
         // Billet force between the upper body and the lower one (or the fixed chain).
@@ -309,7 +334,12 @@ fn blow(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64) -> Fine
         let x_low = if massless { s.x3 } else { s.xl };
         let delta = s.xu - x_low - s.p;
         if k_eff * delta > fy {
-            s.p = s.xu - x_low - fy / k_eff;
+            let p_new = s.xu - x_low - fy / k_eff;
+            // The plastic energy is the frictionless part of the load, π r² σ, over the
+            // compression (CONTRACTS §4), taken at the step's mid height.
+            let h_mid = h0 - 0.5 * (s.p + p_new);
+            out.plastic_j += frictionless_load(process, hidden, h_mid, rate) * (p_new - s.p).max(0.0);
+            s.p = p_new;
         }
         // The strain rate from the tools' closing speed (smooth, where the plastic increments
         // of a return mapping flip between steps that flow and steps that do not).

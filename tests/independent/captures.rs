@@ -1,0 +1,175 @@
+//! Capture directories rendered by the independent renderer (issue 36): one billet's blows as
+//! a DAQ would record them on one continuous clock and one continuous encoder, with the truth
+//! beside them, so that a test can express the same blows in every freedom CONTRACTS §1
+//! grants (column order, time origin and encoder offset per file, direction, rate, jitter,
+//! several blows per file, sheets with or without measured heights) and compare.
+//!
+//! The physics is the parent module's (`blow_over`: an elastic-plastic billet, velocity
+//! Verlet at 100 fine steps a sample, the DAQ's Butterworth chain), not `forgemon::physics`.
+//! Between captures the ram is lifted (hammer) or returned (press) along a smooth path whose
+//! acceleration stays below the segmenter's re-arm level.
+
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+use rand_distr::{Distribution, Normal};
+
+use super::{ADC_LSB_N, CALIPER_M, ENCODER_STEP_M, Hidden, Kind, Rig, blow_over, daq};
+use forgemon::config::parse_process;
+use forgemon::physics::process::Process;
+
+/// One sample as the DAQ recorded it, on the billet's continuous clock and encoder.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Row {
+    pub t_s: f64,
+    pub load_n: f64,
+    pub disp_m: f64,
+    pub acc_mps2: f64,
+}
+
+/// What a blow really did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Truth {
+    pub v0_mps: f64,
+    pub h_start_m: f64,
+    pub h_end_m: f64,
+    pub kinetic_j: f64,
+    pub plastic_j: f64,
+}
+
+impl Truth {
+    pub fn efficiency(&self) -> f64 {
+        self.plastic_j / self.kinetic_j
+    }
+}
+
+/// One billet's blows: a triggered capture per blow (`captures`), the stretches between them
+/// (`between[i]` follows capture i), the truth, the sheet and the hand-measured heights.
+pub struct Rendered {
+    pub kind: Kind,
+    pub rate_hz: f64,
+    pub captures: Vec<Vec<Row>>,
+    pub between: Vec<Vec<Row>>,
+    pub truth: Vec<Truth>,
+    /// The sheet, its billet scaled, without measured heights.
+    pub process: Process,
+    /// The heights after each blow as a caliper read them (`caliper_m` of noise, uniform).
+    pub measured_m: Vec<f64>,
+    /// The sheet's text (`process.toml`), without measured heights.
+    pub sheet_text: String,
+}
+
+/// The encoder's reading with the ram on the lower die, m: any constant.
+const DIE_READING_M: f64 = 0.731;
+/// Captured before contact and after it, s: a pre-trigger window longer than the
+/// estimator's approach fit (10 ms on a hammer, 50 ms on a press).
+const PRE_S: (f64, f64) = (0.04, 0.12);
+const POST_S: (f64, f64) = (0.04, 0.08);
+/// The stretch between two captures, s: long enough for the smooth lift to stay gentle.
+const BETWEEN_S: (f64, f64) = (0.4, 2.0);
+
+/// Render one billet of `height_scale` × the sheet's height on `kind` at `rate_hz`, struck at
+/// `v0s`, with `hidden`; noise and caliper errors from `seed`.
+pub fn render(kind: Kind, hidden: &Hidden, v0s: &[f64], height_scale: f64, rate_hz: f64, seed: u64) -> Rendered {
+    let mut rig = Rig::new(kind, hidden);
+    rig.sample_rate_hz = rate_hz;
+    let sheet = match kind {
+        Kind::Hammer => include_str!("../../config/steel-16NiCrMo13.process.toml"),
+        Kind::Press => include_str!("../../config/copper-cu99.process.toml"),
+    };
+    // The sheet without its measured heights, its billet scaled.
+    let text: String = sheet.lines().take_while(|l| !l.starts_with("[[blows]]")).collect::<Vec<_>>().join("\n");
+    let mut process = parse_process("p", &text).expect("test sheet");
+    process.billet.height_m *= height_scale;
+    let sheet_text = text.replace(
+        &format!("height_m = {}", fmt_sheet(process.billet.height_m / height_scale)),
+        &format!("height_m = {}", process.billet.height_m),
+    );
+    assert_eq!(parse_process("p", &sheet_text).unwrap().billet.height_m, process.billet.height_m, "{sheet_text}");
+    let (pre_s, post_s, between_s) = match kind {
+        Kind::Hammer => (PRE_S.0, POST_S.0, BETWEEN_S.0),
+        Kind::Press => (PRE_S.1, POST_S.1, BETWEEN_S.1),
+    };
+    let mut rng = StdRng::seed_from_u64(seed);
+    let load_noise = Normal::new(0.0, rig.load_sd_n).expect("finite sd");
+    let acc_noise = Normal::new(0.0, rig.acc_sd_mps2).expect("finite sd");
+    let dt = 1.0 / rate_hz;
+    let kinetic_mass = rig.m_upper + rig.ram.map_or(rig.m_lower, |(m, _, _)| m);
+    let mut h = process.billet.height_m;
+    let mut out = Rendered {
+        kind,
+        rate_hz,
+        captures: Vec::new(),
+        between: Vec::new(),
+        truth: Vec::new(),
+        process: process.clone(),
+        measured_m: Vec::new(),
+        sheet_text,
+    };
+    // The clock runs on from an arbitrary origin.
+    let mut t_s = 731.25;
+    let mut load_zero_n = rng.random_range(-5e3..5e3);
+    for &v0 in v0s {
+        let fine = blow_over(&rig, &process, hidden, v0, h, pre_s, post_s);
+        let (load, ram, acc) = (daq(&fine.load_n, &rig), daq(&fine.ram_m, &rig), daq(&fine.ram_acc, &rig));
+        let rows: Vec<Row> = (0..load.len())
+            .map(|k| Row {
+                t_s: t_s + k as f64 * dt,
+                load_n: ((load[k] + load_zero_n + load_noise.sample(&mut rng)) / ADC_LSB_N).round() * ADC_LSB_N,
+                disp_m: quantise(DIE_READING_M - h + ram[k]),
+                acc_mps2: acc[k] + acc_noise.sample(&mut rng),
+            })
+            .collect();
+        t_s += rows.len() as f64 * dt;
+        out.truth.push(Truth {
+            v0_mps: v0,
+            h_start_m: h,
+            h_end_m: fine.h_end_m,
+            kinetic_j: 0.5 * kinetic_mass * v0 * v0,
+            plastic_j: fine.plastic_j,
+        });
+        out.captures.push(rows);
+        h = fine.h_end_m;
+        out.measured_m.push(h + rng.random_range(-CALIPER_M..=CALIPER_M));
+        // The load's zero wanders a little from capture to capture.
+        load_zero_n += rng.random_range(-500.0..500.0);
+    }
+    // Between captures: the ram taken from where the last capture left it to where the next
+    // begins, along a smoothstep (its largest acceleration 5.8 d / T²).
+    for i in 0..out.captures.len().saturating_sub(1) {
+        let (a, b) = (*out.captures[i].last().unwrap(), out.captures[i + 1][0]);
+        let n = (between_s / dt).round() as usize;
+        let d = b.disp_m - a.disp_m;
+        let stretch: Vec<Row> = (1..n)
+            .map(|k| {
+                let u = k as f64 / n as f64;
+                let s = u * u * (3.0 - 2.0 * u);
+                let s_dd = (6.0 - 12.0 * u) / (between_s * between_s);
+                Row {
+                    t_s: a.t_s + k as f64 * dt,
+                    load_n: ((a.load_n + (b.load_n - a.load_n) * u + load_noise.sample(&mut rng)) / ADC_LSB_N).round()
+                        * ADC_LSB_N,
+                    disp_m: quantise(a.disp_m + d * s),
+                    acc_mps2: d * s_dd + acc_noise.sample(&mut rng),
+                }
+            })
+            .collect();
+        // The next capture starts after the stretch.
+        let shift = n as f64 * dt - (b.t_s - a.t_s);
+        for later in &mut out.captures[i + 1..] {
+            for r in later.iter_mut() {
+                r.t_s += shift;
+            }
+        }
+        out.between.push(stretch);
+    }
+    out
+}
+
+/// A height as the example sheets write it (`0.112`, `0.030`).
+fn fmt_sheet(h_m: f64) -> String {
+    format!("{h_m:.3}")
+}
+
+fn quantise(x_m: f64) -> f64 {
+    (x_m / ENCODER_STEP_M).round() * ENCODER_STEP_M
+}
