@@ -19,6 +19,7 @@
 //! offset rule (`estimate::continuity`) has no constant tuned on these blows: its allowance
 //! is the billet detector's.
 
+mod common;
 mod independent;
 
 use std::path::Path;
@@ -247,6 +248,9 @@ fn check(
         fail(format!("{} blows of {}, stderr: {}", got.blows.len(), r.truth.len(), got.stderr.trim()));
         return (f64::NAN, f64::NAN);
     }
+    for finding in common::out_of_range(&got.blows) {
+        fail(finding);
+    }
     let (mut worst_truth, mut worst_intact) = (0.0f64, 0.0f64);
     let mut first_hard_alerted = None;
     for (i, (b, t)) in got.blows.iter().zip(&r.truth).enumerate() {
@@ -288,6 +292,24 @@ fn check(
     (worst_truth, worst_intact)
 }
 
+/// Where each blow's start height came from: the encoder across files it was continuous over
+/// (a contact where the last blow left the billet), else the sheet's measured height, else
+/// the model's end of the blow before; the first blow's is the sheet's billet.
+fn check_height_source(v: &Variant, got: &Replayed, failures: &mut Vec<String>) {
+    let offset = matches!(v.encoder, Encoder::TaredAtTrigger | Encoder::OffsetPerFile);
+    let later = match (offset, v.sheet) {
+        (false, _) => "encoder",
+        (true, Sheet::None) => "model",
+        (true, _) => "sheet",
+    };
+    for (i, b) in got.blows.iter().enumerate() {
+        let want = if i == 0 { "sheet" } else { later };
+        if b["height_source"] != want {
+            failures.push(format!("{}: blow {}: height_source {} where {want}", v.name, i + 1, b["height_source"]));
+        }
+    }
+}
+
 fn run_matrix(kind: Kind, v0s: &[f64], height_scale: f64) {
     let tmp = tempfile::tempdir().unwrap();
     let (native, others) = rates(kind);
@@ -300,10 +322,8 @@ fn run_matrix(kind: Kind, v0s: &[f64], height_scale: f64) {
         let dir = tmp.path().join(format!("v{i}"));
         write_dir(&dir, &r, v);
         let got = replay(&dir, v);
-        if v.encoder == Encoder::Reversed && v.direction.is_none() {
-            // Auto-detected: the same blows as the intact ones.
-        }
         let (a, b) = check(v.name, &r, &got, intact.as_ref(), &mut failures);
+        check_height_source(v, &got, &mut failures);
         println!("  {:<44} {:>5}  {a:.4}  {b:.4}", v.name, v.rate_khz);
         if i == 0 {
             intact = Some(got);

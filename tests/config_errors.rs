@@ -119,3 +119,28 @@ fn a_sheet_whose_heights_rise_by_caliper_noise_is_kept_with_a_warning() {
     let out = forgemon(&["simulate", "--machine", o, "--process", p, "--v0", "3.9"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// Issue 36: a measured height 500 mm on a 112 mm billet was kept as "caliper noise?" by
+/// `replay` and `simulate`, with exit 0. A rise beyond `[caliper] tolerance_m` (1 mm) is no
+/// caliper's scatter: both verbs refuse the sheet, naming its file, line and key.
+#[test]
+fn a_measured_height_far_above_the_billet_is_refused_by_replay_and_simulate() {
+    let steel = std::fs::read_to_string(root().join(STEEL)).unwrap();
+    let sheet = &steel[..steel.find("[[blows]]").unwrap_or(steel.len())];
+    let tall = format!("{sheet}[[blows]]\nfinal_height_m = 0.5\n");
+    let path = tmp("tall.process.toml");
+    std::fs::write(&path, tall).unwrap();
+    let p = path.to_str().unwrap();
+    let line = 1 + sheet.lines().count() + 1;
+    let at = format!("{p}:{line}:1: key 'blows[1].final_height_m' is 500.00 mm, 388.00 mm above the billet's height_m");
+    let out = forgemon(&["simulate", "--machine", HAMMER, "--process", p, "--v0", "3.9"]);
+    fails_naming(&out, &[&at, "[caliper] tolerance_m = 1.00 mm"]);
+    let caps = tmp("tall-captures");
+    let _ = std::fs::remove_dir_all(&caps);
+    let c = caps.to_str().unwrap();
+    let out = forgemon(&["simulate", "--machine", HAMMER, "--process", STEEL, "--v0", "3.9", "--captures", c]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = forgemon(&["replay", c, "--machine", HAMMER, "--process", p, "--json"]);
+    fails_naming(&out, &[&at]);
+    assert!(out.stdout.is_empty(), "nothing replayed on a refused sheet");
+}

@@ -11,6 +11,8 @@
 //! `cargo nextest run --release --test readme_examples --no-capture`: the failure prints
 //! each command's whole output, to paste into README.md.
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
 
@@ -113,8 +115,17 @@ fn the_readme_examples_print_what_the_readme_shows() {
     }
     let tmp = tempfile::tempdir().expect("tempdir");
     let mut stale = Vec::new();
+    let mut out_of_range = Vec::new();
     for e in &all {
         let got = run(root, tmp.path(), e);
+        // Every replay the README shows, again as JSON lines: no number outside its range.
+        if e.args[0] == "replay" {
+            let json = Example { args: replay_as_json(&e.args), expected: Vec::new(), line: e.line };
+            let blows: Vec<serde_json::Value> =
+                run(root, tmp.path(), &json).iter().filter_map(|l| serde_json::from_str(l).ok()).collect();
+            assert!(!blows.is_empty(), "README.md:{}: no blow in the replay", e.line);
+            out_of_range.extend(common::out_of_range(&blows).into_iter().map(|b| format!("README.md:{}: {b}", e.line)));
+        }
         if got != e.expected {
             let first =
                 got.iter().zip(&e.expected).position(|(a, b)| a != b).unwrap_or(got.len().min(e.expected.len()));
@@ -130,6 +141,94 @@ fn the_readme_examples_print_what_the_readme_shows() {
         }
     }
     assert!(stale.is_empty(), "{} of {} README examples are stale:\n\n{}", stale.len(), all.len(), stale.join("\n\n"));
+    assert!(out_of_range.is_empty(), "{}", out_of_range.join("\n"));
+}
+
+/// A README replay's arguments as a `--json` replay that records nothing.
+fn replay_as_json(args: &[String]) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        if a == "--out" {
+            it.next();
+        } else if a != "--json" {
+            out.push(a.clone());
+        }
+    }
+    out.push("--json".to_string());
+    out
+}
+
+/// Issue 36: the committed fixtures' expected results, and a demo session's recording
+/// (the README's first command, two billets), keep every number in its range.
+#[test]
+fn the_fixtures_and_the_demo_keep_every_number_in_its_range() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let can: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(root.join("fixtures/can/hammer_blows.expected.json")).unwrap())
+            .unwrap();
+    let blows = can["blows"].as_array().expect("the fixture's blows");
+    assert_eq!(blows.len(), 3);
+    assert_eq!(common::out_of_range(blows), Vec::<String>::new(), "fixtures/can");
+    let tmp = tempfile::tempdir().expect("tempdir");
+    // `run` moves `/tmp/` into the temporary directory.
+    let dir = "/tmp/demo".to_string();
+    let demo = Example {
+        line: 0,
+        args: ["demo", "--fast", "--billets", "2", "--dir", &dir].map(String::from).to_vec(),
+        expected: vec![],
+    };
+    run(root, tmp.path(), &demo);
+    let rec = std::fs::read_dir(tmp.path().join("demo"))
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .expect("the demo's recording");
+    let name = rec.file_name().expect("a file").to_string_lossy();
+    let replay = Example {
+        line: 0,
+        args: vec!["replay".into(), format!("/tmp/demo/{name}"), "--json".into()],
+        expected: vec![],
+    };
+    let blows: Vec<serde_json::Value> =
+        run(root, tmp.path(), &replay).iter().filter_map(|l| serde_json::from_str(l).ok()).collect();
+    assert_eq!(blows.len(), 16, "two billets of eight blows");
+    assert_eq!(common::out_of_range(&blows), Vec::<String>::new(), "the demo");
+}
+
+/// The range check finds what it should: a negative height, an efficiency above 1, a
+/// negative energy, an implausible blow with energies or without its reason, a billet that
+/// grew.
+#[test]
+fn the_range_check_finds_each_kind_of_number_out_of_range() {
+    let good = serde_json::json!({"blow": 1, "class": "soft", "v_impact_mps": 3.9, "kinetic_in_J": 5711.0,
+        "plastic_J": 5320.0, "friction_J": 226.0, "damped_J": 150.0, "elastic_J": 15.0, "efficiency": 0.931,
+        "h_start_m": 0.112, "h_end_m": 0.0929, "billet": 1, "reason": null});
+    assert_eq!(common::out_of_range(std::slice::from_ref(&good)), Vec::<String>::new());
+    let with = |k: &str, v: serde_json::Value| {
+        let mut b = good.clone();
+        b[k] = v;
+        b
+    };
+    for bad in [
+        with("h_start_m", (-0.0068).into()),
+        with("efficiency", 1.2.into()),
+        with("plastic_J", (-2431.0).into()),
+        with("class", "implausible".into()),
+        with("h_end_m", 0.2.into()),
+        with("v_impact_mps", 0.0.into()),
+    ] {
+        assert!(!common::out_of_range(std::slice::from_ref(&bad)).is_empty(), "{bad}");
+    }
+    let grew = [good.clone(), with("blow", 2.into())].map(|mut b| {
+        b["h_start_m"] = b["h_start_m"].as_f64().unwrap().into();
+        b
+    });
+    let mut grew = grew.to_vec();
+    grew[1]["h_start_m"] = 0.113.into();
+    grew[1]["h_end_m"] = 0.1.into();
+    assert_eq!(common::out_of_range(&grew).len(), 1, "a billet that grew");
 }
 
 /// The parser: commands, continuations, outputs and the README line numbers.

@@ -157,3 +157,56 @@ pub fn with_flow_stress(mut p: Process, factor: f64) -> Process {
     };
     p
 }
+
+/// What in the blow lines `blows` (CONTRACTS §5 JSON, in order) lies outside its physical
+/// range (issue 36): energies below 0, an efficiency outside [0, 1], a non-positive impact
+/// speed, a height at or below 0, a start height above the billet's first (the billet only
+/// gets flatter), an end height above the start; an incomplete or implausible blow with any
+/// energy, and an implausible one without its reason. One line per finding, naming the blow.
+pub fn out_of_range(blows: &[serde_json::Value]) -> Vec<String> {
+    let mut bad = Vec::new();
+    let mut first_height: std::collections::BTreeMap<u64, f64> = Default::default();
+    let num = |b: &serde_json::Value, k: &str| b.get(k).and_then(serde_json::Value::as_f64);
+    for b in blows {
+        let n = &b["blow"];
+        let mut say = |what: String| bad.push(format!("blow {n}: {what}"));
+        let class = b["class"].as_str().unwrap_or("");
+        if !["soft", "intermediate", "hard", "incomplete", "implausible"].contains(&class) {
+            say(format!("class {class:?}"));
+        }
+        let energies = ["kinetic_in_J", "plastic_J", "friction_J", "damped_J", "elastic_J", "efficiency"];
+        if class == "incomplete" || class == "implausible" {
+            for k in energies.iter().filter(|k| !b[**k].is_null()) {
+                say(format!("{class} with {k} {}", b[*k]));
+            }
+        }
+        if (class == "implausible") != b["reason"].is_string() {
+            say(format!("class {class} with reason {}", b["reason"]));
+        }
+        for k in &energies[..5] {
+            if let Some(j) = num(b, k).filter(|j| !(*j >= 0.0)) {
+                say(format!("{k} {j} < 0"));
+            }
+        }
+        if let Some(e) = num(b, "efficiency").filter(|e| !(0.0..=1.0).contains(e)) {
+            say(format!("efficiency {e} outside [0, 1]"));
+        }
+        if !num(b, "v_impact_mps").is_some_and(|v| v > 0.0) {
+            say(format!("impact speed {}", b["v_impact_mps"]));
+        }
+        let (h0, h1) = (num(b, "h_start_m"), num(b, "h_end_m"));
+        let billet = b["billet"].as_u64().unwrap_or(0);
+        if let Some(h0) = h0 {
+            let top = *first_height.entry(billet).or_insert(h0);
+            if !(h0 > 0.0 && h0 <= top) {
+                say(format!("start height {h0} m outside (0, {top}]"));
+            }
+        }
+        if let Some(h1) = h1
+            && !(h1 > 0.0 && h0.is_none_or(|h0| h1 <= h0))
+        {
+            say(format!("end height {h1} m outside (0, start {h0:?}]"));
+        }
+    }
+    bad
+}
