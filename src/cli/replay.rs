@@ -373,7 +373,11 @@ fn table_row(e: &crate::estimate::BlowEstimate) -> String {
         e.class.as_str(),
         e.final_load_n / 1e3,
         e.h_end_m.map_or("-".to_string(), |h| format!("{:.2}", h * 1e3)),
-        e.alert.as_ref().map_or(String::new(), |a| a.reason.clone()),
+        match (&e.alert, &e.implausible) {
+            (Some(a), _) => a.reason.clone(),
+            (None, Some(i)) => i.reason.clone(),
+            (None, None) => String::new(),
+        },
     )
 }
 
