@@ -287,6 +287,32 @@ mod tests {
         }
     }
 
+    fn implausible(n: u32, check: crate::estimate::plausibility::Check) -> BlowEstimate {
+        BlowEstimate {
+            class: BlowClass::Implausible,
+            implausible: Some(Implausible { check, reason: format!("value {n} out of range") }),
+            ..incomplete(n)
+        }
+    }
+
+    /// Issue 36: an implausible blow raises no efficiency alert, and its billet one alert of
+    /// the kind its check names (an input: the sensors'; an output: the model's), carrying
+    /// its reason; the next billet may raise one again. It does not fill the window either.
+    #[test]
+    fn an_implausible_blow_alerts_once_per_billet_by_its_check() {
+        use crate::estimate::plausibility::Check;
+        let mut r = AlertRules::new(AlertConfig::default());
+        let a = r.on_blow(&implausible(1, Check::StartHeight)).expect("the billet's alert");
+        assert_eq!(a.kind, AlertKind::Sensor);
+        assert!(a.reason.contains("blow 1 is implausible (start_height): value 1 out of range"), "{}", a.reason);
+        assert_eq!(r.on_blow(&implausible(2, Check::Balance)), None);
+        assert_eq!(r.on_blow(&blow(3, 0.55, 0.0)), None);
+        assert_eq!(r.on_blow(&blow(4, 0.55, 0.0)), None, "two low blows of the window, not three");
+        r.reset();
+        let a = r.on_blow(&implausible(5, Check::Efficiency)).expect("the next billet's alert");
+        assert_eq!(a.kind, AlertKind::ModelHealth);
+    }
+
     /// Issue 15: a blow cut by a lost frame must never set the PLC coil, nor fill the
     /// low-efficiency window, nor break a run of low blows either.
     #[test]

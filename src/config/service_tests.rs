@@ -305,3 +305,21 @@ fn the_advisor_table_is_checked() {
     assert!(e("target_height_m = 0.03\nsettings = []").contains("1 to 12 speeds"));
     assert!(e("target_heigth_m = 0.03\nv_max = 5.0").contains("target_height_m"), "a misspelt key is named");
 }
+
+/// `[encoder] direction` (issue 36): auto unless set, the three words, and a near miss named.
+#[test]
+fn the_encoders_direction_is_set_in_its_table() {
+    use crate::estimate::EncoderDirection;
+    let c = parse_service("s.toml", Path::new("/"), GOOD).unwrap();
+    assert_eq!(c.encoder_direction, EncoderDirection::Auto);
+    for (word, want) in
+        [("auto", EncoderDirection::Auto), ("down", EncoderDirection::Down), ("up", EncoderDirection::Up)]
+    {
+        let set = GOOD.replace("[[sources]]", &format!("[encoder]\ndirection = \"{word}\"\n[[sources]]"));
+        assert_eq!(parse_service("s.toml", Path::new("/"), &set).unwrap().encoder_direction, want);
+        assert_eq!(parse_tuning("s.toml", &set).unwrap().encoder_direction, want);
+    }
+    let bad = GOOD.replace("[[sources]]", "[encoder]\ndirection = \"dwon\"\n[[sources]]");
+    let e = parse_service("s.toml", Path::new("/"), &bad).unwrap_err().to_string();
+    assert!(e.contains("key 'encoder.direction' must be") && e.contains("did you mean \"down\"?"), "{e}");
+}
