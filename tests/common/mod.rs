@@ -184,7 +184,7 @@ pub fn out_of_range(blows: &[serde_json::Value]) -> Vec<String> {
             say(format!("class {class} with reason {}", b["reason"]));
         }
         for k in &energies[..5] {
-            if let Some(j) = num(b, k).filter(|j| !(*j >= 0.0)) {
+            if let Some(j) = num(b, k).filter(|j| j.is_nan() || *j < 0.0) {
                 say(format!("{k} {j} < 0"));
             }
         }
