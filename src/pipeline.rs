@@ -95,6 +95,21 @@ impl Pipeline {
         }
     }
 
+    /// The machine file's effects, part of the model the blows are estimated with
+    /// (`Estimator::with_effects`).
+    pub fn with_effects(mut self, effects: crate::physics::effects::EffectSet) -> Self {
+        self.estimator = self.estimator.with_effects(effects);
+        self
+    }
+
+    /// A new machine model from the next blow on (`Estimator::set_model`); refused, the old
+    /// one kept, with the reason.
+    pub fn set_model(&mut self, machine: Machine, effects: crate::physics::effects::EffectSet) -> Result<(), String> {
+        self.estimator.set_model(machine, effects)?;
+        self.ring_period_s = 1.0 / machine.second_mode_hz();
+        Ok(())
+    }
+
     /// Feed one batch of samples.
     pub fn push(&mut self, batch: &SampleBatch, out: &mut Vec<PipelineEvent>) {
         if *self.source != *batch.source {

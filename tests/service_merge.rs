@@ -84,6 +84,7 @@ fn roles_from_two_daqs_on_their_own_clocks_are_merged() {
         config_path: dir.join("service.toml"),
         config_text: String::new(),
         machine,
+        effects: forgemon::physics::EffectSet::NONE,
         machine_text: MACHINE.to_string(),
         process: Some(parse_process("p", STEEL).unwrap()),
         process_text: Some(STEEL.to_string()),

@@ -141,6 +141,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         // Recorded as the service file: a replay of the demo's recording uses the defaults.
         config_text: "# forgemon demo: a simulated hammer, every threshold at its default\n".to_string(),
         machine,
+        effects: crate::physics::effects::EffectSet::NONE,
         machine_text: MACHINE.to_string(),
         process: Some(parse_process("steel-16NiCrMo13.process.toml", STEEL)?),
         process_text: Some(STEEL.to_string()),

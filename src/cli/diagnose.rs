@@ -28,14 +28,20 @@ pub struct DiagnoseArgs {
     /// Capture directory of another billet, used only to measure.
     #[arg(long, value_name = "DIR")]
     pub holdout: PathBuf,
-    /// Where report.json and report.html go.
+    /// Where report.json, report.html and machine.toml (the machine with the verdict's
+    /// effect adopted) go.
     #[arg(long, value_name = "OUTDIR")]
     pub out: PathBuf,
+    /// Also write the machine with the verdict's effect over the --machine file (the old one
+    /// kept as M.toml.bak): the one-step form for a user who trusts the verdict.
+    #[arg(long)]
+    pub adopt: bool,
 }
 
 pub fn run(args: DiagnoseArgs) -> anyhow::Result<ExitCode> {
     let started = Instant::now();
-    let file = parse_machine(&args.machine.display().to_string(), &read_text(&args.machine)?)?;
+    let machine_text = read_text(&args.machine)?;
+    let file = parse_machine(&args.machine.display().to_string(), &machine_text)?;
     let machine = file.machine;
     let effects = EffectSet::from_effects(&file.effects);
     let calib = read_dir(&args.calib, &machine)?;
@@ -83,7 +89,53 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<ExitCode> {
         started.elapsed().as_secs_f64()
     );
     eprintln!("forgemon: wrote {} and {}", path.display(), html.display());
+    write_adopted(&args, &machine_text, &machine, &effects, &d)?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// `OUTDIR/machine.toml`: the machine file with the verdict's effect adopted
+/// (`diagnose::adopt`); with `--adopt`, over the machine file too, the old one kept beside it.
+fn write_adopted(
+    args: &DiagnoseArgs,
+    machine_text: &str,
+    machine: &Machine,
+    effects: &EffectSet,
+    d: &Diagnosis,
+) -> anyhow::Result<()> {
+    use crate::diagnose::adopt::{Provenance, machine_toml, rel_sd};
+    let Some(v) = &d.verdict else {
+        eprintln!("forgemon: the verdict is none: no machine.toml written, nothing to adopt");
+        return Ok(());
+    };
+    let sd = rel_sd(machine, effects, &v.effects, &d.calib).unwrap_or_default();
+    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |t| t.as_secs());
+    let date = chrono::DateTime::from_timestamp(now as i64, 0).map_or_else(String::new, |t| t.to_rfc3339());
+    let provenance = Provenance {
+        verdict: v.name.clone(),
+        calib: args.calib.display().to_string(),
+        holdout: args.holdout.display().to_string(),
+        date,
+        holdout_shrink: 1.0 - v.holdout / d.baseline_holdout,
+    };
+    let text = machine_toml(machine_text, &v.effects, &provenance, &sd)
+        .with_context(|| format!("{}: cannot be rewritten", args.machine.display()))?;
+    let out = args.out.join("machine.toml");
+    std::fs::write(&out, &text).with_context(|| format!("{}: cannot write", out.display()))?;
+    eprintln!("forgemon: wrote {}: the machine with {} adopted", out.display(), v.name);
+    if args.adopt {
+        let mut backup = args.machine.clone().into_os_string();
+        backup.push(".bak");
+        std::fs::copy(&args.machine, &backup)
+            .with_context(|| format!("{}: cannot keep a copy", args.machine.display()))?;
+        std::fs::write(&args.machine, &text).with_context(|| format!("{}: cannot write", args.machine.display()))?;
+        eprintln!(
+            "forgemon: adopted {} into {} (the old file is {})",
+            v.name,
+            args.machine.display(),
+            std::path::Path::new(&backup).display()
+        );
+    }
+    Ok(())
 }
 
 /// A capture directory's blows and its process sheet.

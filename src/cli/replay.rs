@@ -13,8 +13,11 @@ use clap::Args;
 use super::{parse_process_warn, read_text};
 use crate::config::parse_machine;
 use crate::config::service::parse_tuning;
-use crate::daemon::{CONTROL_SOURCE, NEW_BILLET_STATE, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, tuned_config};
+use crate::daemon::{
+    CONTROL_SOURCE, MACHINE_CONFIG_NAME, NEW_BILLET_STATE, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, tuned_config,
+};
 use crate::estimate::EncoderDirection;
+use crate::physics::effects::EffectSet;
 use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline, PipelineEvent};
 use crate::record::{BlowBoundary, Payload, RecordReader, RecordWriter, Rotation};
@@ -116,7 +119,9 @@ pub(crate) fn replay_into<W: Write>(
     let Some((machine_origin, machine_text)) = pick(&args.machine, stored.machine, &args.input, "machine.toml")? else {
         bail!("{}: holds no machine model; give one with --machine M.toml", args.input.display());
     };
-    let machine = parse_machine(&machine_origin, &machine_text)?.machine;
+    let machine_file = parse_machine(&machine_origin, &machine_text)?;
+    let machine = machine_file.machine;
+    let effects = EffectSet::from_effects(&machine_file.effects);
     let process_text = pick(&args.process, stored.process, &args.input, "process.toml")?;
     let process: Option<Process> = match &process_text {
         Some((origin, text)) => {
@@ -156,7 +161,13 @@ pub(crate) fn replay_into<W: Write>(
         }
         None => None,
     };
-    let mut pipeline = Pipeline::new(machine, process, tuned_config(&tuning, &machine));
+    if let Some(name) = crate::estimate::unhonoured(&effects, process.as_ref()) {
+        bail!(
+            "{machine_origin}: key 'effects.{name}': the estimator carries it in the model fit, which needs the \
+             billet's process sheet; give one with --process P.toml"
+        );
+    }
+    let mut pipeline = Pipeline::new(machine, process, tuned_config(&tuning, &machine)).with_effects(effects);
     setup(&mut pipeline);
     // The recipe the live run judged with, unless the caller gave one.
     if let (None, Some(text)) = (pipeline.recipe(), &stored.recipe) {
@@ -217,6 +228,18 @@ pub(crate) fn replay_into<W: Write>(
                         let origin = format!("{} (recipe.toml stored in it)", args.input.display());
                         let recipe = crate::daemon::recipe_switch::from_recorded(&origin, &c.text)?;
                         replay.feeder.pipeline_mut().set_recipe(recipe);
+                    }
+                    // The live run reloaded its machine model here (SIGHUP, after `diagnose
+                    // --adopt`); a rotated file repeats the same text, which changes nothing.
+                    Payload::Config(c) if c.name == MACHINE_CONFIG_NAME && args.machine.is_none() => {
+                        let origin = format!("{} (machine.toml stored in it)", args.input.display());
+                        let file = parse_machine(&origin, &c.text)?;
+                        let effects = EffectSet::from_effects(&file.effects);
+                        replay
+                            .feeder
+                            .pipeline_mut()
+                            .set_model(file.machine, effects)
+                            .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
                     }
                     // The live run reloaded its alert rules here (SIGHUP); a rotated file
                     // repeats the same text, which changes nothing.

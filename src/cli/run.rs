@@ -16,6 +16,7 @@ use crate::acquire::serial::driver::{SerialConfig, SerialFormat as WireFormat};
 use crate::config::parse_machine;
 use crate::config::service::{SerialFormat, ServiceConfig, SourceSpec, parse_service};
 use crate::daemon::{Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
+use crate::physics::effects::EffectSet;
 use crate::signal::sample::Role;
 
 #[derive(Debug, Args)]
@@ -31,7 +32,8 @@ pub fn load_parts(config_path: &Path) -> anyhow::Result<ServiceParts> {
     let base = config_path.parent().unwrap_or(Path::new("."));
     let config: ServiceConfig = parse_service(&config_path.display().to_string(), base, &text)?;
     let machine_text = read_text(&config.machine_path).context("key 'machine'")?;
-    let machine = parse_machine(&config.machine_path.display().to_string(), &machine_text)?.machine;
+    let machine_file = parse_machine(&config.machine_path.display().to_string(), &machine_text)?;
+    let (machine, effects) = (machine_file.machine, EffectSet::from_effects(&machine_file.effects));
     let (process, process_text) = match &config.process_path {
         Some(p) => {
             let t = read_text(p).context("key 'process'")?;
@@ -70,11 +72,20 @@ pub fn load_parts(config_path: &Path) -> anyhow::Result<ServiceParts> {
         roles.push((s.name(), r));
     }
     check_roles(&config_path.display().to_string(), &roles)?;
+    if let Some(name) = crate::estimate::unhonoured(&effects, process.as_ref()) {
+        bail!(
+            "{}: key 'effects.{name}': the estimator carries it in the model fit, which needs the billet's \
+             process sheet; set 'process' in {}",
+            config.machine_path.display(),
+            config_path.display()
+        );
+    }
     Ok(ServiceParts {
         config,
         config_path: config_path.to_path_buf(),
         config_text: text,
         machine,
+        effects,
         machine_text,
         process,
         process_text,

@@ -49,6 +49,9 @@ pub struct ServiceParts {
     /// The service file's text as it was read and checked, recorded on `/config`.
     pub config_text: String,
     pub machine: Machine,
+    /// The machine file's effects (`[effects.NAME]`): part of the model every blow is
+    /// estimated with.
+    pub effects: crate::physics::effects::EffectSet,
     pub machine_text: String,
     pub process: Option<Process>,
     pub process_text: Option<String>,
@@ -145,7 +148,7 @@ pub async fn serve(
         RecordWriter::create_with(&cfg.recording_dir, RecordOptions { rotation, ..RecordOptions::default() })
             .with_context(|| format!("{}: cannot record", cfg.recording_dir.display()))?;
     let t0 = host_now_ns();
-    writer.write_config(t0, "machine.toml", &parts.machine_text)?;
+    writer.write_config(t0, MACHINE_CONFIG_NAME, &parts.machine_text)?;
     if let Some(t) = &parts.process_text {
         writer.write_config(t0, "process.toml", t)?;
     }
@@ -186,7 +189,8 @@ pub async fn serve(
     let _opcua =
         opcua::start(cfg.opcua.as_ref(), parts.machine.kind(), status.clone(), &live, control_tx.clone()).await?;
     let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
-    let mut pipeline = Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine));
+    let mut pipeline = Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine))
+        .with_effects(parts.effects);
     if let Some(path) = &cfg.recipe_path {
         // Read, checked and recorded (so a replay judges with it), or the start stops here.
         let text = std::fs::read_to_string(path).with_context(|| format!("recipe {}: cannot read", path.display()))?;
@@ -265,6 +269,10 @@ pub fn tuned_config(tuning: &PipelineTuning, machine: &Machine) -> PipelineConfi
 /// Name of the active recipe as a recording stores it (topic `/config`): a replay judges
 /// with it unless given another.
 pub const RECIPE_CONFIG_NAME: &str = "recipe.toml";
+
+/// Name of the machine file as a recording stores it (topic `/config`): at the start and
+/// again at each SIGHUP reload, where the model it holds took effect.
+pub const MACHINE_CONFIG_NAME: &str = "machine.toml";
 
 /// Name of the service configuration as a recording stores it (topic `/config`), at the
 /// start and again at each SIGHUP reload.

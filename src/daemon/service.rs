@@ -19,7 +19,9 @@ use crate::signal::sample::SampleBatch;
 
 use super::live::{Live, LiveEvent};
 use super::status::SharedStatus;
-use super::{Control, Hooks, SERVICE_CONFIG_NAME, Summary, host_now_ns, new_billet_marker, reload, sinks};
+use super::{
+    Control, Hooks, MACHINE_CONFIG_NAME, SERVICE_CONFIG_NAME, Summary, host_now_ns, new_billet_marker, reload, sinks,
+};
 
 /// The service between its start and its stop.
 pub(super) struct Service {
@@ -146,9 +148,10 @@ impl Service {
         self.status.lock().map(|mut s| s.recipe = name).ok();
     }
 
-    /// SIGHUP: read the service file again and take its alert rules; a bad file keeps the
-    /// old ones. The new file is recorded where it took effect, so that a replay changes the
-    /// rules at the same point.
+    /// SIGHUP: read the service file again and take its alert rules, and read its machine
+    /// file again and take its model (an effect adopted by `forgemon diagnose --adopt`); a bad
+    /// file keeps the old ones. Each new file is recorded where it took effect, so that a
+    /// replay changes the rules and the model at the same point.
     pub fn reload(&mut self) {
         match reload(&self.config_path) {
             Ok((new, text)) => {
@@ -156,8 +159,33 @@ impl Service {
                 let r = self.writer.write_config(host_now_ns(), SERVICE_CONFIG_NAME, &text);
                 self.recorded("the reloaded service file", r);
                 tracing::info!("SIGHUP: alert rules reloaded");
+                self.reload_model(&new.machine_path);
             }
-            Err(e) => tracing::error!("SIGHUP: keeping the old alert rules: {e:#}"),
+            Err(e) => tracing::error!("SIGHUP: keeping the old alert rules and model: {e:#}"),
+        }
+    }
+
+    /// The machine file at `path`, read again and taken as the model from the next blow on.
+    fn reload_model(&mut self, path: &std::path::Path) {
+        let read = std::fs::read_to_string(path).map_err(|e| format!("{}: cannot read: {e}", path.display())).and_then(
+            |text| {
+                let file =
+                    crate::config::parse_machine(&path.display().to_string(), &text).map_err(|e| e.to_string())?;
+                let effects = crate::physics::effects::EffectSet::from_effects(&file.effects);
+                self.feeder
+                    .pipeline_mut()
+                    .set_model(file.machine, effects)
+                    .map_err(|e| format!("{}: {e}", path.display()))?;
+                Ok((text, file.effects.len()))
+            },
+        );
+        match read {
+            Ok((text, n)) => {
+                let r = self.writer.write_config(host_now_ns(), MACHINE_CONFIG_NAME, &text);
+                self.recorded("the reloaded machine file", r);
+                tracing::info!(effects = n, "SIGHUP: machine model reloaded from {}", path.display());
+            }
+            Err(e) => tracing::error!("SIGHUP: keeping the old machine model: {e}"),
         }
     }
 

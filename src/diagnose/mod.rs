@@ -5,6 +5,7 @@
 //! The verdict rule is `verdict.rs`'s (also written into the report); its error rates are
 //! measured by `rates.rs`.
 
+pub mod adopt;
 pub mod attribute;
 pub mod evidence;
 pub mod indicators;

@@ -19,7 +19,7 @@
 //! channels in a fraction of their peaks.
 
 use crate::estimate::approach::ApproachFit;
-use crate::physics::billet::{BilletLaw, FlowStress, LoadEffects};
+use crate::physics::billet::{BilletLaw, FlowStress};
 use crate::physics::blow::{BlowResult, SimOptions, simulate_blow_traced_from};
 use crate::physics::effects::EffectSet;
 use crate::physics::integrator::Method;
@@ -109,6 +109,8 @@ pub enum FitError {
 /// What one blow's fit needs.
 pub struct FitProblem<'a> {
     pub machine: &'a Machine,
+    /// The model's effects (the machine file's, `Estimator::model_effects`).
+    pub effects: &'a EffectSet,
     pub process: &'a Process,
     /// 1-based index of the blow on its billet's sheet (the `thermal` effect's count).
     pub blow_index: usize,
@@ -193,8 +195,8 @@ impl<'a> Setup<'a> {
                 FlowStress::HanselSpittel { a_pa: a_pa * scale, m1, m2, m3, m4, temperature_c }
             }
         };
-        let law = BilletLaw::new(pr.billet.clone(), material, pr.friction, LoadEffects::NEUTRAL, self.p.blow_index);
-        Plant::new(self.p.machine, &EffectSet::NONE, Some(law), self.p.h_start_m)
+        let law = BilletLaw::new(pr.billet.clone(), material, pr.friction, self.p.effects.load, self.p.blow_index);
+        Plant::new(self.p.machine, self.p.effects, Some(law), self.p.h_start_m)
     }
 
     /// Residuals at (ln scale, contact in samples after the contact sample).

@@ -24,12 +24,14 @@ pub mod observer;
 pub mod plausibility;
 pub mod result;
 pub mod sensor;
+pub mod sensor_chain;
 mod track;
 
 pub use config::{EncoderDirection, EstimatorConfig};
 pub use result::{BilletTag, BlowClass, BlowEstimate, HeightCheck, HeightSource};
 
-use crate::physics::billet::{BilletLaw, LoadEffects};
+use crate::physics::billet::BilletLaw;
+use crate::physics::effects::EffectSet;
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
 use crate::signal::segment::Blow;
@@ -102,6 +104,10 @@ pub enum EstimateError {
 #[derive(Debug, Clone)]
 pub struct Estimator {
     machine: Machine,
+    /// The machine file's effects (`[effects.NAME]`), part of the model in every path:
+    /// the sensor chain's high-pass undone on the measured load (`sensor_chain`), the rest
+    /// in the model (`model_effects`).
+    effects: EffectSet,
     /// The process sheet as given.
     process: Option<Process>,
     /// The sheet with the present billet's own height at its first contact, when the
@@ -154,6 +160,7 @@ impl Estimator {
         let detect = BilletDetect::new(h_m, cfg.encoder_resolution_m, cfg.new_billet_rise_m, cfg.idle_new_billet_s);
         Estimator {
             machine,
+            effects: EffectSet::NONE,
             billet_process: process.clone(),
             process,
             cfg,
@@ -177,6 +184,39 @@ impl Estimator {
         }
     }
 
+    /// The model with the machine file's effects (`[effects.NAME]`); `unhonoured` says which
+    /// of them need what the estimator is not given.
+    pub fn with_effects(mut self, effects: EffectSet) -> Self {
+        self.effects = effects;
+        self
+    }
+
+    /// A new machine model from the next blow on (a SIGHUP after `diagnose --adopt`, a
+    /// recording's later `machine.toml`); the billet's track goes on. Refused, the old model
+    /// kept, when it is of another kind, or has an effect this estimator cannot honour
+    /// (`unhonoured`): the error says which.
+    pub fn set_model(&mut self, machine: Machine, effects: EffectSet) -> Result<(), String> {
+        if machine.kind() != self.machine.kind() {
+            return Err(format!(
+                "the machine is a {}, not a {}",
+                machine.kind().as_str(),
+                self.machine.kind().as_str()
+            ));
+        }
+        if let Some(name) = unhonoured(&effects, self.process.as_ref()) {
+            return Err(format!("key 'effects.{name}' needs a process sheet, and the service has none"));
+        }
+        self.machine = machine;
+        self.effects = effects;
+        Ok(())
+    }
+
+    /// The effects the physics of a blow carries: the sensor chain's high-pass is undone on
+    /// the measured load instead (`sensor_chain::restore`).
+    fn model_effects(&self) -> EffectSet {
+        EffectSet { highpass_tau_s: f64::INFINITY, ..self.effects }
+    }
+
     /// Blows whose encoder was found counting up (away from the die) and read negated, under
     /// `EncoderDirection::Auto`.
     pub fn reversed_blows(&self) -> u64 {
@@ -194,10 +234,15 @@ impl Estimator {
         self.last_course.take()
     }
 
-    /// The rule of the module's doc: the observer when the samples resolve the second mode.
+    /// The rule of the module's doc: the observer when the samples resolve the second mode
+    /// and the model has no effect only the fit can carry (`fit_only_effect`).
     pub fn method_for(&self, period_s: f64) -> Method {
         let per_period = 1.0 / (period_s * self.machine.second_mode_hz());
-        if per_period >= OBSERVER_MIN_SAMPLES_PER_MODE { Method::Observer } else { Method::ModelFit }
+        if per_period >= OBSERVER_MIN_SAMPLES_PER_MODE && fit_only_effect(&self.effects).is_none() {
+            Method::Observer
+        } else {
+            Method::ModelFit
+        }
     }
 
     /// Billets started so far (by the encoder or a signal).
@@ -228,6 +273,14 @@ impl Estimator {
         self.last_method = None;
         self.last_course = None;
         let n = self.blows;
+        // The sensor chain's high-pass, undone on the measured load (`sensor_chain`).
+        let restored;
+        let blow = if self.effects.highpass_tau_s.is_finite() {
+            restored = sensor_chain::restore(blow, self.effects.highpass_tau_s);
+            &restored
+        } else {
+            blow
+        };
         // The encoder as configured to count (`EncoderDirection`); under `Auto`, one whose
         // reading fell before contact counts up, and is read negated if then it rises.
         let fit = |b: &Blow| {
@@ -442,7 +495,7 @@ impl Estimator {
     fn locate_contact(&self, blow: &Blow, v0_mps: f64, h_m: Option<f64>) -> f64 {
         let law = self.billet_process.as_ref().map(|p| {
             let n = self.billet_blows + 1;
-            BilletLaw::of(p, LoadEffects::NEUTRAL, n)
+            BilletLaw::of(p, self.effects.load, n)
         });
         let rise = law
             .as_ref()
@@ -468,8 +521,10 @@ impl Estimator {
         // Above the fit's rate, a decimated copy: contact counts in its coarser samples.
         let f = decimate::factor(blow.period_s);
         let coarse = decimate::decimate(blow, f);
+        let effects = self.model_effects();
         let problem = fit::FitProblem {
             machine: &self.machine,
+            effects: &effects,
             process,
             blow_index: self.billet_blows + 1,
             h_start_m: h0_m,
@@ -545,7 +600,6 @@ impl Estimator {
     ) -> Option<f64> {
         self.last_method = Some(Method::Observer);
         e.method = self.last_method;
-        let n = self.blows;
         let v0 = e.v_impact_mps;
         let o = observer::observe(&self.machine, blow, v0);
         let forming_s = (o.forming_end as f64 - delta0) * blow.period_s;
@@ -561,7 +615,9 @@ impl Estimator {
         let max_comp = o.set_m.max(0.0) + before_m;
         let (plastic_j, friction_j, h_end_m) = match (&self.billet_process, h_start_m) {
             (Some(p), Some(h0)) => {
-                let law = BilletLaw::of(p, LoadEffects::NEUTRAL, n as usize);
+                // The split's share (π r² σ over the whole load) is the friction's: the
+                // flow-stress effects cancel from it, `friction_rise` does not.
+                let law = BilletLaw::of(p, self.effects.load, self.billet_blows);
                 let (mut plastic, mut friction) = (0.0, 0.0);
                 let mut h_min = h0;
                 for (comp, dw) in o.compression_m.iter().zip(&o.work_j) {
@@ -623,6 +679,31 @@ impl Estimator {
     fn contact_tolerance_m(&self, sample_travel_m: f64) -> f64 {
         self.cfg.encoder_resolution_m + self.cfg.caliper_resolution_m + sample_travel_m
     }
+}
+
+/// The first machine-side effect of `effects` that the observer does not model and the
+/// model fit does (the fit simulates the whole plant): a foundation under the frame, a
+/// clearance in the lower tool's path, an elastic contact. With one, every blow is fitted,
+/// at every rate, which needs a process sheet (`unhonoured`). The load-side effects enter
+/// the observer's split through the billet's law, and the sensor's high-pass is undone on
+/// the measured load, in either path.
+pub fn fit_only_effect(effects: &EffectSet) -> Option<&'static str> {
+    if effects.foundation.is_some_and(|f| f.k3_n_per_m.is_finite()) {
+        Some("foundation")
+    } else if effects.clearance_gap_m > 0.0 {
+        Some("clearance")
+    } else if effects.k_contact_n_per_m.is_finite() {
+        Some("elastic_recovery")
+    } else {
+        None
+    }
+}
+
+/// The effect of the machine file the estimator cannot honour with what it is given, if
+/// any: one only the model fit carries (`fit_only_effect`), without a process sheet to fit
+/// with. The caller refuses it, naming the file and the key.
+pub fn unhonoured(effects: &EffectSet, process: Option<&Process>) -> Option<&'static str> {
+    fit_only_effect(effects).filter(|_| process.is_none())
 }
 
 /// `blow` with its encoder read negated (an encoder counting up, away from the die).

@@ -139,6 +139,7 @@ pub fn demo_hammer_parts(
         config_path: dir.join("service.toml"),
         config_text: String::new(),
         machine: parse_machine("m", &machine_text).expect("machine").machine,
+        effects: forgemon::physics::EffectSet::NONE,
         machine_text,
         process: Some(parse_process("p", &steel).expect("process")),
         process_text: Some(steel),

@@ -93,7 +93,11 @@ pub fn render(kind: Kind, hidden: &Hidden, v0s: &[f64], height_scale: f64, rate_
     let load_noise = Normal::new(0.0, rig.load_sd_n).expect("finite sd");
     let acc_noise = Normal::new(0.0, rig.acc_sd_mps2).expect("finite sd");
     let dt = 1.0 / rate_hz;
-    let kinetic_mass = rig.m_upper + rig.ram.map_or(rig.m_lower, |(m, _, _)| m);
+    // The energy in: the ram (and the press's heavy mass behind the link), and the hammer's
+    // die where it moves with the ram at contact (the clearances caught up, `blow_over`); a
+    // hidden clearance leaves the die at rest.
+    let die_moves = !matches!(hidden, Hidden::Clearance { .. });
+    let kinetic_mass = rig.m_upper + rig.ram.map_or(if die_moves { rig.m_lower } else { 0.0 }, |(m, _, _)| m);
     let mut h = process.billet.height_m;
     let mut out = Rendered {
         kind,
@@ -108,8 +112,16 @@ pub fn render(kind: Kind, hidden: &Hidden, v0s: &[f64], height_scale: f64, rate_
     // The clock runs on from an arbitrary origin.
     let mut t_s = 731.25;
     let mut load_zero_n = rng.random_range(-5e3..5e3);
-    for &v0 in v0s {
-        let fine = blow_over(&rig, &process, hidden, v0, h, pre_s, post_s);
+    for (i, &v0) in v0s.iter().enumerate() {
+        // A billet that cools from blow to blow: its flow stress scaled on blow i.
+        let blow_process = match *hidden {
+            Hidden::Thermal { q } => scaled(&process, (q * i as f64).exp()),
+            _ => process.clone(),
+        };
+        let mut fine = blow_over(&rig, &blow_process, hidden, v0, h, pre_s, post_s);
+        if let Hidden::Highpass { tau_s } = *hidden {
+            fine.load_n = high_pass(&fine.load_n, tau_s, 1.0 / (rate_hz * super::FINE as f64));
+        }
         let (load, ram, acc) = (daq(&fine.load_n, &rig), daq(&fine.ram_m, &rig), daq(&fine.ram_acc, &rig));
         let rows: Vec<Row> = (0..load.len())
             .map(|k| Row {
@@ -165,6 +177,34 @@ pub fn render(kind: Kind, hidden: &Hidden, v0s: &[f64], height_scale: f64, rate_
     out
 }
 
+/// `p` with its flow stress scaled by `k`.
+fn scaled(p: &Process, k: f64) -> Process {
+    use forgemon::physics::billet::FlowStress;
+    let mut q = p.clone();
+    q.material = match p.material {
+        FlowStress::Constant { sigma0_pa } => FlowStress::Constant { sigma0_pa: sigma0_pa * k },
+        FlowStress::HanselSpittel { a_pa, m1, m2, m3, m4, temperature_c } => {
+            FlowStress::HanselSpittel { a_pa: a_pa * k, m1, m2, m3, m4, temperature_c }
+        }
+    };
+    q
+}
+
+/// A first-order high-pass `y' = x' - y/τ` over `x` at step `dt` (exact for x linear over a
+/// step), from rest: a piezo's charge amplifier.
+fn high_pass(x: &[f64], tau_s: f64, dt: f64) -> Vec<f64> {
+    let a = (-dt / tau_s).exp();
+    let mut y = 0.0;
+    let mut prev = x.first().copied().unwrap_or(0.0);
+    x.iter()
+        .map(|&v| {
+            y = a * y + (v - prev) * tau_s / dt * (1.0 - a);
+            prev = v;
+            y
+        })
+        .collect()
+}
+
 /// A height as the example sheets write it (`0.112`, `0.030`).
 fn fmt_sheet(h_m: f64) -> String {
     format!("{h_m:.3}")
@@ -172,4 +212,24 @@ fn fmt_sheet(h_m: f64) -> String {
 
 fn quantise(x_m: f64) -> f64 {
     (x_m / ENCODER_STEP_M).round() * ENCODER_STEP_M
+}
+
+/// Write `r` as a capture directory in its plainest form: one file per blow on the billet's
+/// own clock and encoder, the sheet with the hand-measured heights, and `machine` as the
+/// directory's `machine.toml`.
+pub fn write_dir(dir: &std::path::Path, r: &Rendered, machine: &str) {
+    std::fs::create_dir_all(dir).unwrap();
+    for (i, rows) in r.captures.iter().enumerate() {
+        let mut text = String::from("t_s,load_N,disp_m,acc_mps2\n");
+        for s in rows {
+            text.push_str(&format!("{:.9},{:.1},{:.5},{:.4}\n", s.t_s, s.load_n, s.disp_m, s.acc_mps2));
+        }
+        std::fs::write(dir.join(format!("blow_{:02}.csv", i + 1)), text).unwrap();
+    }
+    let mut sheet = r.sheet_text.clone();
+    for h in &r.measured_m {
+        sheet.push_str(&format!("\n[[blows]]\nfinal_height_m = {h:.5}\n"));
+    }
+    std::fs::write(dir.join("process.toml"), sheet).unwrap();
+    std::fs::write(dir.join("machine.toml"), machine).unwrap();
 }

@@ -101,6 +101,20 @@ pub enum Hidden {
         k_n_per_m: f64,
         c_ns_per_m: f64,
     },
+    /// σ (ε/ε₀)^n.
+    Hardening {
+        n: f64,
+        eps_ref: f64,
+    },
+    /// σ exp(q (i − 1)) on blow i: the billet cools (`captures::render` only).
+    Thermal {
+        q: f64,
+    },
+    /// The load sensor's charge amplifier: a first-order high-pass of time constant τ on the
+    /// sensor's force (`captures::render` only).
+    Highpass {
+        tau_s: f64,
+    },
 }
 
 impl Hidden {
@@ -113,6 +127,9 @@ impl Hidden {
             Hidden::FrictionRise { .. } => "friction_rise",
             Hidden::StrainRate { .. } => "strain_rate",
             Hidden::Foundation { .. } => "foundation",
+            Hidden::Hardening { .. } => "strain_hardening",
+            Hidden::Thermal { .. } => "thermal",
+            Hidden::Highpass { .. } => "sensor_highpass",
         }
     }
 }
@@ -206,6 +223,7 @@ fn yield_load(process: &Process, hidden: &Hidden, h_m: f64, rate_per_s: f64) -> 
     match *hidden {
         Hidden::FrictionRise { p } => mu *= (g.height_m / h_m).powf(p),
         Hidden::StrainRate { m, rate_ref_per_s } => sigma *= (rate / rate_ref_per_s).powf(m),
+        Hidden::Hardening { n, eps_ref } => sigma *= (eps.max(1e-4) / eps_ref).powf(n),
         _ => {}
     }
     // The hammer paper's eq. 3, F = π r h σ/μ ((e^A − 1)/A − 1), A = 2μr/h, written here as
@@ -224,8 +242,10 @@ fn frictionless_load(process: &Process, hidden: &Hidden, h_m: f64, rate_per_s: f
     let eps = (g.height_m / h_m).ln();
     let rate = rate_per_s.max(1e-3);
     let mut sigma = process.material.sigma_pa(eps, rate);
-    if let Hidden::StrainRate { m, rate_ref_per_s } = *hidden {
-        sigma *= (rate / rate_ref_per_s).powf(m);
+    match *hidden {
+        Hidden::StrainRate { m, rate_ref_per_s } => sigma *= (rate / rate_ref_per_s).powf(m),
+        Hidden::Hardening { n, eps_ref } => sigma *= (eps.max(1e-4) / eps_ref).powf(n),
+        _ => {}
     }
     std::f64::consts::PI * r_sq * sigma
 }
