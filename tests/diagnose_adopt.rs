@@ -134,7 +134,8 @@ fn an_adopted_verdict_brings_every_holdout_blow_within_0_02_of_the_truth() {
             let (verdict, base, adopted) = case(kind, hidden, khz, 36);
             println!("{name:<20} {khz:>5} kHz  verdict {verdict:<20} base {base:.3}  adopted {adopted:.3}");
             let named = hidden == Hidden::None || verdict == hidden.library_name();
-            if !named || !(adopted <= EFFICIENCY_TOL) {
+            let close = adopted <= EFFICIENCY_TOL;
+            if !named || !close {
                 failures.push(format!(
                     "{name} at {khz} kHz: verdict {verdict}, adopted error {adopted:.3} (base {base:.3})"
                 ));
