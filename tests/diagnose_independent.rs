@@ -171,8 +171,9 @@ fn location_on_independent_blows() {
             let expected = match hidden {
                 Hidden::Clearance { .. } => "impact",
                 Hidden::Compliant { .. } => "spring_back",
-                Hidden::FrictionRise { .. } | Hidden::StrainRate { .. } => "forming",
-                Hidden::None | Hidden::Foundation { .. } => continue,
+                Hidden::FrictionRise { .. } | Hidden::StrainRate { .. } | Hidden::Hardening { .. } => "forming",
+                // Not among `cases()`: rendered for `tests/diagnose_adopt.rs` only.
+                Hidden::None | Hidden::Foundation { .. } | Hidden::Thermal { .. } | Hidden::Highpass { .. } => continue,
             };
             let (loc, lead) = baseline_location(kind, &hidden, seed);
             eprintln!("LOCATION {name} seed {seed}: {} {:?} (ram lead {lead:.1} samples)", loc.phase(), loc.share());
