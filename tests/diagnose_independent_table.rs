@@ -36,6 +36,9 @@ fn library_spec(kind: Kind, hidden: &Hidden) -> Option<String> {
         Hidden::Foundation { m_kg, k_n_per_m, .. } => {
             format!("foundation:m3_kg={m_kg},k3_N_per_m={k_n_per_m},c3_Ns_per_m=0")
         }
+        Hidden::Hardening { n, eps_ref } => format!("strain_hardening:n={n},eps_ref={eps_ref}"),
+        Hidden::Thermal { q } => format!("thermal:q_dT={q}"),
+        Hidden::Highpass { tau_s } => format!("sensor_highpass:tau_s={tau_s}"),
     })
 }
 
