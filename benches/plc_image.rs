@@ -36,6 +36,7 @@ fn blow() -> BlowEstimate {
         h_start_m: Some(0.03),
         height_source: forgemon::estimate::HeightSource::Unknown,
         implausible: None,
+        flow_stress_scale: None,
         at_bound: Default::default(),
         height_check: None,
         billet: Default::default(),

@@ -69,6 +69,7 @@ fn result(blow: u32) -> BlowEstimate {
         h_start_m: None,
         height_source: forgemon::estimate::HeightSource::Unknown,
         implausible: None,
+        flow_stress_scale: None,
         at_bound: Default::default(),
         height_check: None,
         billet: Default::default(),

@@ -66,6 +66,7 @@ fn result(blow: u32, with_sheet: bool) -> BlowEstimate {
         h_start_m: with_sheet.then_some(0.0151),
         height_source: forgemon::estimate::HeightSource::Unknown,
         implausible: None,
+        flow_stress_scale: None,
         at_bound: Default::default(),
         height_check: None,
         billet: Default::default(),

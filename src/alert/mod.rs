@@ -33,6 +33,9 @@ pub struct AlertConfig {
     /// Alert when `sensor_k` of the last `sensor_n` complete blows fail the sensor check.
     pub sensor_k: usize,
     pub sensor_n: usize,
+    /// Alert (model health, once per billet) when a blow's `flow_stress_scale` is this
+    /// fraction off the billet's first: see `DEFAULT_SCALE_DRIFT_LIMIT`.
+    pub scale_drift_limit: f64,
 }
 
 impl AlertConfig {
@@ -55,6 +58,15 @@ impl AlertConfig {
     /// a fault that persists is flagged by its third blow.
     pub const DEFAULT_SENSOR_K: usize = 3;
     pub const DEFAULT_SENSOR_N: usize = 4;
+    /// Default bound on the drift of the flow-stress scale a billet's blows need under the
+    /// model, from its first blow (issue 37, `tests/model_health.rs`): 3 %. Tuned on the
+    /// independent renderer's seeds 1–3 (5 blows a billet, soft to hard, both machines, 100
+    /// and 10 kHz): without an effect the drift stays within 0.0022 on the hammer and 0.011 on
+    /// the press at 100 kHz; of the hidden effects that move an efficiency by more than 0.02,
+    /// the smallest drift is the hammer's foundation at 100 kHz, 0.046. 3 % lies between,
+    /// nearly three times the first. The false-alarm and detection rates on other seeds are
+    /// `tests/model_health.rs`'s.
+    pub const DEFAULT_SCALE_DRIFT_LIMIT: f64 = 0.03;
 }
 
 impl Default for AlertConfig {
@@ -69,8 +81,15 @@ impl Default for AlertConfig {
             sensor_limit: Self::DEFAULT_SENSOR_LIMIT,
             sensor_k: Self::DEFAULT_SENSOR_K,
             sensor_n: Self::DEFAULT_SENSOR_N,
+            scale_drift_limit: Self::DEFAULT_SCALE_DRIFT_LIMIT,
         }
     }
+}
+
+/// A billet's flow-stress scale off its first blow's.
+struct Drift {
+    drift: f64,
+    from_blow: u32,
 }
 
 /// The rules and their memory.
@@ -84,6 +103,10 @@ pub struct AlertRules {
     last_fired: BTreeMap<&'static str, u32>,
     /// Whether the present billet has raised its alert for an implausible blow.
     implausible_alerted: bool,
+    /// The present billet's first flow-stress scale (blow, scale), and whether its drift
+    /// has raised its alert.
+    scale_ref: Option<(u32, f64)>,
+    drift_alerted: bool,
 }
 
 impl AlertRules {
@@ -94,6 +117,8 @@ impl AlertRules {
             sensor_recent: VecDeque::new(),
             last_fired: BTreeMap::new(),
             implausible_alerted: false,
+            scale_ref: None,
+            drift_alerted: false,
         }
     }
 
@@ -107,6 +132,8 @@ impl AlertRules {
     pub fn reset(&mut self) {
         self.recent.clear();
         self.implausible_alerted = false;
+        self.scale_ref = None;
+        self.drift_alerted = false;
         self.last_fired.retain(|kind, _| *kind == AlertKind::Sensor.as_str());
     }
 
@@ -142,7 +169,24 @@ impl AlertRules {
             ("kinetic_in_J".to_string(), kinetic_in_j),
             ("elastic_J".to_string(), elastic_j),
         ]);
-        let candidate = if c.on_hard_blow && b.class == BlowClass::Hard {
+        let candidate = if let Some(drift) = self.scale_drift(b) {
+            // The model does not fit this billet: said before any efficiency alert, which
+            // its figures cannot be trusted to raise.
+            figures.insert("flow_stress_scale_drift".to_string(), drift.drift);
+            Some((
+                AlertKind::ModelHealth,
+                format!(
+                    "blow {}: the flow stress its work needs under the model is {:+.1} % off blow {}'s on this billet \
+                     (limit ±{:.0} %): the model lacks an effect (friction rising as the part flattens, hardening, \
+                     cooling, a foundation, a clearance, a compliant contact) or the load sensor drifts, and the \
+                     efficiencies may be off; run `forgemon diagnose` on this billet's recording",
+                    b.blow,
+                    100.0 * drift.drift,
+                    drift.from_blow,
+                    100.0 * c.scale_drift_limit
+                ),
+            ))
+        } else if c.on_hard_blow && b.class == BlowClass::Hard {
             Some((
                 AlertKind::ElasticBlow,
                 format!(
@@ -222,6 +266,16 @@ impl AlertRules {
         Some(Alert { kind: why.check.alert_kind(), blow, reason, figures: BTreeMap::new() })
     }
 
+    /// The drift of `b`'s flow-stress scale from the billet's first, once per billet, when
+    /// beyond the limit.
+    fn scale_drift(&mut self, b: &BlowEstimate) -> Option<Drift> {
+        let s = b.flow_stress_scale.filter(|s| s.is_finite() && *s > 0.0)?;
+        let (from_blow, first) = *self.scale_ref.get_or_insert((b.blow, s));
+        let drift = s / first - 1.0;
+        let beyond = drift.abs() > self.cfg.scale_drift_limit;
+        (beyond && !std::mem::replace(&mut self.drift_alerted, true)).then_some(Drift { drift, from_blow })
+    }
+
     /// Raise `kind` unless it fired within the debounce.
     fn fire(&mut self, kind: AlertKind, blow: u32, reason: String, figures: BTreeMap<String, f64>) -> Option<Alert> {
         if let Some(&last) = self.last_fired.get(kind.as_str())
@@ -264,6 +318,7 @@ mod tests {
             h_start_m: None,
             height_source: crate::estimate::HeightSource::Unknown,
             implausible: None,
+            flow_stress_scale: None,
             at_bound: Default::default(),
             height_check: None,
             billet: Default::default(),

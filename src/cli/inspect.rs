@@ -336,6 +336,7 @@ mod tests {
             h_start_m: None,
             height_source: crate::estimate::HeightSource::Unknown,
             implausible: None,
+            flow_stress_scale: None,
             at_bound: Default::default(),
             height_check: None,
             billet: crate::estimate::BilletTag { billet, billet_blow, ..Default::default() },

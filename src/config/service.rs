@@ -195,6 +195,7 @@ struct RawAlerts {
     k_low: Option<u64>,
     n_window: Option<u64>,
     residual_limit: Option<f64>,
+    scale_drift_limit: Option<f64>,
     sensor_limit: Option<f64>,
     sensor_k: Option<u64>,
     sensor_n: Option<u64>,
@@ -411,6 +412,9 @@ fn parse_alerts(
     efficiency_rule(doc, a, &mut alerts)?;
     if let Some(r) = a.residual_limit {
         alerts.residual_limit = doc.in_range("alerts.residual_limit", r, &RESIDUAL_LIMIT)?;
+    }
+    if let Some(r) = a.scale_drift_limit {
+        alerts.scale_drift_limit = doc.in_range("alerts.scale_drift_limit", r, &RESIDUAL_LIMIT)?;
     }
     sensor_rule(doc, a, &mut alerts)?;
     if let Some(d) = a.debounce_blows {

@@ -206,6 +206,7 @@ mod tests {
             h_start_m: Some(0.1 - 0.01 * f64::from(billet_blow - 1)),
             height_source: crate::estimate::HeightSource::Unknown,
             implausible: None,
+            flow_stress_scale: None,
             at_bound: Default::default(),
             height_check: None,
             sensor_check: None,

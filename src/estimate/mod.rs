@@ -390,6 +390,7 @@ impl Estimator {
                 h_start_off_sheet_m,
             },
             implausible: None,
+            flow_stress_scale: None,
             at_bound: Default::default(),
         };
         self.chain = h_start_m.map(|h| (fit.x_contact_m, h));
@@ -586,6 +587,7 @@ impl Estimator {
         e.peak_load_n =
             blow.samples[blow.i_contact..=blow.i_end].iter().map(|s| s.load_n - blow.load_zero_n).fold(0.0, f64::max);
         e.residual = Some(f.ram_energy_residual);
+        e.flow_stress_scale = Some(f.scale);
         h_end_m
     }
 
@@ -618,16 +620,19 @@ impl Estimator {
                 // The split's share (π r² σ over the whole load) is the friction's: the
                 // flow-stress effects cancel from it, `friction_rise` does not.
                 let law = BilletLaw::of(p, self.effects.load, self.billet_blows);
-                let (mut plastic, mut friction) = (0.0, 0.0);
+                let (mut plastic, mut friction, mut law_j) = (0.0, 0.0, 0.0);
                 let mut h_min = h0;
                 for (comp, dw) in o.compression_m.iter().zip(&o.work_j) {
                     // The billet only gets flatter: its height is the running minimum.
-                    h_min = h_min.min(h0 - comp - before_m);
-                    let l = law.load(h_min.max(1e-6), 0.0);
+                    let h = h_min.min(h0 - comp - before_m);
+                    let l = law.load(h.max(1e-6), 0.0);
+                    law_j += l.total_n * (h_min - h);
+                    h_min = h;
                     let share = if l.total_n > 0.0 { l.frictionless_n / l.total_n } else { 1.0 };
                     plastic += dw * share;
                     friction += dw * (1.0 - share);
                 }
+                e.flow_stress_scale = (law_j > 0.0).then(|| o.deform_j / law_j);
                 let h_end = h0 - max_comp;
                 if h_end < MIN_TRACKED_HEIGHT_FRACTION * p.billet.height_m {
                     // Lost track of the billet: report the work unsplit and no height.

@@ -203,6 +203,12 @@ pub struct BlowEstimate {
     /// Why the blow is `implausible` (CONTRACTS §5 `reason`), `None` otherwise.
     #[serde(rename = "reason", serialize_with = "reason_text")]
     pub implausible: Option<Implausible>,
+    /// The scale of the sheet's flow stress the blow's measured work needs under the model:
+    /// the fitted scale, or the observed deformation work over the law's work along the same
+    /// compression (issue 37). Within one billet it stays put while the model fits; its drift
+    /// from the billet's first blow is a model-health figure (`alert`). `None` without a
+    /// sheet, a height, or whole samples.
+    pub flow_stress_scale: Option<f64>,
     /// The values reported at a bound of their range, as computed (`plausibility`): within
     /// the estimate's accuracy of it. Left out of the JSON when empty.
     #[serde(skip_serializing_if = "AtBound::is_empty")]
@@ -262,6 +268,7 @@ pub(crate) mod examples {
             height_source: HeightSource::Unknown,
             height_check: None,
             implausible: None,
+            flow_stress_scale: None,
             at_bound: AtBound::new(),
             billet: Default::default(),
         }
@@ -294,6 +301,7 @@ pub(crate) mod examples {
             height_source: HeightSource::Unknown,
             height_check: None,
             implausible: None,
+            flow_stress_scale: None,
             at_bound: AtBound::new(),
             billet: Default::default(),
         }

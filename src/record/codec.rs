@@ -270,6 +270,7 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
         implausible: r.implausible.as_ref().map(|i| i.check.as_str().to_string()),
         reason: r.implausible.as_ref().map(|i| i.reason.clone()),
         at_bound: r.at_bound.iter().map(|(k, v)| (k.clone(), *v)).collect(),
+        flow_stress_scale: r.flow_stress_scale,
         judgement: r.judgement.as_ref().map(|j| pb::Judgement {
             ok: j.ok,
             recipe: j.recipe.clone(),
@@ -327,6 +328,7 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
             h_start_off_sheet_m: r.h_start_off_sheet_m,
         },
         implausible,
+        flow_stress_scale: r.flow_stress_scale,
         at_bound: r.at_bound.into_iter().collect(),
     })
 }
@@ -556,6 +558,7 @@ mod tests {
                 crate::estimate::HeightSource::Unknown
             },
             implausible: None,
+            flow_stress_scale: with_optional.then_some(1.04),
             at_bound: if with_optional { [("damped_J".to_string(), -3.5)].into() } else { Default::default() },
             height_check: with_optional.then_some(HeightCheck {
                 sheet_m: 0.0150,
