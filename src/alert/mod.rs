@@ -8,7 +8,7 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use crate::estimate::plausibility::Implausible;
-use crate::estimate::{BlowClass, BlowEstimate};
+use crate::estimate::{BlowClass, BlowEstimate, HeightSource};
 
 // The alert itself is part of a blow's result (`estimate::result`), where the estimate that
 // carries it is defined; the rules here read estimates, so the dependency runs one way.
@@ -267,9 +267,13 @@ impl AlertRules {
     }
 
     /// The drift of `b`'s flow-stress scale from the billet's first, once per billet, when
-    /// beyond the limit.
+    /// beyond the limit. Only a blow whose start height the encoder measured counts (and the
+    /// billet's first, whose height is the billet's): a height from the sheet's calipers
+    /// (±0.2–0.3 mm) or from the model moves the scale by up to 4 % on its own
+    /// (`tests/capture_freedoms.rs`, per-file encoder offsets at 5 kHz).
     fn scale_drift(&mut self, b: &BlowEstimate) -> Option<Drift> {
-        let s = b.flow_stress_scale.filter(|s| s.is_finite() && *s > 0.0)?;
+        let measured = b.height_source == HeightSource::Encoder || b.billet.billet_blow == 1;
+        let s = b.flow_stress_scale.filter(|s| measured && s.is_finite() && *s > 0.0)?;
         let (from_blow, first) = *self.scale_ref.get_or_insert((b.blow, s));
         let drift = s / first - 1.0;
         let beyond = drift.abs() > self.cfg.scale_drift_limit;
