@@ -59,14 +59,17 @@ impl AlertConfig {
     pub const DEFAULT_SENSOR_K: usize = 3;
     pub const DEFAULT_SENSOR_N: usize = 4;
     /// Default bound on the drift of the flow-stress scale a billet's blows need under the
-    /// model, from its first blow (issue 37, `tests/model_health.rs`): 3 %. Tuned on the
-    /// independent renderer's seeds 1–3 (5 blows a billet, soft to hard, both machines, 100
-    /// and 10 kHz): without an effect the drift stays within 0.0022 on the hammer and 0.011 on
-    /// the press at 100 kHz; of the hidden effects that move an efficiency by more than 0.02,
-    /// the smallest drift is the hammer's foundation at 100 kHz, 0.046. 3 % lies between,
-    /// nearly three times the first. The false-alarm and detection rates on other seeds are
-    /// `tests/model_health.rs`'s.
-    pub const DEFAULT_SCALE_DRIFT_LIMIT: f64 = 0.03;
+    /// model, from its first blow (issue 37, `tests/model_health.rs`): 5 %. The independent
+    /// renderer's billets without an effect (seeds 1–3, 5 blows a billet, soft to hard, both
+    /// machines, 100 and 10 kHz) drift within 0.0022 on the hammer and 0.011 on the press;
+    /// the first limit, 3 %, also fell short of a live stream merged from two DAQs
+    /// (`tests/service_merge.rs`: the encoder at a fifth of the rate on its own clock), whose
+    /// scale scatters by up to 2.8 % on a clean machine and raised a false alarm in CI. The
+    /// scale follows the blow's measured height loss, a few millimetres, so 0.1 mm of
+    /// encoder timing is 3 % of it. Of the hidden effects that move an efficiency by more
+    /// than 0.02 on blows whose heights the encoder measured, the smallest drift is 0.073.
+    /// The false-alarm and detection rates on other seeds are `tests/model_health.rs`'s.
+    pub const DEFAULT_SCALE_DRIFT_LIMIT: f64 = 0.05;
 }
 
 impl Default for AlertConfig {
