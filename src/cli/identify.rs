@@ -132,10 +132,11 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
     }
     for b in &result.blows {
         println!(
-            "{:<28} v0 {:.3} m/s  RMS load error {:.2} % of peak{}",
+            "{:<28} v0 {:.3} m/s  RMS load error {:.2} % of peak{}{}",
             b.reference.label,
             b.reference.v0_mps,
             b.rms_error * 100.0,
+            b.over_noise.map_or(String::new(), |r| format!(", {r:.2}× the noise")),
             if b.held_out { "  (held out: predicted)" } else { "" }
         );
     }
@@ -146,6 +147,7 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
         result.runs.len(),
         started.elapsed().as_secs_f64()
     );
+    println!("{}", result.fit_check.verdict());
     eprintln!("forgemon: wrote {} and {}", args.out.display(), report_path.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -489,6 +489,7 @@ mod tests {
             measured: None,
             t_align_s: 1e-3,
             peak_n: peak,
+            noise_n: None,
             blow_index: Some(1),
             t_ram_contact_s: None,
             approach: None,
