@@ -79,11 +79,19 @@ pub enum Check {
     Energy,
     Efficiency,
     Balance,
+    FinalLoad,
 }
 
 impl Check {
-    pub const ALL: [Check; 6] =
-        [Check::ImpactSpeed, Check::StartHeight, Check::EndHeight, Check::Energy, Check::Efficiency, Check::Balance];
+    pub const ALL: [Check; 7] = [
+        Check::ImpactSpeed,
+        Check::StartHeight,
+        Check::EndHeight,
+        Check::Energy,
+        Check::Efficiency,
+        Check::Balance,
+        Check::FinalLoad,
+    ];
 
     pub fn as_str(&self) -> &'static str {
         match self {
@@ -93,6 +101,7 @@ impl Check {
             Check::Energy => "energy",
             Check::Efficiency => "efficiency",
             Check::Balance => "balance",
+            Check::FinalLoad => "final_load",
         }
     }
 
@@ -104,7 +113,7 @@ impl Check {
     /// clock) is a sensor matter, an output out of range a model matter.
     pub fn alert_kind(&self) -> AlertKind {
         match self {
-            Check::ImpactSpeed | Check::StartHeight => AlertKind::Sensor,
+            Check::ImpactSpeed | Check::StartHeight | Check::FinalLoad => AlertKind::Sensor,
             Check::EndHeight | Check::Energy | Check::Efficiency | Check::Balance => AlertKind::ModelHealth,
         }
     }
@@ -197,9 +206,31 @@ fn check(e: &BlowEstimate, r: &Ranges) -> Result<Vec<(&'static str, f64, f64)>, 
             ));
         }
     }
-    let Some(kinetic_j) = e.kinetic_in_j else { return Ok(Vec::new()) };
-    let noise_j = NOISE_FRACTION_OF_KINETIC * kinetic_j;
+    // The load at the end of forming is the sensor's, and a billet in compression cannot
+    // pull on the tools: a reading below zero by more than the estimate's accuracy of the
+    // peak is a sensor's zero or lost low frequencies (a piezo's high-pass), or an end of
+    // forming placed in the spring-back's ringing (issue 37: -986 kN on a moving
+    // foundation). Within it, it is reported at zero.
     let mut bounded = Vec::new();
+    let load_noise_n = NOISE_FRACTION_OF_KINETIC * e.peak_load_n.abs();
+    if !(e.final_load_n >= -load_noise_n) {
+        return Err(Implausible::new(
+            Check::FinalLoad,
+            format!(
+                "load at the end of forming {:.1} kN below zero by more than the estimate's accuracy ({:.1} kN, {:.0} % \
+                 of the {:.0} kN peak): the billet cannot pull; the sensor's zero or its low frequencies are off",
+                e.final_load_n * 1e-3,
+                load_noise_n * 1e-3,
+                100.0 * NOISE_FRACTION_OF_KINETIC,
+                e.peak_load_n * 1e-3
+            ),
+        ));
+    }
+    if e.final_load_n < 0.0 {
+        bounded.push(("final_load_N", e.final_load_n, 0.0));
+    }
+    let Some(kinetic_j) = e.kinetic_in_j else { return Ok(bounded) };
+    let noise_j = NOISE_FRACTION_OF_KINETIC * kinetic_j;
     let terms = [
         ("plastic_J", e.plastic_j),
         ("friction_J", e.friction_j),
@@ -265,6 +296,7 @@ fn set(e: &mut BlowEstimate, field: &str, x: f64) {
         "damped_J" => e.damped_j = Some(x),
         "elastic_J" => e.elastic_j = Some(x),
         "efficiency" => e.efficiency = Some(x),
+        "final_load_N" => e.final_load_n = x,
         _ => unreachable!("settle bounds only the fields of `check`"),
     }
 }
@@ -321,7 +353,7 @@ mod tests {
     #[test]
     fn each_check_fails_on_its_own_value() {
         type Breaker = Box<dyn Fn(&mut BlowEstimate)>;
-        let cases: [(Check, Breaker); 9] = [
+        let cases: [(Check, Breaker); 10] = [
             (Check::ImpactSpeed, Box::new(|e| e.v_impact_mps = 12.0)),
             (Check::ImpactSpeed, Box::new(|e| e.v_impact_mps = -0.5)),
             (Check::StartHeight, Box::new(|e| e.h_start_m = Some(-0.0068))),
@@ -331,6 +363,7 @@ mod tests {
             (Check::Energy, Box::new(|e| e.damped_j = Some(f64::NAN))),
             (Check::Efficiency, Box::new(|e| e.efficiency = Some(1.2))),
             (Check::Balance, Box::new(|e| e.residual = Some(-0.3))),
+            (Check::FinalLoad, Box::new(|e| e.final_load_n = -986e3)),
         ];
         for (check, break_it) in cases {
             let mut e = blow();
@@ -376,6 +409,14 @@ mod tests {
         let mut e = blow();
         e.efficiency = Some(1.0 + NOISE_FRACTION_OF_KINETIC + 1e-9);
         assert_eq!(failed(e).check, Check::Efficiency);
+        // The example's peak is 1.16 MN: 23.2 kN of scatter below zero at the end of forming.
+        let mut e = blow();
+        e.final_load_n = -20e3;
+        let s = settled(e);
+        assert_eq!((s.final_load_n, s.class, s.at_bound.get("final_load_N")), (0.0, BlowClass::Soft, Some(&-20e3)));
+        let mut e = blow();
+        e.final_load_n = -24e3;
+        assert_eq!(failed(e).check, Check::FinalLoad);
     }
 
     /// A start height above the billet's within the measurement is its scatter; a billet
