@@ -122,8 +122,11 @@ pub struct Identified {
 pub enum IdentifyError {
     #[error("no reference blow to fit")]
     NoReference,
-    #[error("the model cannot simulate the references with the fitted parameters")]
-    Simulation,
+    #[error(
+        "the model with the fitted parameters cannot simulate {label}{held}: the fit left a machine that does \
+         not strike this blow (fit it too with --fit-blows, or check its capture)"
+    )]
+    Simulation { label: String, held: &'static str },
 }
 
 /// A reference blow and the standard error of its impact speed, m/s (0: taken as exact).
@@ -176,7 +179,13 @@ pub fn identify(
     let runs_agreeing = runs.iter().filter(|r| r.cost <= best.cost * 1.01).count();
     let machine = set.machine(&best.values);
     let uncertainty = fit::uncertainty(&obj, &set, &best.values, &speed_rel_sd);
-    let sims = obj.simulate(&machine).ok_or(IdentifyError::Simulation)?;
+    let sims = obj.simulate(&machine).ok_or_else(|| {
+        let k = obj.first_failing(&machine).unwrap_or(0);
+        IdentifyError::Simulation {
+            label: obj.refs.get(k).map_or_else(String::new, |r| r.label.clone()),
+            held: if fitted.get(k) == Some(&false) { " (held out)" } else { "" },
+        }
+    })?;
     let (of, rms) = obj.report(&sims);
 
     // Monte Carlo bands from the parameter covariance.

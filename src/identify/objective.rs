@@ -471,6 +471,12 @@ impl Objective {
         self.simulate_to(machine, self.refs.len())
     }
 
+    /// The first reference `machine` cannot simulate (in blow order: a billet's heights
+    /// carry from blow to blow), `None` when it simulates them all.
+    pub fn first_failing(&self, machine: &Machine) -> Option<usize> {
+        (1..=self.refs.len()).find(|&n| self.simulate_to(machine, n).is_none()).map(|n| n - 1)
+    }
+
     /// Simulate the first `n` references.
     fn simulate_to(&self, machine: &Machine, n: usize) -> Option<Vec<Simulated>> {
         let mut h = match &self.setting {
