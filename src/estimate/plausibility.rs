@@ -213,7 +213,7 @@ fn check(e: &BlowEstimate, r: &Ranges) -> Result<Vec<(&'static str, f64, f64)>, 
     // foundation). Within it, it is reported at zero.
     let mut bounded = Vec::new();
     let load_noise_n = NOISE_FRACTION_OF_KINETIC * e.peak_load_n.abs();
-    if !(e.final_load_n >= -load_noise_n) {
+    if e.final_load_n.is_nan() || e.final_load_n < -load_noise_n {
         return Err(Implausible::new(
             Check::FinalLoad,
             format!(
