@@ -37,6 +37,7 @@ fn blow() -> BlowEstimate {
         height_source: forgemon::estimate::HeightSource::Unknown,
         implausible: None,
         flow_stress_scale: None,
+        scale_by_half: None,
         at_bound: Default::default(),
         height_check: None,
         billet: Default::default(),

@@ -93,6 +93,23 @@ impl Default for AlertConfig {
 struct Drift {
     drift: f64,
     from_blow: u32,
+    /// The drift over the first and the second half of the blow's compression, from the
+    /// same reference (`BlowEstimate::scale_by_half`).
+    by_half: Option<[f64; 2]>,
+}
+
+impl Drift {
+    /// Where in the stroke the work departs from the model, in words ("" without a split):
+    /// the residual by phase of the blow.
+    fn by_phase(&self) -> String {
+        let Some([a, b]) = self.by_half else { return String::new() };
+        format!(
+            "; by phase of the stroke, the work is {:+.1} % off in the first half of the compression and {:+.1} % \
+             in the second",
+            100.0 * a,
+            100.0 * b
+        )
+    }
 }
 
 /// The rules and their memory.
@@ -176,17 +193,22 @@ impl AlertRules {
             // The model does not fit this billet: said before any efficiency alert, which
             // its figures cannot be trusted to raise.
             figures.insert("flow_stress_scale_drift".to_string(), drift.drift);
+            if let Some([a, b]) = drift.by_half {
+                figures.insert("flow_stress_scale_drift_first_half".to_string(), a);
+                figures.insert("flow_stress_scale_drift_second_half".to_string(), b);
+            }
             Some((
                 AlertKind::ModelHealth,
                 format!(
                     "blow {}: the flow stress its work needs under the model is {:+.1} % off blow {}'s on this billet \
-                     (limit ±{:.0} %): the model lacks an effect (friction rising as the part flattens, hardening, \
+                     (limit ±{:.0} %){}: the model lacks an effect (friction rising as the part flattens, hardening, \
                      cooling, a foundation, a clearance, a compliant contact) or the load sensor drifts, and the \
                      efficiencies may be off; run `forgemon diagnose` on this billet's recording",
                     b.blow,
                     100.0 * drift.drift,
                     drift.from_blow,
-                    100.0 * c.scale_drift_limit
+                    100.0 * c.scale_drift_limit,
+                    drift.by_phase()
                 ),
             ))
         } else if c.on_hard_blow && b.class == BlowClass::Hard {
@@ -280,7 +302,8 @@ impl AlertRules {
         let (from_blow, first) = *self.scale_ref.get_or_insert((b.blow, s));
         let drift = s / first - 1.0;
         let beyond = drift.abs() > self.cfg.scale_drift_limit;
-        (beyond && !std::mem::replace(&mut self.drift_alerted, true)).then_some(Drift { drift, from_blow })
+        let by_half = b.scale_by_half.map(|h| h.map(|x| x / first - 1.0));
+        (beyond && !std::mem::replace(&mut self.drift_alerted, true)).then_some(Drift { drift, from_blow, by_half })
     }
 
     /// Raise `kind` unless it fired within the debounce.
@@ -326,10 +349,47 @@ mod tests {
             height_source: crate::estimate::HeightSource::Unknown,
             implausible: None,
             flow_stress_scale: None,
+            scale_by_half: None,
             at_bound: Default::default(),
             height_check: None,
             billet: Default::default(),
         }
+    }
+
+    /// A soft blow `n` of its billet with a flow-stress scale, its start height from `source`.
+    fn scaled(n: u32, scale: f64, by_half: Option<[f64; 2]>, source: crate::estimate::HeightSource) -> BlowEstimate {
+        let mut b = blow(n, 0.9, 0.0);
+        b.flow_stress_scale = Some(scale);
+        b.scale_by_half = by_half;
+        b.height_source = source;
+        b.billet.billet_blow = n;
+        b
+    }
+
+    /// The drift from the billet's first blow beyond the limit is a model-health alert, once
+    /// per billet, that gives the residual by phase of the stroke; a height from the sheet
+    /// is not watched.
+    #[test]
+    fn a_drifting_flow_stress_is_a_model_health_alert_by_phase_of_the_stroke() {
+        use crate::estimate::HeightSource::{Encoder, Sheet};
+        let mut r = AlertRules::new(AlertConfig::default());
+        assert_eq!(r.on_blow(&scaled(1, 1.0, Some([1.0, 1.0]), Sheet)), None);
+        // 20 % off, but the height is the calipers': not watched.
+        assert_eq!(r.on_blow(&scaled(2, 1.2, Some([1.0, 1.4]), Sheet)), None);
+        // Within the 5 % limit.
+        assert_eq!(r.on_blow(&scaled(3, 1.04, Some([1.0, 1.08]), Encoder)), None);
+        let a = r.on_blow(&scaled(4, 1.10, Some([1.02, 1.20]), Encoder)).expect("the drift's alert");
+        assert_eq!((a.kind, a.blow), (AlertKind::ModelHealth, 4));
+        assert!(a.reason.contains("+10.0 % off blow 1's"), "{}", a.reason);
+        assert!(
+            a.reason.contains("+2.0 % off in the first half of the compression and +20.0 % in the second"),
+            "{}",
+            a.reason
+        );
+        assert!((a.figures["flow_stress_scale_drift_second_half"] - 0.2).abs() < 1e-12);
+        assert!(a.reason.contains("forgemon diagnose"));
+        // Once per billet.
+        assert_eq!(r.on_blow(&scaled(5, 1.3, None, Encoder)), None);
     }
 
     fn incomplete(n: u32) -> BlowEstimate {

@@ -337,6 +337,7 @@ mod tests {
             height_source: crate::estimate::HeightSource::Unknown,
             implausible: None,
             flow_stress_scale: None,
+            scale_by_half: None,
             at_bound: Default::default(),
             height_check: None,
             billet: Default::default(),

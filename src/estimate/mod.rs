@@ -391,6 +391,7 @@ impl Estimator {
             },
             implausible: None,
             flow_stress_scale: None,
+            scale_by_half: None,
             at_bound: Default::default(),
         };
         self.chain = h_start_m.map(|h| (fit.x_contact_m, h));
@@ -621,11 +622,17 @@ impl Estimator {
                 // flow-stress effects cancel from it, `friction_rise` does not.
                 let law = BilletLaw::of(p, self.effects.load, self.billet_blows);
                 let (mut plastic, mut friction, mut law_j) = (0.0, 0.0, 0.0);
+                // The work and the law's work over each half of the compression.
+                let half_m = 0.5 * (o.compression_m.iter().copied().fold(0.0, f64::max) + before_m);
+                let (mut half_work, mut half_law) = ([0.0; 2], [0.0; 2]);
                 let mut h_min = h0;
                 for (comp, dw) in o.compression_m.iter().zip(&o.work_j) {
                     // The billet only gets flatter: its height is the running minimum.
                     let h = h_min.min(h0 - comp - before_m);
                     let l = law.load(h.max(1e-6), 0.0);
+                    let half = usize::from(h0 - h > half_m);
+                    half_law[half] += l.total_n * (h_min - h);
+                    half_work[half] += dw;
                     law_j += l.total_n * (h_min - h);
                     h_min = h;
                     let share = if l.total_n > 0.0 { l.frictionless_n / l.total_n } else { 1.0 };
@@ -633,6 +640,8 @@ impl Estimator {
                     friction += dw * (1.0 - share);
                 }
                 e.flow_stress_scale = (law_j > 0.0).then(|| o.deform_j / law_j);
+                e.scale_by_half = (half_law[0] > 0.0 && half_law[1] > 0.0)
+                    .then(|| [half_work[0] / half_law[0], half_work[1] / half_law[1]]);
                 let h_end = h0 - max_comp;
                 if h_end < MIN_TRACKED_HEIGHT_FRACTION * p.billet.height_m {
                     // Lost track of the billet: report the work unsplit and no height.

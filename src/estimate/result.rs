@@ -209,6 +209,12 @@ pub struct BlowEstimate {
     /// from the billet's first blow is a model-health figure (`alert`). `None` without a
     /// sheet, a height, or whole samples.
     pub flow_stress_scale: Option<f64>,
+    /// The same scale over the first and the second half of the blow's compression (the
+    /// model observer's, from whole samples): where in the stroke the work departs from the
+    /// model, for the model-health alert's reason. Not in the JSON or the recording: a
+    /// replay computes it again.
+    #[serde(skip)]
+    pub scale_by_half: Option<[f64; 2]>,
     /// The values reported at a bound of their range, as computed (`plausibility`): within
     /// the estimate's accuracy of it. Left out of the JSON when empty.
     #[serde(skip_serializing_if = "AtBound::is_empty")]
@@ -269,6 +275,7 @@ pub(crate) mod examples {
             height_check: None,
             implausible: None,
             flow_stress_scale: None,
+            scale_by_half: None,
             at_bound: AtBound::new(),
             billet: Default::default(),
         }
@@ -302,6 +309,7 @@ pub(crate) mod examples {
             height_check: None,
             implausible: None,
             flow_stress_scale: None,
+            scale_by_half: None,
             at_bound: AtBound::new(),
             billet: Default::default(),
         }

@@ -329,6 +329,7 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
         },
         implausible,
         flow_stress_scale: r.flow_stress_scale,
+        scale_by_half: None,
         at_bound: r.at_bound.into_iter().collect(),
     })
 }
@@ -559,6 +560,7 @@ mod tests {
             },
             implausible: None,
             flow_stress_scale: with_optional.then_some(1.04),
+            scale_by_half: None,
             at_bound: if with_optional { [("damped_J".to_string(), -3.5)].into() } else { Default::default() },
             height_check: with_optional.then_some(HeightCheck {
                 sheet_m: 0.0150,

@@ -82,6 +82,7 @@ mod tests {
             height_source: crate::estimate::HeightSource::Unknown,
             implausible: None,
             flow_stress_scale: None,
+            scale_by_half: None,
             at_bound: Default::default(),
             height_check: None,
             billet: BilletTag { billet, billet_blow: n, billet_check: None, h_start_off_sheet_m: None },
