@@ -120,6 +120,15 @@ gain = 1e-3
     Service { child, dir, http }
 }
 
+/// Wait until the service on `port` has reported `n` blows (15 s at most).
+fn wait_for_blows(port: u16, n: u64) {
+    let deadline = Instant::now() + Duration::from_secs(15);
+    while status(port)["blows"].as_u64() < Some(n) {
+        assert!(Instant::now() < deadline, "blows seen: {}", status(port));
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 fn status(port: u16) -> serde_json::Value {
     serde_json::from_str(&http_get(port, "/status").unwrap()).unwrap()
 }
@@ -507,13 +516,7 @@ fn a_sighup_reload_is_recorded_and_replayed_where_it_happened() {
     let mut svc = start_service_with("sighup", &tty, hook_port, "hard_blow = false");
     let (_stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     let device = std::thread::spawn(move || drive(master, 2, 0.3, Arc::new(AtomicU64::new(0)), stop_rx));
-    let wait_blows = |n: u64| {
-        let deadline = Instant::now() + Duration::from_secs(15);
-        while status(svc.http)["blows"].as_u64() < Some(n) {
-            assert!(Instant::now() < deadline, "blows seen: {}", status(svc.http));
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    };
+    let wait_blows = |n: u64| wait_for_blows(svc.http, n);
     wait_blows(8);
     let cfg = svc.dir.join("service.toml");
     let text = std::fs::read_to_string(&cfg).unwrap().replace("hard_blow = false", "hard_blow = true");
@@ -566,13 +569,7 @@ fn a_sighup_takes_the_adopted_machine_file_and_the_replay_follows() {
     let mut svc = start_service_on("sighup-model", &tty, hook_port, "", Some(()));
     let (_stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     let device = std::thread::spawn(move || drive(master, 2, 0.3, Arc::new(AtomicU64::new(0)), stop_rx));
-    let wait_blows = |n: u64| {
-        let deadline = Instant::now() + Duration::from_secs(15);
-        while status(svc.http)["blows"].as_u64() < Some(n) {
-            assert!(Instant::now() < deadline, "blows seen: {}", status(svc.http));
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    };
+    let wait_blows = |n: u64| wait_for_blows(svc.http, n);
     wait_blows(8);
     let machine = svc.dir.join("machine.toml");
     let adopted = format!("{}\n[effects.friction_rise]\nexponent = 0.8\n", std::fs::read_to_string(&machine).unwrap());
