@@ -2,7 +2,8 @@
 //! parameters under `[effects.NAME]`.
 //!
 //! Which keys are read: the kind's parameters, `k_tool_contact_N_per_m`, `[effects.NAME]`,
-//! and the `[identify]` table that `forgemon identify` writes (ignored here). The contract
+//! `[daq]` (the load channel's anti-alias filter, `physics::load_filter`, which `diagnose`
+//! reads the model through), and the `[identify]` table that `forgemon identify` writes (ignored here). The contract
 //! allows other extra keys (uncertainties, provenance), so any other key is accepted and
 //! ignored, unless it looks like a typing error: a near miss of a known key ("did you
 //! mean"), or a parameter of the other machine kind. A known key with a suffix
@@ -18,6 +19,7 @@ use super::ConfigError;
 use super::document::{Document, suggest};
 use super::limits::{DAMPING_NS_PER_M, MASS_KG, STIFFNESS_N_PER_M};
 use crate::physics::effects::Effect;
+use crate::physics::load_filter::LoadFilter;
 use crate::physics::machine::{DEFAULT_HAMMER_TOOL_CONTACT_N_PER_M, Hammer, Machine, ScrewPress};
 
 /// A machine file: the model and the effects it switches on by default.
@@ -25,6 +27,19 @@ use crate::physics::machine::{DEFAULT_HAMMER_TOOL_CONTACT_N_PER_M, Hammer, Machi
 pub struct MachineFile {
     pub machine: Machine,
     pub effects: Vec<Effect>,
+    /// The DAQ's anti-alias filter on the load channel (`[daq]`), none when not declared.
+    pub load_filter: LoadFilter,
+}
+
+/// `[daq]`: the load channel's anti-alias filter, from the DAQ's data sheet. Cut-off as a
+/// fraction of the sample rate; `cascade` identical filters in series.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDaq {
+    load_filter: String,
+    cutoff: Option<f64>,
+    order: Option<u32>,
+    cascade: Option<u32>,
 }
 
 /// The keys of a hammer's model.
@@ -40,7 +55,7 @@ const PRESS_KEYS: &[&str] = &[
     "k_sensor_N_per_m",
 ];
 /// The keys both kinds read.
-const COMMON_KEYS: &[&str] = &["kind", "k_tool_contact_N_per_m", "effects", "identify"];
+const COMMON_KEYS: &[&str] = &["kind", "k_tool_contact_N_per_m", "effects", "identify", "daq"];
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -59,6 +74,7 @@ struct RawHammer {
     effects: BTreeMap<String, BTreeMap<String, f64>>,
     #[allow(dead_code)]
     identify: Option<IgnoredAny>,
+    daq: Option<RawDaq>,
 }
 
 #[derive(Deserialize)]
@@ -84,6 +100,7 @@ struct RawPress {
     effects: BTreeMap<String, BTreeMap<String, f64>>,
     #[allow(dead_code)]
     identify: Option<IgnoredAny>,
+    daq: Option<RawDaq>,
 }
 
 /// Parse and validate the text of a `machine.toml` named `origin`.
@@ -115,7 +132,7 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
         // An extra key the contract allows (provenance, uncertainty): not ours to read.
         table.remove(key);
     }
-    let (machine, effects) = if kind == "hammer" {
+    let (machine, effects, daq) = if kind == "hammer" {
         let raw: RawHammer = doc.read_table(table)?;
         let machine = Machine::Hammer(Hammer {
             m1_kg: doc.in_range("m1_kg", raw.m1_kg, &MASS_KG)?,
@@ -127,7 +144,7 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
                 None => DEFAULT_HAMMER_TOOL_CONTACT_N_PER_M,
             },
         });
-        (machine, raw.effects)
+        (machine, raw.effects, raw.daq)
     } else {
         let raw: RawPress = doc.read_table(table)?;
         let machine = Machine::ScrewPress(ScrewPress {
@@ -143,7 +160,7 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
                 None => f64::INFINITY,
             },
         });
-        (machine, raw.effects)
+        (machine, raw.effects, raw.daq)
     };
     let mut out = Vec::new();
     for (name, params) in &effects {
@@ -152,7 +169,36 @@ pub fn parse_machine(origin: &str, text: &str) -> Result<MachineFile, ConfigErro
             .map_err(|err| doc.invalid(&format!("effects.{name}"), err.to_string()))?;
         out.push(e);
     }
-    Ok(MachineFile { machine, effects: out })
+    let load_filter = match daq {
+        Some(d) => load_filter(&doc, d)?,
+        None => LoadFilter::None,
+    };
+    Ok(MachineFile { machine, effects: out, load_filter })
+}
+
+/// `[daq]`'s filter, each key checked against what a DAQ can have.
+fn load_filter(doc: &Document, d: RawDaq) -> Result<LoadFilter, ConfigError> {
+    match d.load_filter.as_str() {
+        "none" => Ok(LoadFilter::None),
+        "butterworth" => {
+            let cutoff = d.cutoff.ok_or_else(|| doc.invalid("daq.cutoff", "is needed for a butterworth filter"))?;
+            if !(cutoff > 0.0 && cutoff < 0.5) {
+                return Err(
+                    doc.invalid("daq.cutoff", format!("{cutoff} is not a fraction of the sample rate in (0, 0.5)"))
+                );
+            }
+            let order = d.order.unwrap_or(2);
+            if !(1..=8).contains(&order) {
+                return Err(doc.invalid("daq.order", format!("{order} is not an order from 1 to 8")));
+            }
+            let cascade = d.cascade.unwrap_or(1);
+            if !(1..=4).contains(&cascade) {
+                return Err(doc.invalid("daq.cascade", format!("{cascade} is not 1 to 4 filters in series")));
+            }
+            Ok(LoadFilter::Butterworth { order, cascade, cutoff })
+        }
+        other => Err(doc.invalid("daq.load_filter", format!("\"{other}\" is not \"none\" or \"butterworth\""))),
+    }
 }
 
 #[cfg(test)]
@@ -165,6 +211,24 @@ mod tests {
 
     fn err(text: &str) -> String {
         parse_machine("m.toml", text).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn a_daq_table_declares_the_load_filter_and_a_wrong_key_is_named() {
+        let m =
+            parse_machine("m.toml", &format!("{HAMMER}[daq]\nload_filter = \"butterworth\"\ncutoff = 0.4\n")).unwrap();
+        assert_eq!(m.load_filter, LoadFilter::Butterworth { order: 2, cascade: 1, cutoff: 0.4 });
+        assert_eq!(parse_machine("m.toml", HAMMER).unwrap().load_filter, LoadFilter::None);
+        for (daq, key) in [
+            ("load_filter = \"bessel\"\ncutoff = 0.4", "daq.load_filter"),
+            ("load_filter = \"butterworth\"", "daq.cutoff"),
+            ("load_filter = \"butterworth\"\ncutoff = 0.6", "daq.cutoff"),
+            ("load_filter = \"butterworth\"\ncutoff = 0.4\norder = 0", "daq.order"),
+        ] {
+            let e = err(&format!("{HAMMER}[daq]\n{daq}\n"));
+            assert!(e.contains(key) && e.contains("m.toml"), "{daq}: {e}");
+        }
+        assert!(err(&format!("{HAMMER}[daq]\nload_filter = \"none\"\ncutof = 0.4\n")).contains("cutof"));
     }
 
     #[test]

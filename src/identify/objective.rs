@@ -18,6 +18,7 @@ use crate::identify::model::default_prior;
 use crate::physics::blow::{SimOptions, TraceEnd, simulate_blow_sensor_until};
 use crate::physics::effects::EffectSet;
 use crate::physics::integrator::Method;
+use crate::physics::load_filter::LoadFilter;
 use crate::physics::machine::{Machine, MachineKind};
 use crate::physics::plant::Plant;
 use crate::physics::process::{CALIPER_TOLERANCE_M, Process};
@@ -28,6 +29,12 @@ use crate::signal::spectrum::{Mode, Spectrum, SpectrumPlanner, blow_modes};
 
 /// Fraction of the measured peak where the two blows are aligned.
 pub const ALIGN_FRACTION: f64 = 0.10;
+/// The simulated trace's step at most, s, where it passes a declared anti-alias filter
+/// (`LoadFilter`): 1/40 of a 4 kHz cut-off's period.
+pub const TRACE_STEP_S: f64 = 1e-5;
+/// And at least this many steps to a sample: a filter at 0.4 of the rate then sees ten
+/// steps to its cut-off's period.
+const FILTER_STEPS: f64 = 4.0;
 /// Floor of the relative errors' denominators, fraction of the peak (load or spectrum).
 pub const RELATIVE_FLOOR: f64 = 0.05;
 /// The paper's weight of the load against the spectrum.
@@ -512,10 +519,15 @@ impl Objective {
                 }
                 _ => Plant::new(machine, &self.effects, None, 0.0),
             };
+            // Through a declared anti-alias filter, the trace on a step fine enough for the
+            // filter (`TRACE_STEP_S`); else read at the samples.
+            let filtered = self.effects.load_filter != LoadFilter::None;
+            let over = if filtered { (r.dt_s / TRACE_STEP_S).max(FILTER_STEPS).ceil() as usize } else { 1 };
+            let fine_dt = r.dt_s / over as f64;
             let opts = SimOptions {
                 method: Method::Dopri5 { rtol: FIT_RTOL },
                 post_s: r.duration_s(),
-                trace_dt_s: Some(r.dt_s),
+                trace_dt_s: Some(fine_dt),
             };
             // The blow ends a window after the model's alignment crossing (the last sample
             // compared), never before the contact opens (`TraceEnd`).
@@ -523,15 +535,9 @@ impl Objective {
             let end = TraceEnd { threshold_n: threshold, after_s: r.duration_s() - r.t_align_s };
             let (res, trace) = simulate_blow_sensor_until(&plant, r.v0_mps, &opts, end).ok()?;
             h = res.forming.map(|f| f.h_end_m).or(h);
-            // The first sample at or above the threshold (the damper's share of the load
-            // jumps at first contact, so it may be the very first).
-            let t_cross = match trace.iter().position(|&x| x >= threshold) {
-                Some(0) | None => 0.0,
-                Some(k) => ((k - 1) as f64 + (threshold - trace[k - 1]) / (trace[k] - trace[k - 1])) * r.dt_s,
-            };
-            // Measured sample i is at model time i dt - t_align + t_cross: the trace at a
-            // fixed fractional shift of the index.
-            let load = shifted(&trace, r.load_n.len(), (t_cross - r.t_align_s) / r.dt_s);
+            // The DAQ's view: its anti-alias filter as the machine file declares it.
+            let trace = self.effects.load_filter.apply(&trace, fine_dt, over);
+            let (load, t_cross) = aligned(&trace, fine_dt, over, r.load_n.len(), threshold, r.t_align_s);
             let spectrum =
                 SIM_PLANNER.with_borrow_mut(|p| p.amplitudes_up_to(&load, r.dt_s, PAD_FACTOR, 0, self.f_max_hz));
             // The model's instants on the window's clock (model time 0 is first contact).
@@ -627,6 +633,26 @@ impl Objective {
 /// flagged and left out), below `f_max_hz`.
 pub fn machine_modes(s: &Spectrum, f_max_hz: f64) -> Vec<Mode> {
     blow_modes(s, 8).into_iter().filter(|m| !m.below_resolution && m.frequency_hz < f_max_hz).collect()
+}
+
+/// The model read at a window's `n` samples from its `trace` (step `fine_dt`, `over` steps
+/// to a sample), and the model time put at the window's `t_align_s`: the trace's own
+/// crossing of `threshold` (the damper's share of the load jumps at first contact, so it
+/// may be the very first point).
+fn aligned(trace: &[f64], fine_dt: f64, over: usize, n: usize, threshold: f64, t_align_s: f64) -> (Vec<f64>, f64) {
+    let t_cross = crossing(trace, threshold).map_or(0.0, |k| k * fine_dt);
+    let len = (n.max(1) - 1) * over + 1;
+    let load = shifted(trace, len, (t_cross - t_align_s) / fine_dt).into_iter().step_by(over).collect();
+    (load, t_cross)
+}
+
+/// The fractional index where `v` first rises to `threshold`, interpolated between the
+/// samples either side (0 when the first sample is already there; `None` when never).
+fn crossing(v: &[f64], threshold: f64) -> Option<f64> {
+    match v.iter().position(|&x| x >= threshold)? {
+        0 => Some(0.0),
+        k => Some((k - 1) as f64 + (threshold - v[k - 1]) / (v[k] - v[k - 1])),
+    }
 }
 
 /// RMS of (measured − model) over the blow, as a fraction of the measured peak.

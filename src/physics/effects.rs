@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 use std::fmt;
 
 use super::billet::LoadEffects;
+use super::load_filter::LoadFilter;
 use super::machine::MachineKind;
 
 /// Default reference strain rate of `strain_rate` when the spec leaves it out, 1/s.
@@ -295,6 +296,10 @@ pub struct EffectSet {
     pub foundation: Option<Foundation>,
     /// `sensor_highpass`: time constant of the charge amplifier, s. Infinite is neutral.
     pub highpass_tau_s: f64,
+    /// The DAQ's anti-alias filter on the load channel (a machine file's `[daq]`, not an
+    /// effect of the library): the fits read the model's load through it
+    /// (`identify::objective`); the plant does not.
+    pub load_filter: LoadFilter,
 }
 
 impl EffectSet {
@@ -306,6 +311,7 @@ impl EffectSet {
         load: LoadEffects::NEUTRAL,
         foundation: None,
         highpass_tau_s: f64::INFINITY,
+        load_filter: LoadFilter::None,
     };
 
     /// The set with the given effects switched on (a later one of the same name wins).

@@ -6,6 +6,7 @@ pub mod blow;
 pub mod effects;
 pub mod integrator;
 pub mod ledger;
+pub mod load_filter;
 pub mod machine;
 pub mod montecarlo;
 pub mod oscillator;
