@@ -42,9 +42,14 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
-pub const HAMMER: &str = "kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n";
+/// The machine files the tests hand the project: the model without the hidden effect, and
+/// the DAQ's anti-alias filter from its data sheet (`daq`, the renderer's own two
+/// Butterworths at 0.4 × the rate).
+pub const HAMMER: &str = "kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n\
+    \n[daq]\nload_filter = \"butterworth\"\norder = 2\ncascade = 2\ncutoff = 0.4\n";
 pub const PRESS: &str = "kind = \"screw_press\"\nm_tool_kg = 2500\nm_ram_kg = 90000\nk_link_N_per_m = 2.1e9\n\
-    c_link_Ns_per_m = 2.8e5\nk_frame_N_per_m = 8.0e9\nc_frame_Ns_per_m = 5.0e4\nk_sensor_N_per_m = 3.39e10\n";
+    c_link_Ns_per_m = 2.8e5\nk_frame_N_per_m = 8.0e9\nc_frame_Ns_per_m = 5.0e4\nk_sensor_N_per_m = 3.39e10\n\
+    \n[daq]\nload_filter = \"butterworth\"\norder = 2\ncascade = 2\ncutoff = 0.4\n";
 const STEEL: &str = include_str!("../../config/steel-16NiCrMo13.process.toml");
 const COPPER: &str = include_str!("../../config/copper-cu99.process.toml");
 
