@@ -15,6 +15,7 @@ use crate::identify::model::default_prior;
 use crate::identify::objective::{Reference, Setting};
 use crate::identify::speed::impact_speed_sd_mps;
 use crate::identify::{IdentifyConfig, WithSpeedSd, identify};
+use crate::physics::load_filter::LoadFilter;
 use crate::physics::machine::MachineKind;
 use crate::signal::segment::{SegmentConfig, Segmenter};
 
@@ -63,15 +64,16 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
         "screw_press" => MachineKind::ScrewPress,
         k => bail!("--kind: '{k}' is not hammer or screw_press"),
     };
-    let prior = match &args.initial {
+    let (prior, load_filter) = match &args.initial {
         Some(p) => {
-            let m = parse_machine(&p.display().to_string(), &read_text(p)?)?.machine;
+            let file = parse_machine(&p.display().to_string(), &read_text(p)?)?;
+            let m = file.machine;
             if m.kind() != kind {
                 bail!("{}: key 'kind' is \"{}\" but --kind is {}", p.display(), m.kind().as_str(), kind.as_str());
             }
-            m
+            (m, file.load_filter)
         }
-        None => default_prior(kind),
+        None => (default_prior(kind), LoadFilter::None),
     };
     let setting = if args.bare {
         Setting::Bare
@@ -90,7 +92,8 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
         Setting::Billet(p)
     };
     let (fit, held) = read_references_with_speed_sd(&args.reference, kind, args.bare, &args.fit_blows, None)?;
-    let cfg = IdentifyConfig { starts: args.starts.max(1), seed: args.seed, monte_carlo: args.monte_carlo };
+    let cfg =
+        IdentifyConfig { starts: args.starts.max(1), seed: args.seed, monte_carlo: args.monte_carlo, load_filter };
     let bar = indicatif::ProgressBar::new((cfg.starts + cfg.monte_carlo) as u64);
     bar.set_style(
         indicatif::ProgressStyle::with_template(
@@ -108,8 +111,9 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
         if args.bare { "bare strikes" } else { "billet blows" },
         if result.blows.iter().any(|b| b.held_out) { ", others held out" } else { "" }
     );
-    std::fs::write(&args.out, result.to_toml(&provenance))
-        .with_context(|| format!("{}: cannot write", args.out.display()))?;
+    // The filter the model was identified through goes on with it.
+    let text = result.to_toml(&provenance) + &load_filter.to_toml();
+    std::fs::write(&args.out, text).with_context(|| format!("{}: cannot write", args.out.display()))?;
     let report_path = args.report.clone().unwrap_or_else(|| args.out.with_extension("html"));
     let report = result.report(&provenance, started.elapsed().as_secs_f64());
     crate::identify::report::write_identify_report(&report, &report_path)

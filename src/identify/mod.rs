@@ -15,6 +15,8 @@ pub mod speed;
 
 use rayon::prelude::*;
 
+use crate::physics::effects::EffectSet;
+use crate::physics::load_filter::LoadFilter;
 use crate::physics::machine::Machine;
 use fit::{Run, Uncertainty};
 use model::ParamSet;
@@ -28,11 +30,14 @@ pub struct IdentifyConfig {
     pub seed: u64,
     /// Monte Carlo draws for the load bands (0: none).
     pub monte_carlo: usize,
+    /// The DAQ's anti-alias filter on the load channel (the initial machine file's `[daq]`):
+    /// the model's load is read through it, as `diagnose` reads it.
+    pub load_filter: LoadFilter,
 }
 
 impl Default for IdentifyConfig {
     fn default() -> Self {
-        IdentifyConfig { starts: 8, seed: 1, monte_carlo: 200 }
+        IdentifyConfig { starts: 8, seed: 1, monte_carlo: 200, load_filter: LoadFilter::None }
     }
 }
 
@@ -159,7 +164,9 @@ pub fn identify(
     // Start heights from the encoder's chain where it agrees with the sheet
     // (`Heights::Encoder`), as `diagnose` takes them: the calipers' scatter (±0.2 mm) is an
     // error of the blow's input that the covariance does not hold.
-    let obj = Objective::new(all_refs, fitted.clone(), setting, &prior).with_heights(Heights::Encoder);
+    let obj = Objective::new(all_refs, fitted.clone(), setting, &prior)
+        .with_heights(Heights::Encoder)
+        .with_effects(EffectSet { load_filter: cfg.load_filter, ..EffectSet::NONE });
     let first = set.values_of(&prior);
     // Global stage: local searches on the ring-free envelope from every start; then the
     // full objective from where each ended (objective::Fidelity explains why).

@@ -47,6 +47,18 @@ impl LoadFilter {
     }
 }
 
+impl LoadFilter {
+    /// The machine file's `[daq]` table for this filter (empty for none).
+    pub fn to_toml(&self) -> String {
+        match *self {
+            LoadFilter::None => String::new(),
+            LoadFilter::Butterworth { order, cascade, cutoff } => format!(
+                "\n[daq]\nload_filter = \"butterworth\"\norder = {order}\ncascade = {cascade}\ncutoff = {cutoff:?}\n"
+            ),
+        }
+    }
+}
+
 /// The sections of a Butterworth low-pass of `order`: the quality factor of each pole pair,
 /// and `None` for the real pole of an odd order.
 fn butterworth_qs(order: u32) -> Vec<Option<f64>> {
