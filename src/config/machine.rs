@@ -219,6 +219,9 @@ mod tests {
             parse_machine("m.toml", &format!("{HAMMER}[daq]\nload_filter = \"butterworth\"\ncutoff = 0.4\n")).unwrap();
         assert_eq!(m.load_filter, LoadFilter::Butterworth { order: 2, cascade: 1, cutoff: 0.4 });
         assert_eq!(parse_machine("m.toml", HAMMER).unwrap().load_filter, LoadFilter::None);
+        // What identify writes on reads back.
+        let f = LoadFilter::Butterworth { order: 4, cascade: 2, cutoff: 0.35 };
+        assert_eq!(parse_machine("m.toml", &format!("{HAMMER}{}", f.to_toml())).unwrap().load_filter, f);
         for (daq, key) in [
             ("load_filter = \"bessel\"\ncutoff = 0.4", "daq.load_filter"),
             ("load_filter = \"butterworth\"", "daq.cutoff"),
