@@ -138,7 +138,7 @@ const ZETA_UNDAMPED: f64 = 1e-4;
 /// `strain_rate`'s σ·(ε̇/ε̇₀)^m changes the flow stress's level with ε̇₀ at a fixed m (and
 /// `strain_hardening`'s σ·(ε/ε₀)^n with ε₀), so the reference is fitted too, searched on the
 /// grid as the level at 10 /s (at a strain of 0.2). What the data determine is the exponent
-/// and that level; the reference itself only as well as the level over the exponent (README,
+/// and that level; the reference itself only as well as the level over the exponent (docs/validation.md,
 /// "Diagnosis: effect families").
 pub fn library(kind: MachineKind) -> Vec<Candidate> {
     let p = |key, lo, hi| Param { key, lo, hi };

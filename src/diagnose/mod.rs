@@ -62,7 +62,7 @@ fn blow_set(
     let n = refs.len();
     // Where the sheet has hand-measured heights, the start heights from the encoder's chain
     // (`Heights::Encoder`): the calipers' scatter (±0.2 mm) moved each holdout blow's error by
-    // more than the noise and gave the independent hammer false positives (README, "Start
+    // more than the noise and gave the independent hammer false positives (docs/validation.md, "Start
     // heights from the encoder").
     let obj = Objective::new(refs, vec![true; n], setting, machine.kind())
         .with_effects(*effects)

@@ -125,7 +125,7 @@ impl Effect {
         }
     }
 
-    /// What blows determine of this effect, as names and values (README, "Diagnosis:
+    /// What blows determine of this effect, as names and values (docs/validation.md, "Diagnosis:
     /// effect families"): the parameters themselves, except that `strain_rate` and
     /// `strain_hardening` are determined as their exponent and the flow stress's level at
     /// the default reference (σ·(ε̇/ε̇₀)^m is σ·(10/ε̇₀)^m at 10 /s: ε̇₀ moves the level at a

@@ -2,7 +2,7 @@
 //! compares about a tenth of a padded spectrum's bins (`identify::objective`'s band) and
 //! takes one spectrum per simulated blow, and realfft splits the complex transform's
 //! outputs into the real signal's bins over all of them (5 % of the hammer's fitted blow,
-//! README "Diagnosis: location, basins, speed"). realfft has no call for a band, so this is
+//! docs/validation.md "Diagnosis: location, basins, speed"). realfft has no call for a band, so this is
 //! its `RealToComplexEven` (3.5) for the first bins alone: the same complex FFT of half the
 //! length (rustfft's planner, as realfft plans it, on the even and odd samples as one
 //! complex signal), realfft's twiddles, and its split's expressions in its order, so the
