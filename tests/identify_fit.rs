@@ -73,13 +73,18 @@ fn try_identify(kind: Kind, hidden: Hidden, khz: f64, seed: u64) -> Result<Fit, 
     })
 }
 
+/// The seeds `FORGEMON_FIT_SEEDS` lists (comma-separated), else `default`.
+fn seeds_or(default: Vec<u64>) -> Vec<u64> {
+    std::env::var("FORGEMON_FIT_SEEDS")
+        .ok()
+        .map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect())
+        .unwrap_or(default)
+}
+
 #[test]
 #[ignore = "the misfit table: cargo test --release --test identify_fit -- --ignored --nocapture table"]
 fn table() {
-    let seeds: Vec<u64> = std::env::var("FORGEMON_FIT_SEEDS")
-        .ok()
-        .map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect())
-        .unwrap_or_else(|| vec![1]);
+    let seeds = seeds_or(vec![1]);
     let only = std::env::var("FORGEMON_FIT_CASES").unwrap_or_default();
     for (name, kind, hidden) in independent::cases() {
         if !only.split(',').any(|c| name.contains(c)) {
@@ -174,10 +179,7 @@ fn a_model_that_leaves_more_than_twice_the_noise_unexplained_is_said_not_to_fit(
 #[test]
 #[ignore = "harness: 24 identifications; run by hand"]
 fn coverage() {
-    let seeds: Vec<u64> = std::env::var("FORGEMON_FIT_SEEDS")
-        .ok()
-        .map(|s| s.split(',').filter_map(|x| x.parse().ok()).collect())
-        .unwrap_or_else(|| (11..=22).collect());
+    let seeds = seeds_or((11..=22).collect());
     for (kind, khz) in [(Kind::Hammer, 100.0), (Kind::Press, 10.0)] {
         let mut per_key: std::collections::BTreeMap<String, (usize, usize)> = Default::default();
         for &seed in &seeds {

@@ -23,7 +23,7 @@ use crate::physics::machine::{Machine, MachineKind};
 use crate::physics::plant::Plant;
 use crate::physics::process::{CALIPER_TOLERANCE_M, Process};
 use crate::physics::sequence::blow_plant;
-use crate::signal::resample::{moving_average, shifted};
+use crate::signal::resample::{aligned, moving_average};
 use crate::signal::segment::Blow;
 use crate::signal::spectrum::{Mode, Spectrum, SpectrumPlanner, blow_modes};
 
@@ -635,46 +635,6 @@ pub fn machine_modes(s: &Spectrum, f_max_hz: f64) -> Vec<Mode> {
     blow_modes(s, 8).into_iter().filter(|m| !m.below_resolution && m.frequency_hz < f_max_hz).collect()
 }
 
-/// The model read at a window's `n` samples from its `trace` (step `fine_dt`, `over` steps
-/// to a sample), and the model time put at the window's `t_align_s`: the trace's own
-/// crossing of `threshold` (the damper's share of the load jumps at first contact, so it
-/// may be the very first point).
-///
-/// Read between finer steps than the samples (`over` > 1), the model is then shifted until
-/// its samples, their crossing interpolated as the measured one is, cross at `t_align_s`:
-/// the measured crossing, interpolated between samples where the load curves, is late or
-/// early by a part of a sample, and the model's then carries the same error.
-fn aligned(trace: &[f64], fine_dt: f64, over: usize, n: usize, threshold: f64, t_align_s: f64) -> (Vec<f64>, f64) {
-    let mut t_cross = crossing(trace, threshold).map_or(0.0, |k| k * fine_dt);
-    let len = (n.max(1) - 1) * over + 1;
-    let dt = fine_dt * over as f64;
-    let read =
-        |t: f64| -> Vec<f64> { shifted(trace, len, (t - t_align_s) / fine_dt).into_iter().step_by(over).collect() };
-    let mut load = read(t_cross);
-    for _ in 0..if over > 1 { ALIGN_ROUNDS } else { 0 } {
-        // A sample or more off, the samples crossed elsewhere (a ring's dip): keep the last.
-        let Some(off) = crossing(&load, threshold).map(|k| k * dt - t_align_s) else { break };
-        if off.abs() >= dt {
-            break;
-        }
-        t_cross += off;
-        load = read(t_cross);
-    }
-    (load, t_cross)
-}
-
-/// Rounds of `aligned`'s shift.
-const ALIGN_ROUNDS: usize = 2;
-
-/// The fractional index where `v` first rises to `threshold`, interpolated between the
-/// samples either side (0 when the first sample is already there; `None` when never).
-fn crossing(v: &[f64], threshold: f64) -> Option<f64> {
-    match v.iter().position(|&x| x >= threshold)? {
-        0 => Some(0.0),
-        k => Some((k - 1) as f64 + (threshold - v[k - 1]) / (v[k] - v[k - 1])),
-    }
-}
-
 /// RMS of (measured − model) over the blow, as a fraction of the measured peak.
 pub fn rms_peak_error(measured: &[f64], model: &[f64], peak: f64) -> f64 {
     let n = measured.len().max(1) as f64;
@@ -688,8 +648,6 @@ fn bins(s: &crate::signal::spectrum::Spectrum, f_max_hz: f64) -> Vec<f64> {
 
 #[cfg(test)]
 mod tests {
-    use std::f64::consts::PI;
-
     use super::*;
     use crate::physics::machine::Hammer;
 
@@ -704,27 +662,6 @@ mod tests {
         assert_eq!(chained_height((30e-3, 0.470), 0.469, 60e-6), None);
         // Lower than the die: broken.
         assert_eq!(chained_height((30e-3, 0.470), 0.501, 60e-6), None);
-    }
-
-    #[test]
-    fn a_finely_read_model_is_shifted_to_the_sampling_phase_of_the_measured_blow() {
-        // A curved rise, 1 - cos, sampled every 100 µs at a phase of 0.37 sample after its
-        // start: the measured crossing of 10 %, interpolated between samples, is biased;
-        // the model read from a 10 µs trace of the same curve must land on those samples.
-        let (dt, over, rise_s) = (1e-4, 10, 6e-4);
-        let f = |t: f64| if t <= 0.0 { 0.0 } else { 1.0 - (PI * (t / rise_s).min(1.0)).cos() };
-        let phase = 0.37 * dt;
-        let measured: Vec<f64> = (0..40).map(|i| f(i as f64 * dt - 10.0 * dt + phase)).collect();
-        let threshold = 0.2;
-        let t_align = crossing(&measured, threshold).unwrap() * dt;
-        let fine_dt = dt / over as f64;
-        let trace: Vec<f64> = (0..400).map(|j| f(j as f64 * fine_dt)).collect();
-        let (load, _) = aligned(&trace, fine_dt, over, measured.len(), threshold, t_align);
-        let worst = load.iter().zip(&measured).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-        // Read at the trace's own crossing instead (no shift), the rise is off by more.
-        let plain = shifted(&trace, 391, (crossing(&trace, threshold).unwrap() * fine_dt - t_align) / fine_dt);
-        let plain_worst = plain.iter().step_by(over).zip(&measured).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-        assert!(worst < 0.01 && plain_worst > 3.0 * worst, "shifted {worst}, unshifted {plain_worst}");
     }
 
     #[test]
