@@ -182,6 +182,54 @@ pub struct Uncertainty {
     pub notes: Vec<String>,
 }
 
+/// Fitted blows needed for the jackknife over blows (`widen_by_blows`): with two, each
+/// leave-one-out fit is one blow's alone.
+pub const JACKKNIFE_MIN_BLOWS: usize = 2;
+
+/// Standard errors that cover the model's error as well as the noise: the jackknife over the
+/// fitted blows (each left out in turn, refitted from `values`), whose spread shows where
+/// the model explains the blows unalike, which the residuals' noise cannot. Each parameter's
+/// error becomes the larger of the two, its covariance row and column scaled with it (the
+/// correlations kept), and a widened one says so. Parameters held at a bound (no error)
+/// stay as they are; fewer than `JACKKNIFE_MIN_BLOWS` fitted blows change nothing.
+pub fn widen_by_blows(obj: &Objective, set: &ParamSet, values: &[f64], mut u: Uncertainty) -> Uncertainty {
+    let fitted: Vec<usize> = (0..obj.fitted.len()).filter(|&i| obj.fitted[i]).collect();
+    let n = fitted.len();
+    if n < JACKKNIFE_MIN_BLOWS {
+        return u;
+    }
+    let outs: Vec<Vec<f64>> = fitted
+        .par_iter()
+        .map(|&i| {
+            let mut o = obj.clone();
+            o.fitted[i] = false;
+            local_fit(&o, set, values).values.iter().map(|v| v.ln()).collect()
+        })
+        .collect();
+    let nf = n as f64;
+    for k in 0..values.len() {
+        let mean = outs.iter().map(|o| o[k]).sum::<f64>() / nf;
+        let jack = ((nf - 1.0) / nf * outs.iter().map(|o| (o[k] - mean).powi(2)).sum::<f64>()).sqrt();
+        let se = u.rel_se[k];
+        if !(se > 0.0 && jack.is_finite() && jack > se) {
+            continue;
+        }
+        let r = jack / se;
+        for j in 0..values.len() {
+            u.cov_ln[(k, j)] *= r;
+            u.cov_ln[(j, k)] *= r;
+        }
+        u.rel_se[k] = jack;
+        let mut why = format!("widened {r:.1}× to the spread over the blows (jackknife)");
+        if jack >= DETERMINED_REL_SE {
+            u.determined[k] = false;
+            why = format!("relative standard error {:.1} %, {why}", jack * 100.0);
+        }
+        u.notes[k] = if u.notes[k].is_empty() { why } else { format!("{}; {why}", u.notes[k]) };
+    }
+    u
+}
+
 /// Covariance at the optimum `values`: s²·(JᵀJ)⁺ in ln p, with s² = cost/(n − p) and the
 /// variance inflated by (1 + ρ)/(1 − ρ) for residuals correlated in time (ρ the lag-1
 /// autocorrelation): neighbouring load samples are not independent measurements. Plus the

@@ -186,6 +186,7 @@ pub fn identify(
     let runs_agreeing = runs.iter().filter(|r| r.cost <= best.cost * 1.01).count();
     let machine = set.machine(&best.values);
     let uncertainty = fit::uncertainty(&obj, &set, &best.values, &speed_rel_sd);
+    let uncertainty = fit::widen_by_blows(&obj, &set, &best.values, uncertainty);
     let sims = obj.simulate(&machine).ok_or_else(|| {
         let k = obj.first_failing(&machine).unwrap_or(0);
         IdentifyError::Simulation {
