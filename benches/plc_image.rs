@@ -38,6 +38,8 @@ fn blow() -> BlowEstimate {
         implausible: None,
         flow_stress_scale: None,
         scale_by_half: None,
+        model_residual: None,
+        model_residual_by_phase: None,
         at_bound: Default::default(),
         height_check: None,
         billet: Default::default(),

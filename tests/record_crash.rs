@@ -71,6 +71,8 @@ fn result(blow: u32) -> BlowEstimate {
         implausible: None,
         flow_stress_scale: None,
         scale_by_half: None,
+        model_residual: None,
+        model_residual_by_phase: None,
         at_bound: Default::default(),
         height_check: None,
         billet: Default::default(),

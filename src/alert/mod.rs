@@ -36,6 +36,10 @@ pub struct AlertConfig {
     /// Alert (model health, once per billet) when a blow's `flow_stress_scale` is this
     /// fraction off the billet's first: see `DEFAULT_SCALE_DRIFT_LIMIT`.
     pub scale_drift_limit: f64,
+    /// Alert (model health, once per billet) when the model fitted to a blow misses the
+    /// measured load by more than this RMS fraction of its peak (`model_residual`): see
+    /// `DEFAULT_MODEL_RESIDUAL_LIMIT`.
+    pub model_residual_limit: f64,
 }
 
 impl AlertConfig {
@@ -70,6 +74,20 @@ impl AlertConfig {
     /// than 0.02 on blows whose heights the encoder measured, the smallest drift is 0.073.
     /// The false-alarm and detection rates on other seeds are `tests/model_health.rs`'s.
     pub const DEFAULT_SCALE_DRIFT_LIMIT: f64 = 0.05;
+    /// Default bound on a blow's `model_residual`, the RMS of the load the fitted model
+    /// misses from the end of impact to separation, over the measured peak (issue 37,
+    /// `tests/model_health.rs`): 2 %. On the independent renderer's billets without an
+    /// effect (its tuning seeds 1–3, 5 blows a billet, soft to hard, both machines, at 5, 10,
+    /// 20, 50 and 100 kHz, with its DAQ's filter declared in the machine file) the largest
+    /// was 0.0060 (the press at 5 kHz); the hammer's stayed within 0.0047. Before the
+    /// estimator honoured the declared filter, the hammer at 5 kHz, whose 1.6 kHz ring falls
+    /// 3 samples a period, reached 0.0079. The project's own 5 kHz CAN fixture, sampled
+    /// without an anti-alias filter, gives 0.0068. The hidden effects that move an
+    /// efficiency by more than 0.02 leave more than the limit on some blow of their billet,
+    /// except the press's friction rise (0.011 by the fifth blow), whose drift the scale's
+    /// rule sees. The limit sits about 3× above the largest clean blow. The false-alarm and
+    /// detection rates on other seeds are `tests/model_health.rs`'s.
+    pub const DEFAULT_MODEL_RESIDUAL_LIMIT: f64 = 0.02;
 }
 
 impl Default for AlertConfig {
@@ -85,6 +103,7 @@ impl Default for AlertConfig {
             sensor_k: Self::DEFAULT_SENSOR_K,
             sensor_n: Self::DEFAULT_SENSOR_N,
             scale_drift_limit: Self::DEFAULT_SCALE_DRIFT_LIMIT,
+            model_residual_limit: Self::DEFAULT_MODEL_RESIDUAL_LIMIT,
         }
     }
 }
@@ -123,10 +142,10 @@ pub struct AlertRules {
     last_fired: BTreeMap<&'static str, u32>,
     /// Whether the present billet has raised its alert for an implausible blow.
     implausible_alerted: bool,
-    /// The present billet's first flow-stress scale (blow, scale), and whether its drift
-    /// has raised its alert.
+    /// The present billet's first flow-stress scale (blow, scale), and whether the billet
+    /// has raised its model-health alert (`model_health`).
     scale_ref: Option<(u32, f64)>,
-    drift_alerted: bool,
+    health_alerted: bool,
 }
 
 impl AlertRules {
@@ -138,7 +157,7 @@ impl AlertRules {
             last_fired: BTreeMap::new(),
             implausible_alerted: false,
             scale_ref: None,
-            drift_alerted: false,
+            health_alerted: false,
         }
     }
 
@@ -153,15 +172,16 @@ impl AlertRules {
         self.recent.clear();
         self.implausible_alerted = false;
         self.scale_ref = None;
-        self.drift_alerted = false;
+        self.health_alerted = false;
         self.last_fired.retain(|kind, _| *kind == AlertKind::Sensor.as_str());
     }
 
-    /// Judge one blow; at most one alert (elastic blows first, then the sensors, then model
-    /// health: a sensor that reads wrong also breaks the energy balance, and the sensor
-    /// alert names the cause). An
-    /// incomplete blow (no efficiency) raises none and is not remembered: it neither counts
-    /// toward the low-efficiency window nor breaks it.
+    /// Judge one blow; at most one alert. First the model's health (`model_health`: when
+    /// the model does not fit, the efficiencies that would raise the next alerts cannot be
+    /// trusted), unless the sensor alert is due (a sensor that reads wrong also makes the
+    /// model miss, and the sensor alert names the cause); then the elastic blows, the
+    /// sensors, and the energy balance. An incomplete blow (no efficiency) raises none and is
+    /// not remembered: it neither counts toward the low-efficiency window nor breaks it.
     pub fn on_blow(&mut self, b: &BlowEstimate) -> Option<Alert> {
         if let Some(why) = &b.implausible {
             return self.on_implausible(b.blow, why);
@@ -189,28 +209,14 @@ impl AlertRules {
             ("kinetic_in_J".to_string(), kinetic_in_j),
             ("elastic_J".to_string(), elastic_j),
         ]);
-        let candidate = if let Some(drift) = self.scale_drift(b) {
+        // A sensor that reads wrong also makes the model miss the load: where its alert is
+        // due, it names the cause, and the model's health is judged on a later blow.
+        let sensor_due = c.sensor_k > 0 && sensor_fails >= c.sensor_k && !self.debounced(AlertKind::Sensor, b.blow);
+        let health = if sensor_due { None } else { self.model_health(b, &mut figures) };
+        let candidate = if let Some(reason) = health {
             // The model does not fit this billet: said before any efficiency alert, which
             // its figures cannot be trusted to raise.
-            figures.insert("flow_stress_scale_drift".to_string(), drift.drift);
-            if let Some([a, b]) = drift.by_half {
-                figures.insert("flow_stress_scale_drift_first_half".to_string(), a);
-                figures.insert("flow_stress_scale_drift_second_half".to_string(), b);
-            }
-            Some((
-                AlertKind::ModelHealth,
-                format!(
-                    "blow {}: the flow stress its work needs under the model is {:+.1} % off blow {}'s on this billet \
-                     (limit ±{:.0} %){}: the model lacks an effect (friction rising as the part flattens, hardening, \
-                     cooling, a foundation, a clearance, a compliant contact) or the load sensor drifts, and the \
-                     efficiencies may be off; run `forgemon diagnose` on this billet's recording",
-                    b.blow,
-                    100.0 * drift.drift,
-                    drift.from_blow,
-                    100.0 * c.scale_drift_limit,
-                    drift.by_phase()
-                ),
-            ))
+            Some((AlertKind::ModelHealth, reason))
         } else if c.on_hard_blow && b.class == BlowClass::Hard {
             Some((
                 AlertKind::ElasticBlow,
@@ -291,6 +297,70 @@ impl AlertRules {
         Some(Alert { kind: why.check.alert_kind(), blow, reason, figures: BTreeMap::new() })
     }
 
+    /// Whether `b` says the model does not fit this billet, once per billet: the flow
+    /// stress its work needs drifts (`scale_drift`), or the model fitted to it misses the
+    /// measured load (`model_residual`). The reason names the figures, by phase of the
+    /// stroke where known, and suggests `diagnose`; the figures go into `figures`.
+    fn model_health(&mut self, b: &BlowEstimate, figures: &mut BTreeMap<String, f64>) -> Option<String> {
+        let c = self.cfg;
+        let drift = self.scale_drift(b);
+        let misses = b.model_residual.filter(|r| *r > c.model_residual_limit);
+        if self.health_alerted || (drift.is_none() && misses.is_none()) {
+            return None;
+        }
+        self.health_alerted = true;
+        let mut said = Vec::new();
+        if let Some(drift) = &drift {
+            figures.insert("flow_stress_scale_drift".to_string(), drift.drift);
+            if let Some([a, b]) = drift.by_half {
+                figures.insert("flow_stress_scale_drift_first_half".to_string(), a);
+                figures.insert("flow_stress_scale_drift_second_half".to_string(), b);
+            }
+            said.push(format!(
+                "the flow stress its work needs under the model is {:+.1} % off blow {}'s on this billet (limit \
+                 ±{:.0} %){}",
+                100.0 * drift.drift,
+                drift.from_blow,
+                100.0 * c.scale_drift_limit,
+                drift.by_phase()
+            ));
+        }
+        // The fitted model's residual is a figure of every model-health alert that has one,
+        // and a reason when beyond its limit.
+        if let Some(r) = b.model_residual {
+            figures.insert("model_residual".to_string(), r);
+        }
+        if let Some(p) = b.model_residual_by_phase {
+            for (name, v) in [("impact", p.impact), ("forming", p.forming), ("spring_back", p.spring_back)] {
+                figures.insert(format!("model_residual_{name}"), v);
+            }
+        }
+        if let Some(r) = misses {
+            let mut phases = String::new();
+            if let Some(p) = b.model_residual_by_phase {
+                phases = format!(
+                    ", most in the {} (impact {:.1} %, forming {:.1} %, spring-back {:.1} %)",
+                    p.dominant().replace('_', "-"),
+                    100.0 * p.impact,
+                    100.0 * p.forming,
+                    100.0 * p.spring_back
+                );
+            }
+            said.push(format!(
+                "the model fitted to it misses the measured load by {:.1} % of the peak, RMS (limit {:.0} %){phases}",
+                100.0 * r,
+                100.0 * c.model_residual_limit
+            ));
+        }
+        Some(format!(
+            "blow {}: {}: the model lacks an effect (friction rising as the part flattens, hardening, cooling, a \
+             foundation, a clearance, a compliant contact, a load sensor that loses its low frequencies) or the load \
+             sensor drifts, and the efficiencies may be off; run `forgemon diagnose` on this billet's recording",
+            b.blow,
+            said.join("; and ")
+        ))
+    }
+
     /// The drift of `b`'s flow-stress scale from the billet's first, once per billet, when
     /// beyond the limit. Only a blow whose start height the encoder measured counts (and the
     /// billet's first, whose height is the billet's): a height from the sheet's calipers
@@ -303,14 +373,17 @@ impl AlertRules {
         let drift = s / first - 1.0;
         let beyond = drift.abs() > self.cfg.scale_drift_limit;
         let by_half = b.scale_by_half.map(|h| h.map(|x| x / first - 1.0));
-        (beyond && !std::mem::replace(&mut self.drift_alerted, true)).then_some(Drift { drift, from_blow, by_half })
+        beyond.then_some(Drift { drift, from_blow, by_half })
+    }
+
+    /// Whether `kind` fired within the debounce before `blow`.
+    fn debounced(&self, kind: AlertKind, blow: u32) -> bool {
+        self.last_fired.get(kind.as_str()).is_some_and(|&last| blow <= last + self.cfg.debounce_blows)
     }
 
     /// Raise `kind` unless it fired within the debounce.
     fn fire(&mut self, kind: AlertKind, blow: u32, reason: String, figures: BTreeMap<String, f64>) -> Option<Alert> {
-        if let Some(&last) = self.last_fired.get(kind.as_str())
-            && blow <= last + self.cfg.debounce_blows
-        {
+        if self.debounced(kind, blow) {
             return None;
         }
         self.last_fired.insert(kind.as_str(), blow);
@@ -350,6 +423,8 @@ mod tests {
             implausible: None,
             flow_stress_scale: None,
             scale_by_half: None,
+            model_residual: None,
+            model_residual_by_phase: None,
             at_bound: Default::default(),
             height_check: None,
             billet: Default::default(),
@@ -390,6 +465,37 @@ mod tests {
         assert!(a.reason.contains("forgemon diagnose"));
         // Once per billet.
         assert_eq!(r.on_blow(&scaled(5, 1.3, None, Encoder)), None);
+    }
+
+    /// A blow whose fitted model misses the measured load beyond the limit is a model-health
+    /// alert, raised before the efficiency rules would see the blow, once per billet, that
+    /// names the phase where the model and the measurement part; a new billet watches again.
+    #[test]
+    fn a_model_that_misses_the_load_is_a_model_health_alert_by_phase() {
+        use crate::estimate::fit::PhaseResidual;
+        let missing = |n: u32, r: f64, efficiency: f64| {
+            let mut b = blow(n, efficiency, 0.0);
+            b.model_residual = Some(r);
+            b.model_residual_by_phase = Some(PhaseResidual { impact: 0.01, forming: r, spring_back: 2.0 * r });
+            b
+        };
+        let mut r = AlertRules::new(AlertConfig::default());
+        // At the limit (2 %), not beyond it: the hard blow's alert.
+        assert_eq!(r.on_blow(&missing(1, 0.02, 0.3)).map(|a| a.kind), Some(AlertKind::ElasticBlow));
+        r.reset();
+        let a = r.on_blow(&missing(2, 0.05, 0.3)).expect("the residual's alert");
+        assert_eq!((a.kind, a.blow), (AlertKind::ModelHealth, 2));
+        assert!(a.reason.contains("misses the measured load by 5.0 % of the peak"), "{}", a.reason);
+        assert!(a.reason.contains("most in the spring-back"), "{}", a.reason);
+        assert!(a.reason.contains("forgemon diagnose"), "{}", a.reason);
+        assert_eq!(a.figures["model_residual_spring_back"], 0.1);
+        // Once per billet; the next billet is watched again.
+        assert_eq!(r.on_blow(&missing(3, 0.2, 0.9)), None);
+        r.reset();
+        let limit = AlertConfig { model_residual_limit: 0.1, ..AlertConfig::default() };
+        r.set_config(limit);
+        assert_eq!(r.on_blow(&missing(10, 0.05, 0.9)), None);
+        assert_eq!(r.on_blow(&missing(11, 0.12, 0.9)).map(|a| a.kind), Some(AlertKind::ModelHealth));
     }
 
     fn incomplete(n: u32) -> BlowEstimate {

@@ -13,7 +13,6 @@ use super::{parse_process_warn, read_text};
 use crate::advise::{Advisor, PlanRequest, Speeds};
 use crate::config::limits::IMPACT_SPEED_MPS;
 use crate::config::parse_machine;
-use crate::physics::effects::EffectSet;
 
 #[derive(Debug, Args)]
 pub struct AdviseArgs {
@@ -67,7 +66,7 @@ pub fn run(args: AdviseArgs) -> anyhow::Result<ExitCode> {
         let flag = if args.v_max.is_some() { "--v-max" } else { "--settings" };
         bail!("{flag}: impact speed {bad} m/s {why}");
     }
-    let effects = EffectSet::from_effects(&machine.effects);
+    let effects = machine.effect_set();
     let advisor = Advisor::new(&machine.machine, &effects, &process);
     let req = PlanRequest { h_now_m: args.h_now, target_m: args.target, blows_done: args.blows_done, speeds };
     let plan = advisor.plan(&req)?;

@@ -43,7 +43,7 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<ExitCode> {
     let machine_text = read_text(&args.machine)?;
     let file = parse_machine(&args.machine.display().to_string(), &machine_text)?;
     let machine = file.machine;
-    let effects = EffectSet { load_filter: file.load_filter, ..EffectSet::from_effects(&file.effects) };
+    let effects = file.effect_set();
     let calib = read_dir(&args.calib, &machine)?;
     let holdout = read_dir(&args.holdout, &machine)?;
     let bar = indicatif::ProgressBar::new(fit_count(machine.kind()) as u64);

@@ -337,6 +337,8 @@ mod tests {
             height_source: crate::estimate::HeightSource::Unknown,
             implausible: None,
             flow_stress_scale: None,
+            model_residual: None,
+            model_residual_by_phase: None,
             scale_by_half: None,
             at_bound: Default::default(),
             height_check: None,

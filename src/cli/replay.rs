@@ -17,7 +17,6 @@ use crate::daemon::{
     CONTROL_SOURCE, MACHINE_CONFIG_NAME, NEW_BILLET_STATE, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, tuned_config,
 };
 use crate::estimate::EncoderDirection;
-use crate::physics::effects::EffectSet;
 use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline, PipelineEvent};
 use crate::record::{BlowBoundary, Payload, RecordReader, RecordWriter, Rotation};
@@ -121,7 +120,7 @@ pub(crate) fn replay_into<W: Write>(
     };
     let machine_file = parse_machine(&machine_origin, &machine_text)?;
     let machine = machine_file.machine;
-    let effects = EffectSet::from_effects(&machine_file.effects);
+    let effects = machine_file.effect_set();
     let process_text = pick(&args.process, stored.process, &args.input, "process.toml")?;
     let process: Option<Process> = match &process_text {
         Some((origin, text)) => {
@@ -234,7 +233,7 @@ pub(crate) fn replay_into<W: Write>(
                     Payload::Config(c) if c.name == MACHINE_CONFIG_NAME && args.machine.is_none() => {
                         let origin = format!("{} (machine.toml stored in it)", args.input.display());
                         let file = parse_machine(&origin, &c.text)?;
-                        let effects = EffectSet::from_effects(&file.effects);
+                        let effects = file.effect_set();
                         replay
                             .feeder
                             .pipeline_mut()

@@ -16,7 +16,6 @@ use crate::acquire::serial::driver::{SerialConfig, SerialFormat as WireFormat};
 use crate::config::parse_machine;
 use crate::config::service::{SerialFormat, ServiceConfig, SourceSpec, parse_service};
 use crate::daemon::{Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
-use crate::physics::effects::EffectSet;
 use crate::signal::sample::Role;
 
 #[derive(Debug, Args)]
@@ -33,7 +32,7 @@ pub fn load_parts(config_path: &Path) -> anyhow::Result<ServiceParts> {
     let config: ServiceConfig = parse_service(&config_path.display().to_string(), base, &text)?;
     let machine_text = read_text(&config.machine_path).context("key 'machine'")?;
     let machine_file = parse_machine(&config.machine_path.display().to_string(), &machine_text)?;
-    let (machine, effects) = (machine_file.machine, EffectSet::from_effects(&machine_file.effects));
+    let (machine, effects) = (machine_file.machine, machine_file.effect_set());
     let (process, process_text) = match &config.process_path {
         Some(p) => {
             let t = read_text(p).context("key 'process'")?;

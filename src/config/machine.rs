@@ -18,7 +18,7 @@ use serde::de::IgnoredAny;
 use super::ConfigError;
 use super::document::{Document, suggest};
 use super::limits::{DAMPING_NS_PER_M, MASS_KG, STIFFNESS_N_PER_M};
-use crate::physics::effects::Effect;
+use crate::physics::effects::{Effect, EffectSet};
 use crate::physics::load_filter::LoadFilter;
 use crate::physics::machine::{DEFAULT_HAMMER_TOOL_CONTACT_N_PER_M, Hammer, Machine, ScrewPress};
 
@@ -29,6 +29,14 @@ pub struct MachineFile {
     pub effects: Vec<Effect>,
     /// The DAQ's anti-alias filter on the load channel (`[daq]`), none when not declared.
     pub load_filter: LoadFilter,
+}
+
+impl MachineFile {
+    /// The model's effects with the DAQ's filter: what the estimator, the fits and the
+    /// simulator take from the file.
+    pub fn effect_set(&self) -> EffectSet {
+        EffectSet { load_filter: self.load_filter, ..EffectSet::from_effects(&self.effects) }
+    }
 }
 
 /// `[daq]`: the load channel's anti-alias filter, from the DAQ's data sheet. Cut-off as a

@@ -196,6 +196,7 @@ struct RawAlerts {
     n_window: Option<u64>,
     residual_limit: Option<f64>,
     scale_drift_limit: Option<f64>,
+    model_residual_limit: Option<f64>,
     sensor_limit: Option<f64>,
     sensor_k: Option<u64>,
     sensor_n: Option<u64>,
@@ -415,6 +416,9 @@ fn parse_alerts(
     }
     if let Some(r) = a.scale_drift_limit {
         alerts.scale_drift_limit = doc.in_range("alerts.scale_drift_limit", r, &RESIDUAL_LIMIT)?;
+    }
+    if let Some(r) = a.model_residual_limit {
+        alerts.model_residual_limit = doc.in_range("alerts.model_residual_limit", r, &RESIDUAL_LIMIT)?;
     }
     sensor_rule(doc, a, &mut alerts)?;
     if let Some(d) = a.debounce_blows {

@@ -93,12 +93,8 @@ pub fn start(
     let Some(cfg) = cfg else { return Ok(None) };
     let process = process.context("[advisor] needs the billet's process sheet: set `process` in service.toml")?;
     let file = crate::config::parse_machine("machine.toml", machine_text)?;
-    let model = Arc::new(Model {
-        machine: *machine,
-        effects: EffectSet::from_effects(&file.effects),
-        process: process.clone(),
-        cfg: cfg.clone(),
-    });
+    let model =
+        Arc::new(Model { machine: *machine, effects: file.effect_set(), process: process.clone(), cfg: cfg.clone() });
     let task = tokio::spawn(run(model, live.subscribe(), status, live.clone(), hook));
     Ok(Some(AdvisorTask { task }))
 }

@@ -171,7 +171,7 @@ impl Service {
             |text| {
                 let file =
                     crate::config::parse_machine(&path.display().to_string(), &text).map_err(|e| e.to_string())?;
-                let effects = crate::physics::effects::EffectSet::from_effects(&file.effects);
+                let effects = file.effect_set();
                 self.feeder
                     .pipeline_mut()
                     .set_model(file.machine, effects)

@@ -326,8 +326,21 @@ impl Estimator {
         let gap_s = self.gap_s(blow);
         let complete = blow.lost_s == 0.0 && gap_s <= self.max_bridged_s();
         let wants_fit = complete && self.method_for(blow.period_s) == Method::ModelFit;
+        // The residual of the last fit tried, good or not: the blow's model check.
+        let mut check = None;
         let mut fitted = match h_guess_m {
-            Some(h) if wants_fit => self.fit(blow, approach, h, self.scale, delta0, true),
+            Some(h) if wants_fit => self.fit(
+                blow,
+                approach,
+                FitStart {
+                    h0_m: h,
+                    scale0: self.scale,
+                    delta0,
+                    search_contact: true,
+                    blow_index: self.billet_blows + 1,
+                },
+                &mut check,
+            ),
             _ => None,
         };
         let delta = fitted.as_ref().map_or(delta0, |f| f.contact_samples);
@@ -393,6 +406,8 @@ impl Estimator {
             implausible: None,
             flow_stress_scale: None,
             scale_by_half: None,
+            model_residual: None,
+            model_residual_by_phase: None,
             at_bound: Default::default(),
         };
         self.chain = h_start_m.map(|h| (fit.x_contact_m, h));
@@ -410,10 +425,32 @@ impl Estimator {
         // afresh from the follow-up's height and the locator's contact.
         match (&fitted, h_start_m) {
             (Some(f), Some(h0)) if !premeasured && (f.h_start_m - h0).abs() > REFIT_HEIGHT_M => {
-                fitted = self.fit(blow, approach, h0, f.scale, f.contact_samples, false);
+                fitted = self.fit(
+                    blow,
+                    approach,
+                    FitStart {
+                        h0_m: h0,
+                        scale0: f.scale,
+                        delta0: f.contact_samples,
+                        search_contact: false,
+                        blow_index: self.billet_blows,
+                    },
+                    &mut check,
+                );
             }
             (None, Some(h0)) if wants_fit && h_guess_m.is_none_or(|h| (h - h0).abs() > REFIT_HEIGHT_M) => {
-                fitted = self.fit(blow, approach, h0, self.scale, delta0, true);
+                fitted = self.fit(
+                    blow,
+                    approach,
+                    FitStart {
+                        h0_m: h0,
+                        scale0: self.scale,
+                        delta0,
+                        search_contact: true,
+                        blow_index: self.billet_blows,
+                    },
+                    &mut check,
+                );
             }
             _ => {}
         }
@@ -435,13 +472,29 @@ impl Estimator {
         if h_start_m.is_none() {
             fitted = None;
         }
-        let h_end_m = match fitted {
+        let h_end_m = match &fitted {
             Some(f) => {
                 self.scale = f.scale;
-                self.fill_from_fit(&mut e, blow, &f)
+                self.fill_from_fit(&mut e, blow, f)
             }
             None => self.fill_from_observer(&mut e, blow, h_start_m, delta0),
         };
+        // Where the observer takes the blow by the rule, the model is fitted all the same, as
+        // the check that it still describes the machine (a few ms a blow: `fit`).
+        if let (false, Some(h0)) = (wants_fit, h_start_m)
+            && let Some(f) = self.fit(
+                blow,
+                approach,
+                FitStart { h0_m: h0, scale0: self.scale, delta0, search_contact: false, blow_index: self.billet_blows },
+                &mut check,
+            )
+        {
+            self.scale = f.scale;
+        }
+        if h_start_m.is_some() {
+            e.model_residual = check.map(|c| c.load);
+            e.model_residual_by_phase = check.map(|c| c.load_by_phase);
+        }
         e.sensor_check = sensor::sensor_check(&self.machine, blow, e.v_impact_mps).ok();
         // The stream ended before the load had held quiet (a capture's end, a stop): the blow
         // is whole only if its samples show the spring-back, the load back under the end
@@ -510,16 +563,15 @@ impl Estimator {
 
     /// The model fitted to `blow` from start height `h0_m` (`None`: it could not be, or
     /// its residuals say it did not fit, `fit::MAX_GOOD_RMS`, and the observer takes the
-    /// blow).
+    /// blow). A fit that ran, good or not, leaves its residual in `check`.
     fn fit(
         &self,
         blow: &Blow,
         approach: ApproachFit,
-        h0_m: f64,
-        scale0: f64,
-        delta0: f64,
-        search_contact: bool,
+        start: FitStart,
+        check: &mut Option<fit::ModelResidual>,
     ) -> Option<fit::ModelFit> {
+        let FitStart { h0_m, scale0, delta0, search_contact, blow_index } = start;
         let process = self.billet_process.as_ref()?;
         // Above the fit's rate, a decimated copy: contact counts in its coarser samples.
         let f = decimate::factor(blow.period_s);
@@ -529,9 +581,10 @@ impl Estimator {
             machine: &self.machine,
             effects: &effects,
             process,
-            blow_index: self.billet_blows + 1,
+            blow_index,
             h_start_m: h0_m,
             blow: &coarse,
+            daq_period_s: blow.period_s,
             approach,
         };
         // Above the fit's rate the locator's contact, found in the finer samples, is already
@@ -540,6 +593,17 @@ impl Estimator {
         // the tuning seeds of `tests/estimate_rates.rs`).
         let search = search_contact && f == 1;
         let mut m = fit::fit_blow(&problem, self.cfg.encoder_resolution_m, scale0, delta0 / f as f64, search).ok()?;
+        // The check is the load's own best fit: where the fit to all three channels leaves
+        // more than `fit::CONFIRM_RESIDUAL`, the model is fitted to the load and the
+        // acceleration alone, and the smaller residual is the blow's.
+        let mut residual = m.residual;
+        if residual.load > fit::CONFIRM_RESIDUAL
+            && let Ok(r) = fit::analogue_residual(&problem, self.cfg.encoder_resolution_m, m.scale, m.contact_samples)
+            && r.load < residual.load
+        {
+            residual = r;
+        }
+        *check = Some(residual);
         m.contact_samples *= f as f64;
         (m.rms <= fit::MAX_GOOD_RMS).then_some(m)
     }
@@ -564,6 +628,19 @@ impl Estimator {
     fn contact_tolerance_m(&self, sample_travel_m: f64) -> f64 {
         self.cfg.encoder_resolution_m + self.cfg.caliper_resolution_m + sample_travel_m
     }
+}
+
+/// Where a blow's model fit starts: the start height, the flow-stress scale, the contact in
+/// samples after the segmenter's contact sample, and whether the contact is searched from the
+/// encoder's optimum as well (`fit::fit_blow`); and the blow's 1-based index on its billet
+/// (the fits before the blow is counted on its billet and after it).
+#[derive(Debug, Clone, Copy)]
+struct FitStart {
+    h0_m: f64,
+    scale0: f64,
+    delta0: f64,
+    search_contact: bool,
+    blow_index: usize,
 }
 
 /// The first machine-side effect of `effects` that the observer does not model and the

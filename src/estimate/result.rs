@@ -215,6 +215,16 @@ pub struct BlowEstimate {
     /// replay computes it again.
     #[serde(skip)]
     pub scale_by_half: Option<[f64; 2]>,
+    /// How far the model fitted to the blow stays from the measured load: the RMS of the
+    /// load's residual over the fitted window, a fraction of the measured peak
+    /// (`fit::ModelResidual`). The model is fitted at every rate for this, as the check that
+    /// it still describes the machine; the model-health alert weighs it (`alert`). `None`
+    /// without a sheet, a height, or whole samples.
+    pub model_residual: Option<f64>,
+    /// The same by phase of the blow (impact, forming, spring-back): where the model and the
+    /// measurement part. Not in the recording: a replay computes it again.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub model_residual_by_phase: Option<super::fit::PhaseResidual>,
     /// The values reported at a bound of their range, as computed (`plausibility`): within
     /// the estimate's accuracy of it. Left out of the JSON when empty.
     #[serde(skip_serializing_if = "AtBound::is_empty")]
@@ -276,6 +286,8 @@ pub(crate) mod examples {
             implausible: None,
             flow_stress_scale: None,
             scale_by_half: None,
+            model_residual: None,
+            model_residual_by_phase: None,
             at_bound: AtBound::new(),
             billet: Default::default(),
         }
@@ -310,6 +322,8 @@ pub(crate) mod examples {
             implausible: None,
             flow_stress_scale: None,
             scale_by_half: None,
+            model_residual: None,
+            model_residual_by_phase: None,
             at_bound: AtBound::new(),
             billet: Default::default(),
         }

@@ -18,7 +18,7 @@ use crate::identify::model::default_prior;
 use crate::physics::blow::{SimOptions, TraceEnd, simulate_blow_sensor_until};
 use crate::physics::effects::EffectSet;
 use crate::physics::integrator::Method;
-use crate::physics::load_filter::LoadFilter;
+use crate::physics::load_filter::{self, LoadFilter};
 use crate::physics::machine::{Machine, MachineKind};
 use crate::physics::plant::Plant;
 use crate::physics::process::{CALIPER_TOLERANCE_M, Process};
@@ -29,9 +29,6 @@ use crate::signal::spectrum::{Mode, Spectrum, SpectrumPlanner, blow_modes};
 
 /// Fraction of the measured peak where the two blows are aligned.
 pub const ALIGN_FRACTION: f64 = 0.10;
-/// The simulated trace's step at most, s, where it passes a declared anti-alias filter
-/// (`LoadFilter`): 1/40 of a 4 kHz cut-off's period.
-pub const TRACE_STEP_S: f64 = 1e-5;
 /// And at least this many steps to a sample: a filter at 0.4 of the rate then sees ten
 /// steps to its cut-off's period.
 const FILTER_STEPS: f64 = 4.0;
@@ -520,9 +517,9 @@ impl Objective {
                 _ => Plant::new(machine, &self.effects, None, 0.0),
             };
             // Through a declared anti-alias filter, the trace on a step fine enough for the
-            // filter (`TRACE_STEP_S`); else read at the samples.
+            // filter (`load_filter::MAX_STEP_S`); else read at the samples.
             let filtered = self.effects.load_filter != LoadFilter::None;
-            let over = if filtered { (r.dt_s / TRACE_STEP_S).max(FILTER_STEPS).ceil() as usize } else { 1 };
+            let over = if filtered { (r.dt_s / load_filter::MAX_STEP_S).max(FILTER_STEPS).ceil() as usize } else { 1 };
             let fine_dt = r.dt_s / over as f64;
             let opts = SimOptions {
                 method: Method::Dopri5 { rtol: FIT_RTOL },
@@ -536,7 +533,7 @@ impl Objective {
             let (res, trace) = simulate_blow_sensor_until(&plant, r.v0_mps, &opts, end).ok()?;
             h = res.forming.map(|f| f.h_end_m).or(h);
             // The DAQ's view: its anti-alias filter as the machine file declares it.
-            let trace = self.effects.load_filter.apply(&trace, fine_dt, over);
+            let trace = self.effects.load_filter.apply(&trace, fine_dt, r.dt_s);
             let (load, t_cross) = aligned(&trace, fine_dt, over, r.load_n.len(), threshold, r.t_align_s);
             let spectrum =
                 SIM_PLANNER.with_borrow_mut(|p| p.amplitudes_up_to(&load, r.dt_s, PAD_FACTOR, 0, self.f_max_hz));

@@ -1,6 +1,8 @@
 //! The DAQ's anti-alias filter on the load channel, as a machine file declares it (`[daq]`,
 //! `config::machine`): what a model's load trace passes through before the fits compare it
-//! with the measured samples (`identify::objective`). At 10 kHz the hammer's 1.6 kHz ring
+//! with the measured samples (`identify::objective`, and the estimator's `estimate::fit`,
+//! which also passes the acceleration through it and takes out its delay at low
+//! frequencies, `dc_delay_s`). At 10 kHz the hammer's 1.6 kHz ring
 //! and its impact edge lie within the filter's reach: the renderer of `tests/independent`
 //! (two second-order Butterworths at 0.4 × the rate) left a clean machine's load error at
 //! 3.3 % of the peak against a model without the filter, 0.2 % without the filter in the
@@ -14,6 +16,11 @@ use std::f64::consts::PI;
 
 use nalgebra::{Matrix2, Vector2};
 
+/// The step a model's load trace is integrated on at most, s, where it passes a declared
+/// filter (`LoadFilter::apply` holds the load over each step): 1/40 of a 4 kHz cut-off's
+/// period, the hammer's 1.6 kHz ring held over 1/60 of its own.
+pub const MAX_STEP_S: f64 = 1e-5;
+
 /// The load channel's anti-alias filter. Cut-offs are fractions of the sample rate.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum LoadFilter {
@@ -25,13 +32,13 @@ pub enum LoadFilter {
 }
 
 impl LoadFilter {
-    /// `trace` (every `fine_dt`, `over` fine steps to a sample, zero before its first point)
-    /// through the filter.
-    pub fn apply(&self, trace: &[f64], fine_dt: f64, over: usize) -> Vec<f64> {
+    /// `trace` (every `fine_dt`, zero before its first point) through the filter of a DAQ
+    /// that samples every `period_s`.
+    pub fn apply(&self, trace: &[f64], fine_dt: f64, period_s: f64) -> Vec<f64> {
         match *self {
             LoadFilter::None => trace.to_vec(),
             LoadFilter::Butterworth { order, cascade, cutoff } => {
-                let w = 2.0 * PI * cutoff / (over as f64 * fine_dt);
+                let w = 2.0 * PI * cutoff / period_s;
                 let mut y = trace.to_vec();
                 for _ in 0..cascade {
                     for q in butterworth_qs(order) {
@@ -48,6 +55,20 @@ impl LoadFilter {
 }
 
 impl LoadFilter {
+    /// The filter's delay at low frequencies, s, for a DAQ that samples every `period_s`:
+    /// the group delay at DC, 1/(q ω) for each pole pair and 1/ω for a real pole. A slow
+    /// signal (an encoder's position, the load's forming) comes out this late.
+    pub fn dc_delay_s(&self, period_s: f64) -> f64 {
+        match *self {
+            LoadFilter::None => 0.0,
+            LoadFilter::Butterworth { order, cascade, cutoff } => {
+                let w = 2.0 * PI * cutoff / period_s;
+                let one: f64 = butterworth_qs(order).iter().map(|q| q.map_or(1.0 / w, |q| 1.0 / (q * w))).sum();
+                cascade as f64 * one
+            }
+        }
+    }
+
     /// The machine file's `[daq]` table for this filter (empty for none).
     pub fn to_toml(&self) -> String {
         match *self {
@@ -113,7 +134,7 @@ mod tests {
         let (over, dt) = (10, 1e-6);
         let f_hz = f_rel / (over as f64 * dt);
         let u: Vec<f64> = (0..20000).map(|i| (2.0 * PI * f_hz * i as f64 * dt).sin()).collect();
-        let y = f.apply(&u, dt, over);
+        let y = f.apply(&u, dt, over as f64 * dt);
         y[15000..].iter().fold(0.0_f64, |m, v| m.max(v.abs()))
     }
 
@@ -130,11 +151,23 @@ mod tests {
         }
     }
 
+    /// A ramp comes out late by the DC delay, once the start has settled.
+    #[test]
+    fn a_ramp_lags_by_the_dc_delay() {
+        let (dt, period) = (1e-6, 1e-4);
+        let f = LoadFilter::Butterworth { order: 3, cascade: 2, cutoff: 0.4 };
+        let u: Vec<f64> = (0..20000).map(|i| i as f64 * dt).collect();
+        let y = f.apply(&u, dt, period);
+        let lag = u[19999] - y[19999];
+        let want = f.dc_delay_s(period);
+        assert!((lag - want).abs() < 1e-3 * want, "{lag} against {want}");
+    }
+
     #[test]
     fn a_step_settles_at_unit_gain_and_none_passes_the_trace() {
         let u = vec![1.0; 5000];
-        let y = LoadFilter::Butterworth { order: 4, cascade: 1, cutoff: 0.4 }.apply(&u, 1e-6, 10);
+        let y = LoadFilter::Butterworth { order: 4, cascade: 1, cutoff: 0.4 }.apply(&u, 1e-6, 1e-5);
         assert!((y[4999] - 1.0).abs() < 1e-9 && y[0] < 0.01, "{} {}", y[0], y[4999]);
-        assert_eq!(LoadFilter::None.apply(&u, 1e-6, 10), u);
+        assert_eq!(LoadFilter::None.apply(&u, 1e-6, 1e-5), u);
     }
 }

@@ -13,6 +13,7 @@ use prost::Message;
 
 use crate::alert::{Alert, AlertKind};
 use crate::estimate::billet::BilletCheck;
+use crate::estimate::fit::PhaseResidual;
 use crate::estimate::plausibility::{Check, Implausible};
 use crate::estimate::{BilletTag, BlowClass, BlowEstimate, HeightCheck, HeightSource};
 use crate::signal::sample::{Role, SampleBatch};
@@ -271,6 +272,12 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
         reason: r.implausible.as_ref().map(|i| i.reason.clone()),
         at_bound: r.at_bound.iter().map(|(k, v)| (k.clone(), *v)).collect(),
         flow_stress_scale: r.flow_stress_scale,
+        model_residual: r.model_residual,
+        model_residual_by_phase: r.model_residual_by_phase.map(|p| pb::PhaseResidual {
+            impact: p.impact,
+            forming: p.forming,
+            spring_back: p.spring_back,
+        }),
         judgement: r.judgement.as_ref().map(|j| pb::Judgement {
             ok: j.ok,
             recipe: j.recipe.clone(),
@@ -330,6 +337,12 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
         implausible,
         flow_stress_scale: r.flow_stress_scale,
         scale_by_half: None,
+        model_residual: r.model_residual,
+        model_residual_by_phase: r.model_residual_by_phase.map(|p| PhaseResidual {
+            impact: p.impact,
+            forming: p.forming,
+            spring_back: p.spring_back,
+        }),
         at_bound: r.at_bound.into_iter().collect(),
     })
 }
@@ -561,6 +574,12 @@ mod tests {
             implausible: None,
             flow_stress_scale: with_optional.then_some(1.04),
             scale_by_half: None,
+            model_residual: with_optional.then_some(0.004),
+            model_residual_by_phase: with_optional.then_some(PhaseResidual {
+                impact: 0.001,
+                forming: 0.005,
+                spring_back: 0.002,
+            }),
             at_bound: if with_optional { [("damped_J".to_string(), -3.5)].into() } else { Default::default() },
             height_check: with_optional.then_some(HeightCheck {
                 sheet_m: 0.0150,
