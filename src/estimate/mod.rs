@@ -21,6 +21,7 @@ pub mod curve;
 pub mod decimate;
 mod energies;
 pub mod fit;
+mod model_fit;
 pub mod observer;
 pub mod plausibility;
 pub mod result;
@@ -36,9 +37,10 @@ use crate::physics::effects::EffectSet;
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
 use crate::signal::segment::Blow;
-use approach::{ApproachError, ApproachFit, fit_impact_speed};
+use approach::{ApproachError, fit_impact_speed};
 use billet::{BilletCheck, BilletDetect};
 pub use contact::contact_between_samples;
+use model_fit::FitStart;
 use track::{Continuity, LastEnd};
 
 /// A tracked billet height below this fraction of the sheet's is impossible for an upset
@@ -561,53 +563,6 @@ impl Estimator {
         contact_between_samples(blow, rise.as_ref())
     }
 
-    /// The model fitted to `blow` from start height `h0_m` (`None`: it could not be, or
-    /// its residuals say it did not fit, `fit::MAX_GOOD_RMS`, and the observer takes the
-    /// blow). A fit that ran, good or not, leaves its residual in `check`.
-    fn fit(
-        &self,
-        blow: &Blow,
-        approach: ApproachFit,
-        start: FitStart,
-        check: &mut Option<fit::ModelResidual>,
-    ) -> Option<fit::ModelFit> {
-        let FitStart { h0_m, scale0, delta0, search_contact, blow_index } = start;
-        let process = self.billet_process.as_ref()?;
-        // Above the fit's rate, a decimated copy: contact counts in its coarser samples.
-        let f = decimate::factor(blow.period_s);
-        let coarse = decimate::decimate(blow, f);
-        let effects = self.model_effects();
-        let problem = fit::FitProblem {
-            machine: &self.machine,
-            effects: &effects,
-            process,
-            blow_index,
-            h_start_m: h0_m,
-            blow: &coarse,
-            daq_period_s: blow.period_s,
-            approach,
-        };
-        // Above the fit's rate the locator's contact, found in the finer samples, is already
-        // within a fraction of a coarse sample: no second start is needed to find the basin
-        // (it halved the hammer's 100 kHz latency, 10.8 to 6.4 ms, with the same results on
-        // the tuning seeds of `tests/estimate_rates.rs`).
-        let search = search_contact && f == 1;
-        let mut m = fit::fit_blow(&problem, self.cfg.encoder_resolution_m, scale0, delta0 / f as f64, search).ok()?;
-        // The check is the load's own best fit: where the fit to all three channels leaves
-        // more than `fit::CONFIRM_RESIDUAL`, the model is fitted to the load and the
-        // acceleration alone, and the smaller residual is the blow's.
-        let mut residual = m.residual;
-        if residual.load > fit::CONFIRM_RESIDUAL
-            && let Ok(r) = fit::analogue_residual(&problem, self.cfg.encoder_resolution_m, m.scale, m.contact_samples)
-            && r.load < residual.load
-        {
-            residual = r;
-        }
-        *check = Some(residual);
-        m.contact_samples *= f as f64;
-        (m.rms <= fit::MAX_GOOD_RMS).then_some(m)
-    }
-
     /// Time lost inside the blow: interpolated samples from the start of the approach fit
     /// to the blow's end, and any time cut off by a break in the stream.
     fn gap_s(&self, blow: &Blow) -> f64 {
@@ -628,19 +583,6 @@ impl Estimator {
     fn contact_tolerance_m(&self, sample_travel_m: f64) -> f64 {
         self.cfg.encoder_resolution_m + self.cfg.caliper_resolution_m + sample_travel_m
     }
-}
-
-/// Where a blow's model fit starts: the start height, the flow-stress scale, the contact in
-/// samples after the segmenter's contact sample, and whether the contact is searched from the
-/// encoder's optimum as well (`fit::fit_blow`); and the blow's 1-based index on its billet
-/// (the fits before the blow is counted on its billet and after it).
-#[derive(Debug, Clone, Copy)]
-struct FitStart {
-    h0_m: f64,
-    scale0: f64,
-    delta0: f64,
-    search_contact: bool,
-    blow_index: usize,
 }
 
 /// The first machine-side effect of `effects` that the observer does not model and the
