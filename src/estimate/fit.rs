@@ -155,6 +155,8 @@ struct Setup<'a> {
     p: &'a FitProblem<'a>,
     /// Model points per sample (`OVERSAMPLE`, more under a declared filter).
     os: usize,
+    /// Whether `p.blow` is a decimated copy of what the DAQ sampled (`decimate`).
+    decimated: bool,
     aa: LowPass,
     lp: LowPass,
     /// Window of samples [k0, k1] (indices into the blow) and the LP'd measured channels on it.
@@ -197,6 +199,7 @@ impl<'a> Setup<'a> {
         Ok(Setup {
             p,
             os,
+            decimated: (b.period_s / p.daq_period_s).round() as usize > 1,
             sd_x: encoder_resolution_m.max(1e-6),
             sd_load: (PEAK_FRACTION_SD * peak(&load_meas)).max(1.0),
             sd_acc: (PEAK_FRACTION_SD * peak(&acc_meas)).max(1e-3),
@@ -288,7 +291,7 @@ impl<'a> Setup<'a> {
             let lead = filter.dc_delay_s(self.p.daq_period_s) / fine_dt;
             let y = resample::shifted(&filter.apply(&from_rest, fine_dt, self.p.daq_period_s), v.len(), lead);
             let y: Vec<f64> = y.iter().map(|x| x + v0).collect();
-            if self.p.daq_period_s < 0.75 * dt {
+            if self.decimated {
                 (0..m).map(|k| self.aa.at(&y, centre(k))).collect()
             } else {
                 (0..m).map(|k| y[centre(k)]).collect()
@@ -296,7 +299,6 @@ impl<'a> Setup<'a> {
         };
         let load_s = analogue(&load);
         let acc_s = analogue(&acc);
-
         let load_lp = self.lp.apply(&load_s);
         let acc_lp = self.lp.apply(&acc_s);
         let first = self.lp.half();
