@@ -117,8 +117,10 @@ fn table() {
 /// `EFFICIENCY_TOL` of the truth. The whole table, the press at 100 kHz and the press
 /// without an effect too (15 min on 2 cores), is `table` above. The machine files declare
 /// the renderer's anti-alias filter (`independent::HAMMER`): without it the hammer's
-/// foundation at 10 kHz got verdict none (shrink 0.28). One case misses the goal:
-/// `KNOWN_MISSES`, held to a fifth of its base error and listed.
+/// foundation at 10 kHz got verdict none (shrink 0.28). The closest to the goal is the
+/// hammer's rising friction at 10 kHz: 0.019 against a base error of 0.216 (its exponent
+/// fitted at 0.76 there, 0.80 at 100 kHz, hidden 0.8; 0.020–0.021 before the estimator
+/// read `[daq]`).
 #[test]
 fn an_adopted_verdict_brings_every_holdout_blow_within_0_02_of_the_truth() {
     let mut failures = Vec::new();
@@ -134,9 +136,7 @@ fn an_adopted_verdict_brings_every_holdout_blow_within_0_02_of_the_truth() {
             let (verdict, base, adopted) = case(kind, hidden, khz, 36);
             println!("{name:<20} {khz:>5} kHz  verdict {verdict:<20} base {base:.3}  adopted {adopted:.3}");
             let named = hidden == Hidden::None || verdict == hidden.library_name();
-            let known = KNOWN_MISSES.contains(&(name, khz));
-            let close = adopted <= EFFICIENCY_TOL || (known && adopted <= 0.2 * base);
-            if !named || !close {
+            if !named || adopted > EFFICIENCY_TOL {
                 failures.push(format!(
                     "{name} at {khz} kHz: verdict {verdict}, adopted error {adopted:.3} (base {base:.3})"
                 ));
@@ -145,11 +145,6 @@ fn an_adopted_verdict_brings_every_holdout_blow_within_0_02_of_the_truth() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
-
-/// Cases on the edge of `EFFICIENCY_TOL`: the hammer's rising friction at 10 kHz, 0.020 to
-/// 0.021 against a base error of 0.216 since its machine file declares the anti-alias
-/// filter (exponent 0.76 fitted at 10 kHz, 0.80 at 100 kHz, hidden 0.8).
-const KNOWN_MISSES: [(&str, f64); 1] = [("hammer-friction", 10.0)];
 
 /// Issue 16's accuracy target for a blow's efficiency (`tests/estimate_rates.rs`), which
 /// issue 37 asks of the adopted model.
