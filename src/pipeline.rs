@@ -9,7 +9,8 @@ use crate::estimate::curve::BlowCurve;
 use crate::estimate::{BlowEstimate, EstimateError, Estimator, EstimatorConfig};
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
-use crate::recipe::{Recipe, Signature, signature};
+use crate::recipe::{Estimated, Recipe, Signature, signature};
+use crate::record::BlowBoundary;
 use crate::signal::sample::SampleBatch;
 use crate::signal::segment::{Blow, SegmentConfig, SegmentStats, Segmenter};
 
@@ -21,6 +22,19 @@ pub struct Cut {
     pub t_contact_s: f64,
     pub t_end_s: f64,
     pub source: std::sync::Arc<str>,
+}
+
+impl Cut {
+    /// The recording's boundary of this cut as blow `blow` (the source left unnamed).
+    pub fn boundary(&self, blow: u32) -> BlowBoundary {
+        BlowBoundary {
+            blow,
+            t_trigger_s: self.t_trigger_s,
+            t_contact_s: self.t_contact_s,
+            t_end_s: self.t_end_s,
+            source: String::new(),
+        }
+    }
 }
 
 /// What the pipeline reports.
@@ -213,7 +227,15 @@ impl Pipeline {
                         self.alerts.reset();
                     }
                     let sig = (self.recipe.is_some() || self.signatures.is_some())
-                        .then(|| signature(&blow, &estimate, self.ring_period_s))
+                        .then(|| {
+                            let e = Estimated {
+                                efficiency: estimate.efficiency,
+                                plastic_j: estimate.plastic_j,
+                                peak_load_n: estimate.peak_load_n,
+                                t_contact_s: estimate.t_contact_s,
+                            };
+                            signature(&blow, e, self.ring_period_s)
+                        })
                         .flatten();
                     if let (Some(r), Some(sig)) = (&self.recipe, &sig) {
                         estimate.judgement = Some(r.judge(estimate.billet.billet_blow, sig));

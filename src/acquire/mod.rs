@@ -10,7 +10,7 @@ pub mod can;
 pub mod modbus;
 pub mod serial;
 
-use crate::record::{Gap, Status};
+use crate::signal::sample::{Gap, Status};
 use crate::signal::sample::{Role, SampleBatch};
 
 /// What a transport hands the service.

@@ -440,3 +440,29 @@ fn unreachable(mut plan: Plan, req: &PlanRequest, tried: &[f64], adv: &Advisor<'
     });
     plan
 }
+/// The advice after a billet's latest blow, as `/status` serves it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Advice {
+    /// The billet planned for (0: the next billet, before its first blow).
+    pub billet: u32,
+    /// Its blows so far; the plan's first blow is the next one.
+    pub after_blow: u32,
+    /// The plan (CONTRACTS §9, as `forgemon advise --json` prints it); `None` when it is not
+    /// known, with the reason in `why_not`.
+    pub plan: Option<Plan>,
+    pub why_not: Option<String>,
+    /// How long the plan took, ms.
+    pub planned_ms: f64,
+}
+
+impl Advice {
+    /// Blows still needed to reach the target, when a plan reaches it.
+    pub fn blows_to_target(&self) -> Option<usize> {
+        self.plan.as_ref().filter(|p| p.reachable).and_then(|p| p.blows_to_target)
+    }
+
+    /// The next blow's advised kinetic energy, J, when there is a next blow to strike.
+    pub fn next_kinetic_j(&self) -> Option<f64> {
+        self.plan.as_ref().filter(|p| p.reachable).and_then(|p| p.plan.first()).map(|b| b.kinetic_j)
+    }
+}

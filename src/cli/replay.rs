@@ -19,7 +19,7 @@ use crate::daemon::{
 use crate::estimate::EncoderDirection;
 use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline, PipelineEvent};
-use crate::record::{BlowBoundary, Payload, RecordReader, RecordWriter, Rotation};
+use crate::record::{Payload, RecordReader, RecordWriter, Rotation};
 use crate::signal::merge::Merger;
 use crate::signal::sample::SampleBatch;
 
@@ -311,7 +311,7 @@ impl<W: Write> Replay<W> {
                     self.blows += 1;
                     if let Some(rec) = self.writer.as_mut() {
                         let t_ns = (cut.t_end_s * 1e9).round() as i64;
-                        rec.write_payload(t_ns, &Payload::Boundary(BlowBoundary::of(estimate.blow, &cut)))?;
+                        rec.write_payload(t_ns, &Payload::Boundary(cut.boundary(estimate.blow)))?;
                         rec.write_result(t_ns, &estimate)?;
                         if let Some(a) = &estimate.alert {
                             rec.write_alert(t_ns, a)?;

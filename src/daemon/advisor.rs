@@ -12,44 +12,17 @@
 use std::sync::Arc;
 
 use anyhow::Context;
-use serde::Serialize;
 use tokio::sync::broadcast;
 
 use super::live::{Live, LiveEvent};
 use super::status::SharedStatus;
-use crate::advise::{Advisor, Plan, PlanRequest};
+pub use crate::advise::Advice;
+use crate::advise::{Advisor, PlanRequest};
 use crate::config::advisor::AdvisorConfig;
 use crate::estimate::BlowEstimate;
 use crate::physics::effects::EffectSet;
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
-
-/// The advice after a billet's latest blow, as `/status` serves it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Advice {
-    /// The billet planned for (0: the next billet, before its first blow).
-    pub billet: u32,
-    /// Its blows so far; the plan's first blow is the next one.
-    pub after_blow: u32,
-    /// The plan (CONTRACTS §9, as `forgemon advise --json` prints it); `None` when it is not
-    /// known, with the reason in `why_not`.
-    pub plan: Option<Plan>,
-    pub why_not: Option<String>,
-    /// How long the plan took, ms.
-    pub planned_ms: f64,
-}
-
-impl Advice {
-    /// Blows still needed to reach the target, when a plan reaches it.
-    pub fn blows_to_target(&self) -> Option<usize> {
-        self.plan.as_ref().filter(|p| p.reachable).and_then(|p| p.blows_to_target)
-    }
-
-    /// The next blow's advised kinetic energy, J, when there is a next blow to strike.
-    pub fn next_kinetic_j(&self) -> Option<f64> {
-        self.plan.as_ref().filter(|p| p.reachable).and_then(|p| p.plan.first()).map(|b| b.kinetic_j)
-    }
-}
 
 /// What the advisor plans with, owned so that a plan runs on a blocking thread.
 struct Model {

@@ -24,7 +24,7 @@ pub enum LiveEvent {
     /// A new billet is in the dies.
     NewBillet,
     /// The advisor replanned the billet's next blows (`advisor.rs`).
-    Advice(Arc<super::advisor::Advice>),
+    Advice(Arc<crate::advise::Advice>),
     /// The latched alert was acknowledged (`POST /ack`, the PLC's coil 0).
     Acknowledged,
 }

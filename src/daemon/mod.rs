@@ -164,9 +164,12 @@ pub async fn serve(
     let live = live::Live::default();
     let token = dashboard::auth::Token::read(cfg.http_token_file.as_deref())?;
     let (recipe_tx, mut recipe_rx) = mpsc::channel::<recipe_switch::RecipeChange>(4);
-    let recipes = recipe_switch::routes(recipe_tx, parts.machine.kind().as_str());
-    let http =
-        tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone(), live.clone(), token, recipes));
+    let pages = recipe_switch::routes(recipe_tx, parts.machine.kind().as_str()).merge(dashboard::routes(
+        status.clone(),
+        control_tx.clone(),
+        live.clone(),
+    ));
+    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone(), token, pages));
     // The Foxglove live view: the recorder's tap feeds it; it stops when `serve` returns.
     let _foxglove = match cfg.foxglove_listen {
         Some(addr) => Some(foxglove::start(addr, &mut writer).await?),

@@ -13,7 +13,7 @@ use crate::acquire::SourceEvent;
 use crate::estimate::BlowEstimate;
 use crate::estimate::billet_book::BilletSummary;
 use crate::pipeline::{Feeder, PipelineEvent};
-use crate::record::{BlowBoundary, Gap, Payload, RecordError, RecordWriter};
+use crate::record::{Gap, Payload, RecordError, RecordWriter};
 use crate::signal::merge::Merger;
 use crate::signal::sample::SampleBatch;
 
@@ -225,9 +225,7 @@ impl Service {
         for e in events {
             match e {
                 PipelineEvent::Blow { cut, estimate } => {
-                    let r = self
-                        .writer
-                        .write_payload(log_time_ns, &Payload::Boundary(BlowBoundary::of(estimate.blow, &cut)));
+                    let r = self.writer.write_payload(log_time_ns, &Payload::Boundary(cut.boundary(estimate.blow)));
                     self.recorded("a blow's boundary", r);
                     self.on_blow(&estimate, log_time_ns);
                 }

@@ -26,7 +26,6 @@ use crate::signal::sample::SampleBatch;
 
 use super::dashboard::auth::{Token, require_token};
 use super::dashboard::board::Board;
-use super::live::Live;
 
 /// Shared between the service loop and the HTTP handlers.
 pub type SharedStatus = Arc<Mutex<StatusSnapshot>>;
@@ -86,7 +85,7 @@ pub struct StatusSnapshot {
     pub recipe: Option<String>,
     /// The live advisor's plan for the billet's next blows (`[advisor]`), `None` without
     /// one.
-    pub advice: Option<super::advisor::Advice>,
+    pub advice: Option<crate::advise::Advice>,
     /// From the host receiving the samples that ended the last blow to its result, ms.
     pub last_result_latency_ms: Option<f64>,
     /// From the host receiving the samples that ended the last alerting blow to the
@@ -334,14 +333,13 @@ async fn new_billet(State(tx): State<tokio::sync::mpsc::Sender<super::Control>>)
     }
 }
 
-/// Serve `GET /status`, `GET /metrics`, `POST /billet`, the dashboard (`GET /`, its state
-/// and events, `POST /ack`) and `more` (`POST /recipe`) on an already bound listener; with a
+/// Serve `GET /status`, `GET /metrics`, `POST /billet` and `more` (the dashboard's `GET /`,
+/// its state and events, `POST /ack`; `POST /recipe`) on an already bound listener; with a
 /// token, only to requests that present it.
 pub async fn serve_http(
     listener: tokio::net::TcpListener,
     status: SharedStatus,
     control: tokio::sync::mpsc::Sender<super::Control>,
-    live: Live,
     token: Option<Token>,
     more: Router,
 ) {
@@ -349,8 +347,7 @@ pub async fn serve_http(
         .route("/status", get(status_json))
         .route("/metrics", get(metrics_text))
         .with_state(status.clone())
-        .merge(Router::new().route("/billet", post(new_billet)).with_state(control.clone()))
-        .merge(super::dashboard::routes(status, control, live))
+        .merge(Router::new().route("/billet", post(new_billet)).with_state(control))
         .merge(more)
         .layer(axum::middleware::from_fn_with_state(token, require_token));
     if let Err(e) = axum::serve(listener, app).await {

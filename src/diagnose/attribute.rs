@@ -19,8 +19,8 @@ use crate::physics::billet::{BilletLaw, LoadEffects};
 use crate::physics::effects::{DEFAULT_EPS_REF, DEFAULT_RATE_REF_PER_S, Effect, EffectSet};
 use crate::physics::machine::{Machine, MachineKind};
 
+use super::evidence::MIN_PAIR_SHRINK;
 use super::localise::nrmse;
-use super::verdict::MIN_PAIR_SHRINK;
 
 /// One library effect: all its parameters fitted (issue #17 item 5: the whole family),
 /// with their bounds, the coarse grid the global stage searches, and the effect they give.

@@ -91,6 +91,11 @@ pub fn equivalent(best: &[f64], other: &[f64]) -> bool {
     Comparison::of(other, best).is_some_and(|c| !c.significant())
 }
 
+/// Smallest further shrink of a pair over its single effect. Set from the withheld-effect
+/// suite (a lone clearance leaves a misfit that a friction exponent halves; a true second
+/// effect removes ~98 % of it).
+pub const MIN_PAIR_SHRINK: f64 = 0.8;
+
 #[cfg(test)]
 mod tests {
     use super::*;

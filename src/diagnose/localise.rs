@@ -22,13 +22,12 @@ use crate::physics::machine::Machine;
 use crate::signal::segment::Blow;
 
 use super::location::Location;
+pub use super::phases::{IMPACT_FRACTION, Phases};
 
 /// Kept after the load returns to zero, s (CONTRACTS.md §6).
 pub const POST_S: f64 = 5e-3;
 /// The load has returned to zero when it falls below this fraction of the peak.
 pub const ZERO_FRACTION: f64 = 0.02;
-/// `impact` is this fraction of the forming time.
-pub const IMPACT_FRACTION: f64 = 0.10;
 
 /// RMS error by phase, fraction of the peak.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
@@ -97,41 +96,6 @@ pub struct Localised {
     pub model: Phases,
     /// The error phase with phase, each on its own time (`location`).
     pub location: Location,
-}
-
-/// A blow's phase boundaries, sample indices: first contact, end of impact, end of forming,
-/// load back at zero, end of `post`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Phases(pub [usize; 5]);
-
-impl Phases {
-    /// Boundaries from first contact and the end of forming, with the load back at zero the
-    /// first sample of `load` below `threshold` from the end of forming (or from `not_before`).
-    fn new(contact: usize, forming_end: usize, load: &[f64], threshold: f64, not_before: usize, post: usize) -> Phases {
-        let n = load.len();
-        let contact = contact.min(n);
-        let forming_end = forming_end.clamp(contact, n);
-        let impact_end = contact + ((forming_end - contact) as f64 * IMPACT_FRACTION).round() as usize;
-        let zero = (forming_end.max(not_before)..n).find(|&i| load[i] < threshold).unwrap_or(n);
-        Phases([contact, impact_end, forming_end, zero, (zero + post).min(n)])
-    }
-
-    /// The phase sample `i` is in: -1 before contact, 0..=3 the four phases, 4 after.
-    fn of(&self, i: usize) -> i32 {
-        (0..5).rev().find(|&k| i >= self.0[k]).map_or(-1, |k| k as i32)
-    }
-
-    pub fn contact(&self) -> usize {
-        self.0[0]
-    }
-
-    pub fn forming_end(&self) -> usize {
-        self.0[2]
-    }
-
-    pub fn zero(&self) -> usize {
-        self.0[3]
-    }
 }
 
 /// A measured blow as `diagnose` compares it with the model: over the contract's window

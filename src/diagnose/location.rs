@@ -32,7 +32,7 @@
 
 use serde::Serialize;
 
-use super::localise::Phases;
+use super::phases::Phases;
 
 /// The method, as the report states it.
 pub const METHOD: &str = "phase_aligned: each phase of the measured and the modelled blow on its own normalised time; \

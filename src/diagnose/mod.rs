@@ -11,6 +11,7 @@ pub mod evidence;
 pub mod indicators;
 pub mod localise;
 pub mod location;
+pub mod phases;
 #[cfg(test)]
 mod rates;
 pub mod verdict;

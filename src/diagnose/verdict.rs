@@ -29,10 +29,7 @@ use super::evidence::{ALPHA, equivalent, improves};
 pub const NOISE_FACTOR: f64 = 2.0;
 /// Smallest holdout shrink that counts.
 pub const MIN_SHRINK: f64 = 0.2;
-/// Smallest further shrink of a pair over its single effect. Set from the withheld-effect
-/// suite (a lone clearance leaves a misfit that a friction exponent halves; a true second
-/// effect removes ~98 % of it).
-pub const MIN_PAIR_SHRINK: f64 = 0.8;
+pub use super::evidence::MIN_PAIR_SHRINK;
 /// A fitted foundation lighter than this share of the lower tool moves with it: the mass
 /// on a spring under the tool acts as a spring in series with the contact.
 pub const SERIES_SPRING_MASS_FRACTION: f64 = 0.05;

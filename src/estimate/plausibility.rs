@@ -12,11 +12,8 @@
 //! `reason` names the value and its range. A value is never clamped into range and passed
 //! off. Pure code.
 
-use std::collections::BTreeMap;
-
-use serde::Serialize;
-
-use super::result::{AlertKind, BlowClass, BlowEstimate};
+pub use super::result::{AtBound, Check, Implausible};
+use super::result::{BlowClass, BlowEstimate};
 use crate::physics::machine::MachineKind;
 
 /// The fastest impact a gravity drop hammer reaches, m/s: free fall from 2.5 m (the tallest
@@ -67,69 +64,6 @@ pub struct Ranges {
     /// How far a height may sit above its bound and be the measurement's scatter, m (the
     /// encoder's and caliper's resolutions and one sample's travel).
     pub height_tolerance_m: f64,
-}
-
-/// Which check a blow failed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Check {
-    ImpactSpeed,
-    StartHeight,
-    EndHeight,
-    Energy,
-    Efficiency,
-    Balance,
-    FinalLoad,
-}
-
-impl Check {
-    pub const ALL: [Check; 7] = [
-        Check::ImpactSpeed,
-        Check::StartHeight,
-        Check::EndHeight,
-        Check::Energy,
-        Check::Efficiency,
-        Check::Balance,
-        Check::FinalLoad,
-    ];
-
-    pub fn as_str(&self) -> &'static str {
-        match self {
-            Check::ImpactSpeed => "impact_speed",
-            Check::StartHeight => "start_height",
-            Check::EndHeight => "end_height",
-            Check::Energy => "energy",
-            Check::Efficiency => "efficiency",
-            Check::Balance => "balance",
-            Check::FinalLoad => "final_load",
-        }
-    }
-
-    pub fn parse(s: &str) -> Option<Self> {
-        Check::ALL.into_iter().find(|c| c.as_str() == s)
-    }
-
-    /// The alert a billet with such a blow raises: an input out of range (the encoder, the
-    /// clock) is a sensor matter, an output out of range a model matter.
-    pub fn alert_kind(&self) -> AlertKind {
-        match self {
-            Check::ImpactSpeed | Check::StartHeight | Check::FinalLoad => AlertKind::Sensor,
-            Check::EndHeight | Check::Energy | Check::Efficiency | Check::Balance => AlertKind::ModelHealth,
-        }
-    }
-}
-
-/// Why a blow is implausible: the check it failed and, in words, the value and its range.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Implausible {
-    pub check: Check,
-    pub reason: String,
-}
-
-impl Implausible {
-    fn new(check: Check, reason: String) -> Self {
-        Implausible { check, reason }
-    }
 }
 
 /// Check `e` against `r`. On success the values within the scatter of a bound are set to it
@@ -300,9 +234,6 @@ fn set(e: &mut BlowEstimate, field: &str, x: f64) {
         _ => unreachable!("settle bounds only the fields of `check`"),
     }
 }
-
-/// The raw values of the fields reported at a bound, by name (JSON `at_bound`).
-pub type AtBound = BTreeMap<String, f64>;
 
 #[cfg(test)]
 mod tests {

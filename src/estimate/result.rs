@@ -6,7 +6,6 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use crate::estimate::billet::BilletCheck;
-use crate::estimate::plausibility::{AtBound, Implausible};
 
 /// Which rule fired.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -253,6 +252,72 @@ impl BlowEstimate {
 
 /// Blows with every field set, for the unit tests of what carries them (the recorder, the
 /// PLC image, the OPC UA event, the Sparkplug payload, the advisor).
+/// The raw values of the fields reported at a bound, by name (JSON `at_bound`).
+pub type AtBound = BTreeMap<String, f64>;
+
+/// Which check a blow failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Check {
+    ImpactSpeed,
+    StartHeight,
+    EndHeight,
+    Energy,
+    Efficiency,
+    Balance,
+    FinalLoad,
+}
+
+impl Check {
+    pub const ALL: [Check; 7] = [
+        Check::ImpactSpeed,
+        Check::StartHeight,
+        Check::EndHeight,
+        Check::Energy,
+        Check::Efficiency,
+        Check::Balance,
+        Check::FinalLoad,
+    ];
+
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Check::ImpactSpeed => "impact_speed",
+            Check::StartHeight => "start_height",
+            Check::EndHeight => "end_height",
+            Check::Energy => "energy",
+            Check::Efficiency => "efficiency",
+            Check::Balance => "balance",
+            Check::FinalLoad => "final_load",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        Check::ALL.into_iter().find(|c| c.as_str() == s)
+    }
+
+    /// The alert a billet with such a blow raises: an input out of range (the encoder, the
+    /// clock) is a sensor matter, an output out of range a model matter.
+    pub fn alert_kind(&self) -> AlertKind {
+        match self {
+            Check::ImpactSpeed | Check::StartHeight | Check::FinalLoad => AlertKind::Sensor,
+            Check::EndHeight | Check::Energy | Check::Efficiency | Check::Balance => AlertKind::ModelHealth,
+        }
+    }
+}
+
+/// Why a blow is implausible: the check it failed and, in words, the value and its range.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Implausible {
+    pub check: Check,
+    pub reason: String,
+}
+
+impl Implausible {
+    pub(super) fn new(check: Check, reason: String) -> Self {
+        Implausible { check, reason }
+    }
+}
+
 #[cfg(test)]
 pub(crate) mod examples {
     use super::*;

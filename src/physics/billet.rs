@@ -7,8 +7,6 @@
 
 use std::f64::consts::PI;
 
-use super::process::Process;
-
 /// Strain below which the flow-stress laws are evaluated at this floor.
 ///
 /// Hansel–Spittel's `eps^m2 * exp(m4/eps)` and the `strain_hardening` power law are zero
@@ -136,12 +134,6 @@ pub struct BilletLaw {
 }
 
 impl BilletLaw {
-    /// The law of `process`'s billet, material and friction for its blow `blow_index`
-    /// (1-based), with `effects`.
-    pub fn of(process: &Process, effects: LoadEffects, blow_index: usize) -> Self {
-        Self::new(process.billet.clone(), process.material.clone(), process.friction, effects, blow_index)
-    }
-
     /// The law for blow `blow_index` (1-based) of the sheet.
     pub fn new(
         geometry: BilletGeometry,

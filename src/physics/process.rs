@@ -1,6 +1,6 @@
 //! The process sheet as the physics uses it (CONTRACTS.md §2): one billet, blow after blow.
 
-use super::billet::{BilletGeometry, FlowStress};
+use super::billet::{BilletGeometry, BilletLaw, FlowStress, LoadEffects};
 use super::machine::MachineKind;
 
 /// How far a hand-measured height may rise above the one before it (or, after blow 1, above
@@ -23,4 +23,13 @@ pub struct Process {
     pub friction: f64,
     /// Measured height after each blow, m, in order (may be shorter than the blows).
     pub measured_final_heights_m: Vec<f64>,
+}
+
+/// The billet's law is the process's (the law itself knows no process sheet).
+impl BilletLaw {
+    /// The law of `process`'s billet, material and friction for its blow `blow_index`
+    /// (1-based), with `effects`.
+    pub fn of(process: &Process, effects: LoadEffects, blow_index: usize) -> Self {
+        Self::new(process.billet.clone(), process.material.clone(), process.friction, effects, blow_index)
+    }
 }

@@ -12,7 +12,7 @@ pub mod signature;
 
 use serde::Serialize;
 
-pub use signature::{Signature, signature};
+pub use signature::{Estimated, Signature, signature};
 
 /// Envelope points per blow.
 pub const ENVELOPE_POINTS: usize = 40;

@@ -3,7 +3,6 @@
 //! contact to the deepest point). The travel includes the machine's elastic give, the same
 //! on every blow of a machine, so the curve is a like-for-like fingerprint of the part.
 
-use crate::estimate::BlowEstimate;
 use crate::signal::segment::Blow;
 
 /// Most points kept of a curve.
@@ -41,11 +40,23 @@ impl Signature {
     }
 }
 
+/// What a recipe takes from a blow's estimate (`estimate::BlowEstimate`'s fields of the
+/// same names); `None` where the estimate has none, so that an incomplete blow has no
+/// signature.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimated {
+    pub efficiency: Option<f64>,
+    pub plastic_j: Option<f64>,
+    pub peak_load_n: f64,
+    /// First contact, device time, s.
+    pub t_contact_s: f64,
+}
+
 /// The signature of a blow estimated whole; `None` for an incomplete one (never judged).
 /// The load is averaged over `ring_period_s` centred on each sample (the machine's second
 /// mode, `Machine::second_mode_hz`): a box that long cancels the ring, whose phase moves
 /// from billet to billet, and keeps the forming load the recipe is about.
-pub fn signature(blow: &Blow, e: &BlowEstimate, ring_period_s: f64) -> Option<Signature> {
+pub fn signature(blow: &Blow, e: Estimated, ring_period_s: f64) -> Option<Signature> {
     let (efficiency, plastic_j) = (e.efficiency?, e.plastic_j?);
     let s = &blow.samples;
     let end = blow.i_end.min(s.len().checked_sub(1)?);

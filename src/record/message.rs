@@ -1,11 +1,12 @@
 //! What a recording holds, as typed values: the pipeline's own types (sample batches, blow
-//! estimates, alerts, billet summaries) plus the few that exist only to be recorded (blow boundaries, gaps,
-//! transport status, configuration files), and [`Recorded`], one message with its log time.
+//! estimates, alerts, billet summaries) plus the few that exist only to be recorded (blow boundaries; the gaps and
+//! transport status of `signal::sample`, re-exported here; configuration files), and [`Recorded`], one message with its log time.
 
 use crate::alert::Alert;
 use crate::estimate::BlowEstimate;
 use crate::estimate::billet_book::BilletSummary;
 use crate::signal::sample::SampleBatch;
+pub use crate::signal::sample::{Gap, Status};
 
 use super::schema::MessageKind;
 
@@ -21,47 +22,6 @@ pub struct BlowBoundary {
     pub t_end_s: f64,
     /// The source whose samples hold the blow.
     pub source: String,
-}
-
-impl BlowBoundary {
-    /// Blow `blow` as the pipeline cut it (the source left unnamed).
-    pub fn of(blow: u32, cut: &crate::pipeline::Cut) -> Self {
-        BlowBoundary {
-            blow,
-            t_trigger_s: cut.t_trigger_s,
-            t_contact_s: cut.t_contact_s,
-            t_end_s: cut.t_end_s,
-            source: String::new(),
-        }
-    }
-}
-
-/// Samples lost or dropped (topic `/gaps`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Gap {
-    pub source: String,
-    /// Device time of the gap, s.
-    pub t_s: f64,
-    pub samples_lost: u64,
-    /// Why: "sequence_jump", "crc", "overflow", "backpressure", ...
-    pub reason: String,
-}
-
-/// A source's state and counters since it started (topic `/status`).
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub struct Status {
-    pub source: String,
-    /// "connected", "reconnecting", "stopped", ...
-    pub state: String,
-    pub samples: u64,
-    pub frames: u64,
-    pub drops: u64,
-    pub gaps: u64,
-    pub crc_errors: u64,
-    pub decode_errors: u64,
-    pub reconnects: u64,
-    /// Free text: last error, port name, ...
-    pub detail: String,
 }
 
 /// A configuration file stored in the recording (topic `/config`): `machine.toml`,

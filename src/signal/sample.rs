@@ -83,3 +83,31 @@ impl SampleBatch {
         self.roles.iter().position(|r| *r == role)
     }
 }
+
+/// Samples lost or dropped (topic `/gaps`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Gap {
+    pub source: String,
+    /// Device time of the gap, s.
+    pub t_s: f64,
+    pub samples_lost: u64,
+    /// Why: "sequence_jump", "crc", "overflow", "backpressure", ...
+    pub reason: String,
+}
+
+/// A source's state and counters since it started (topic `/status`).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Status {
+    pub source: String,
+    /// "connected", "reconnecting", "stopped", ...
+    pub state: String,
+    pub samples: u64,
+    pub frames: u64,
+    pub drops: u64,
+    pub gaps: u64,
+    pub crc_errors: u64,
+    pub decode_errors: u64,
+    pub reconnects: u64,
+    /// Free text: last error, port name, ...
+    pub detail: String,
+}

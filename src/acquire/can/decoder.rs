@@ -9,7 +9,7 @@
 //! depend on where batches happen to start. Relative to the first frame they are exact.
 
 use crate::acquire::{Counters, SourceEvent};
-use crate::record::Gap;
+use crate::signal::sample::Gap;
 use crate::signal::sample::{Role, SampleBatch};
 
 use super::signal::{CanMapping, FrameId};

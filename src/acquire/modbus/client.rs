@@ -18,7 +18,7 @@ use tokio_modbus::{ExceptionCode, Slave};
 use super::block::{BlockError, BlockHeader, BlockPlan, BlockTracker, HEADER_REGISTERS, decode_slots};
 use super::registers::{DecodeError, RegisterKind, RegisterSpec, Signal, decode_one, plan_reads};
 use crate::acquire::{ChannelSpec, Counters, SourceEvent, next_backoff_ms, offer};
-use crate::record::Gap;
+use crate::signal::sample::Gap;
 use crate::signal::sample::{Role, SampleBatch};
 
 /// How often a connected driver reports its counters.

@@ -9,7 +9,7 @@
 use std::collections::VecDeque;
 
 use super::stamps::{Checked, DropReason, StampCheck, seconds};
-use crate::record::Gap;
+use crate::signal::sample::Gap;
 use crate::signal::sample::{Role, SampleBatch};
 
 /// Batch length when none is configured, s (DESIGN.md §3: 10–100 ms per message).

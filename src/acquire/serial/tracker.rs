@@ -7,7 +7,7 @@
 
 use super::frame::Frame;
 use crate::acquire::ChannelSpec;
-use crate::record::Gap;
+use crate::signal::sample::Gap;
 use crate::signal::sample::SampleBatch;
 
 /// Why a well-formed frame could not become samples.
