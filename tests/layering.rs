@@ -32,14 +32,6 @@ const LAYERS: [&str; 18] = [
     "cli",
 ];
 
-/// Imports against the layering that are still to be removed (issue 38): (from module,
-/// to module). The test fails when one of them is gone, so that the list only shrinks.
-const NOT_YET: [(&str, &str); 1] = [
-    // The CAN source's parser uses the config's `Keys`; config reads every other source from
-    // its own structs.
-    ("acquire::can::config", "config"),
-];
-
 /// A module file's path from `src/`: `a::b` for `src/a/b.rs` and `src/a/b/mod.rs`.
 fn module_of(rel: &Path) -> String {
     let mut parts: Vec<String> = rel.iter().map(|p| p.to_string_lossy().into_owned()).collect();
@@ -178,7 +170,6 @@ fn every_import_points_down_the_layers() {
     let g = graph();
     let rank = |m: &str| LAYERS.iter().position(|l| *l == top(m));
     let mut wrong = Vec::new();
-    let mut waived = BTreeSet::new();
     for (from, tos) in &g {
         let Some(rf) = rank(from) else {
             wrong.push(format!("{from}: top-level module not in LAYERS"));
@@ -187,17 +178,8 @@ fn every_import_points_down_the_layers() {
         for to in tos {
             let Some(rt) = rank(to) else { continue };
             if rt > rf {
-                if NOT_YET.iter().any(|(f, t)| f == from && t == to) {
-                    waived.insert((from.clone(), to.clone()));
-                } else {
-                    wrong.push(format!("{from} -> {to} ({} is above {})", top(to), top(from)));
-                }
+                wrong.push(format!("{from} -> {to} ({} is above {})", top(to), top(from)));
             }
-        }
-    }
-    for (f, t) in NOT_YET {
-        if !waived.contains(&(f.to_owned(), t.to_owned())) {
-            wrong.push(format!("NOT_YET lists {f} -> {t}, which is gone: take it off the list"));
         }
     }
     assert!(wrong.is_empty(), "imports against the layering:\n{}", wrong.join("\n"));
@@ -253,12 +235,7 @@ fn no_module_reaches_itself_through_others() {
             t.visit(v);
         }
     }
-    // The waived upward import closes one cycle (acquire::can::config -> config ->
-    // config::source -> acquire::can); it is the one listed, nothing else.
-    let known = |c: &Vec<&str>| {
-        c.contains(&"acquire::can::config") && c.iter().all(|m| top(m) == "acquire" || top(m) == "config")
-    };
-    let cycles: Vec<_> = t.cycles.iter().filter(|c| !known(c)).collect();
+    let cycles = &t.cycles;
     assert!(cycles.is_empty(), "import cycles: {cycles:#?}");
 }
 

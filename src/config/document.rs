@@ -35,10 +35,6 @@ impl<'a> Document<'a> {
         Ok(Document { origin, text, root: Spanned::new(span, DeValue::Table(root.into_inner())) })
     }
 
-    pub fn origin(&self) -> &'a str {
-        self.origin
-    }
-
     /// The top-level table.
     pub fn table(&self) -> &DeTable<'a> {
         match self.root.get_ref() {
@@ -120,16 +116,6 @@ impl<'a> Document<'a> {
     /// `x`, the whole number at `path`, if it is inside `limits`.
     pub fn in_whole_range(&self, path: &str, x: u64, limits: &WholeLimits) -> Result<u64, ConfigError> {
         limits.check(x).map_err(|why| self.invalid(path, why))
-    }
-
-    /// An error made without the document (by `Keys`), placed at its key.
-    pub fn locate(&self, mut e: ConfigError) -> ConfigError {
-        if e.place_mut().at.is_none()
-            && let Some(key) = e.key().map(str::to_string)
-        {
-            *e.place_mut() = self.place(&key);
-        }
-        e
     }
 
     /// The line and column of byte `offset`.

@@ -8,8 +8,8 @@
 //! passes its text and name; nothing here opens a file.
 
 pub mod advisor;
+mod can;
 mod document;
-pub(crate) mod keys;
 pub mod limits;
 pub mod machine;
 pub mod opcua;
@@ -21,8 +21,6 @@ pub mod uplink;
 
 pub use machine::{MachineFile, parse_machine};
 pub use process::{parse_process, parse_process_sheet};
-
-pub(crate) use keys::Keys;
 
 use std::fmt;
 
@@ -87,15 +85,6 @@ impl ConfigError {
             ConfigError::UnknownKey { key, .. }
             | ConfigError::Missing { key, .. }
             | ConfigError::Invalid { key, .. } => Some(key),
-        }
-    }
-
-    pub(crate) fn place_mut(&mut self) -> &mut Place {
-        match self {
-            ConfigError::Syntax { place, .. }
-            | ConfigError::UnknownKey { place, .. }
-            | ConfigError::Missing { place, .. }
-            | ConfigError::Invalid { place, .. } => place,
         }
     }
 }

@@ -1,12 +1,10 @@
 //! The `[[sources]]` tables of the service configuration, one raw struct per `kind`
-//! (serial, modbus, can), each denying unknown keys. A CAN source's values are checked by
-//! `acquire::can::parse_can_source`, after its key names are checked here.
+//! (serial, modbus; can in `can.rs`), each denying unknown keys.
 
 use std::path::Path;
 use std::time::Duration;
 
 use serde::Deserialize;
-use serde::de::IgnoredAny;
 
 use super::ConfigError;
 use super::document::Document;
@@ -119,50 +117,6 @@ enum RawWordOrder {
     Little,
 }
 
-/// The key names of a CAN source (its values are checked by `parse_can_source`).
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-#[allow(dead_code)]
-struct CanKeys {
-    name: Option<IgnoredAny>,
-    kind: Option<IgnoredAny>,
-    interface: Option<IgnoredAny>,
-    log: Option<IgnoredAny>,
-    sample_rate_hz: Option<IgnoredAny>,
-    batch_s: Option<IgnoredAny>,
-    fd: Option<IgnoredAny>,
-    samples_per_frame: Option<IgnoredAny>,
-    dbc: Option<IgnoredAny>,
-    signals: Option<CanSignalNames>,
-    can_signals: Option<Vec<CanSignalKeys>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-#[allow(dead_code)]
-struct CanSignalNames {
-    #[serde(rename = "load_N")]
-    load_n: Option<IgnoredAny>,
-    disp_m: Option<IgnoredAny>,
-    acc_mps2: Option<IgnoredAny>,
-    sequence: Option<IgnoredAny>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-#[allow(dead_code)]
-struct CanSignalKeys {
-    role: Option<IgnoredAny>,
-    id: Option<IgnoredAny>,
-    extended: Option<IgnoredAny>,
-    start_bit: Option<IgnoredAny>,
-    length: Option<IgnoredAny>,
-    byte_order: Option<IgnoredAny>,
-    signed: Option<IgnoredAny>,
-    factor: Option<IgnoredAny>,
-    offset: Option<IgnoredAny>,
-}
-
 /// The `index`-th (from 1) `[[sources]]` table of `doc`, whose directory is `base`.
 pub(super) fn parse_source(doc: &Document<'_>, index: usize, base: &Path) -> Result<SourceSpec, ConfigError> {
     let prefix = format!("sources[{index}]");
@@ -197,18 +151,14 @@ fn source_name(doc: &Document<'_>, key: &str) -> Result<String, ConfigError> {
     Ok(name)
 }
 
-/// `kind = "can"`: the key names are checked here, the values by `parse_can_source`.
+/// `kind = "can"`: `super::can`.
 fn can(
     doc: &Document<'_>,
     prefix: &str,
     value: toml::Spanned<toml::de::DeValue<'_>>,
     base: &Path,
 ) -> Result<SourceSpec, ConfigError> {
-    let _: CanKeys = doc.read_value(value.clone(), prefix)?;
-    let table: toml::Table = doc.read_value(value, prefix)?;
-    crate::acquire::can::parse_can_source(doc.origin(), prefix, &table, base)
-        .map(SourceSpec::Can)
-        .map_err(|e| doc.locate(e))
+    super::can::can_source(doc, prefix, value, base).map(SourceSpec::Can)
 }
 
 /// `kind = "serial"`: `path`, `baud`, `format` "binary"|"ascii" and 1 to 16

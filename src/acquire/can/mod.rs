@@ -78,7 +78,7 @@ pub mod signal;
 pub use candump::{
     BadLines, CandumpReader, LogFrame, LoggedFrame, read_candump, write_candump_fd_line, write_candump_line,
 };
-pub use config::{CanInput, CanSignals, CanSourceSpec, parse_can_source};
+pub use config::{CanInput, CanSignals, CanSourceSpec, MAX_SAMPLES_PER_FRAME};
 pub use dbc::{DbcNames, block_mapping_from_dbc, mapping_from_dbc};
 pub use decoder::{CanDecoder, CanStats, CanTiming};
 pub use device::CanDevice;
