@@ -16,6 +16,7 @@ pub mod pipeline;
 pub mod recipe;
 pub mod record;
 pub mod report;
+pub mod session;
 pub mod signal;
 pub mod simdevice;
 pub mod synth;

@@ -11,7 +11,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The top-level modules, bottom to top: each may use only those before it.
-const LAYERS: [&str; 18] = [
+const LAYERS: [&str; 19] = [
     "physics",
     "signal",
     "synth",
@@ -27,6 +27,7 @@ const LAYERS: [&str; 18] = [
     "pipeline",
     "acquire",
     "config",
+    "session",
     "diagnose",
     "daemon",
     "cli",

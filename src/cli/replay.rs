@@ -13,14 +13,14 @@ use clap::Args;
 use super::{parse_process_warn, read_text};
 use crate::config::parse_machine;
 use crate::config::service::parse_tuning;
-use crate::daemon::{
-    CONTROL_SOURCE, MACHINE_CONFIG_NAME, NEW_BILLET_STATE, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, tuned_config,
-};
+use crate::daemon::tuned_config;
 use crate::estimate::EncoderDirection;
 use crate::physics::process::Process;
-use crate::pipeline::{Feeder, Pipeline, PipelineEvent};
+use crate::pipeline::{Feeder, Pipeline};
 use crate::record::{Payload, RecordReader, RecordWriter, Rotation};
-use crate::signal::merge::Merger;
+use crate::session::{
+    MACHINE_CONFIG_NAME, Outcome, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, Session, Stamp, is_new_billet_marker,
+};
 use crate::signal::sample::SampleBatch;
 
 #[derive(Debug, Args)]
@@ -184,11 +184,8 @@ pub(crate) fn replay_into<W: Write>(
         );
     }
     let mut replay = Replay {
-        feeder: Feeder::new(pipeline),
-        merger: Merger::default(),
-        merged: Vec::new(),
-        events: Vec::new(),
-        writer,
+        session: Session::new(pipeline, writer, Stamp::DeviceEnd),
+        outcomes: Vec::new(),
         input: args.input.clone(),
         out: std::io::BufWriter::new(out),
         json: args.json,
@@ -206,48 +203,41 @@ pub(crate) fn replay_into<W: Write>(
             }
         }
         Input::Recording { mut reader, ahead } => {
-            let mut last_log_ns = 0;
             for batch in &ahead {
-                last_log_ns = batch.host_time_ns;
                 replay.batch(batch)?;
             }
             for m in reader.by_ref() {
-                match m?.payload {
-                    Payload::Samples(batch) => {
-                        last_log_ns = batch.host_time_ns;
-                        replay.batch(&batch)?;
-                    }
+                let m = m?;
+                let log_ns = m.log_time_ns;
+                match m.payload {
+                    Payload::Samples(batch) => replay.batch(&batch)?,
                     // A new billet went into the dies here during the live run.
-                    Payload::Status(st) if st.source == CONTROL_SOURCE && st.state == NEW_BILLET_STATE => {
-                        replay.new_billet(last_log_ns, &st)?;
+                    Payload::Status(st) if is_new_billet_marker(&st) => {
+                        replay.session.new_billet(None, log_ns, &mut replay.outcomes);
+                        replay.handle()?;
                     }
                     // The live run switched recipes here (`POST /recipe`); a rotated file
                     // repeats the same text, which changes nothing.
                     Payload::Config(c) if c.name == RECIPE_CONFIG_NAME && args.recipe.is_none() => {
                         let origin = format!("{} (recipe.toml stored in it)", args.input.display());
                         let recipe = crate::daemon::recipe_switch::from_recorded(&origin, &c.text)?;
-                        replay.feeder.pipeline_mut().set_recipe(recipe);
+                        replay.session.set_recipe(recipe, &c.text, log_ns);
                     }
                     // The live run reloaded its machine model here (SIGHUP, after `diagnose
                     // --adopt`); a rotated file repeats the same text, which changes nothing.
                     Payload::Config(c) if c.name == MACHINE_CONFIG_NAME && args.machine.is_none() => {
                         let origin = format!("{} (machine.toml stored in it)", args.input.display());
-                        let file = parse_machine(&origin, &c.text)?;
-                        let effects = file.effect_set();
-                        replay
-                            .feeder
-                            .pipeline_mut()
-                            .set_model(file.machine, effects)
-                            .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
+                        replay.session.set_model(&origin, &c.text, log_ns).map_err(anyhow::Error::msg)?;
                     }
                     // The live run reloaded its alert rules here (SIGHUP); a rotated file
                     // repeats the same text, which changes nothing.
                     Payload::Config(c) if c.name == SERVICE_CONFIG_NAME && args.service.is_none() => {
                         let origin = format!("{} (service.toml stored in it)", args.input.display());
-                        replay.feeder.pipeline_mut().set_alert_config(parse_tuning(&origin, &c.text)?.alerts);
+                        replay.session.set_alerts(parse_tuning(&origin, &c.text)?.alerts, &c.text, log_ns);
                     }
                     _ => {}
                 }
+                replay.recorded()?;
             }
             if !reader.report().complete {
                 eprintln!("forgemon: {}", reader.report());
@@ -262,13 +252,10 @@ pub(crate) fn replay_into<W: Write>(
 const TABLE_HEADER: &str =
     "blow  t_contact s     v m/s  kinetic J  plastic J  elastic J  efficiency  class         final kN  h_end mm  alert";
 
-/// The pipeline, its input merge, the recording and the output of one replay.
+/// The session (the live service's core) and the output of one replay.
 struct Replay<W: Write> {
-    feeder: Feeder,
-    merger: Merger,
-    merged: Vec<SampleBatch>,
-    events: Vec<PipelineEvent>,
-    writer: Option<RecordWriter>,
+    session: Session,
+    outcomes: Vec<Outcome>,
     /// The input, for the messages.
     input: PathBuf,
     out: W,
@@ -278,60 +265,39 @@ struct Replay<W: Write> {
 }
 
 impl<W: Write> Replay<W> {
-    /// Record a batch (with `--out`) and feed it to the pipeline, through the same merge of
-    /// several sources' roles as the live service (`signal::merge`).
+    /// A batch through the session: recorded (with `--out`), merged, fed.
     fn batch(&mut self, batch: &SampleBatch) -> anyhow::Result<()> {
-        if let Some(rec) = self.writer.as_mut() {
-            rec.write_samples(batch)?;
-        }
-        if self.merger.push(batch, &mut self.merged) {
-            self.feeder.push(batch, &mut self.events);
-        }
-        for b in self.merged.drain(..) {
-            self.feeder.push(&b, &mut self.events);
-        }
+        self.session.batch(batch, &mut self.outcomes);
         self.handle()
     }
 
-    /// The recording's new-billet marker, at the same point in the stream.
-    fn new_billet(&mut self, log_ns: i64, marker: &crate::record::Status) -> anyhow::Result<()> {
-        self.feeder.pipeline_mut().new_billet(&mut self.events);
-        self.handle()?;
-        if let Some(rec) = self.writer.as_mut() {
-            rec.write_status(log_ns, marker)?;
+    /// A failed write to `--out` stops the replay.
+    fn recorded(&mut self) -> anyhow::Result<()> {
+        match self.session.take_record_errors().into_iter().next() {
+            Some((what, e)) => Err(anyhow::Error::new(e).context(format!("recording {what}"))),
+            None => Ok(()),
         }
-        Ok(())
     }
 
-    /// Print and record the pipeline's events.
+    /// Print the session's outcomes.
     fn handle(&mut self) -> anyhow::Result<()> {
-        for ev in std::mem::take(&mut self.events) {
-            match ev {
-                PipelineEvent::Blow { cut, estimate } => {
+        self.recorded()?;
+        for o in std::mem::take(&mut self.outcomes) {
+            match o {
+                Outcome::Blow { estimate, .. } => {
                     self.blows += 1;
-                    if let Some(rec) = self.writer.as_mut() {
-                        let t_ns = (cut.t_end_s * 1e9).round() as i64;
-                        rec.write_payload(t_ns, &Payload::Boundary(cut.boundary(estimate.blow)))?;
-                        rec.write_result(t_ns, &estimate)?;
-                        if let Some(a) = &estimate.alert {
-                            rec.write_alert(t_ns, a)?;
-                        }
-                    }
                     if self.json {
                         writeln!(self.out, "{}", serde_json::to_string(&estimate)?)?;
                     } else {
                         writeln!(self.out, "{}", table_row(&estimate))?;
                     }
                 }
-                PipelineEvent::Billet(b) => {
-                    if let Some(rec) = self.writer.as_mut() {
-                        rec.write_billet((b.t_end_s * 1e9).round() as i64, &b)?;
-                    }
+                Outcome::Billet { summary, .. } => {
                     if !self.json {
-                        writeln!(self.out, "{b}")?;
+                        writeln!(self.out, "{summary}")?;
                     }
                 }
-                PipelineEvent::Rejected { cut, error } => {
+                Outcome::Rejected { cut, error } => {
                     self.rejected += 1;
                     // A directory's blow is placed in its file (`cli::for_each_capture_batch`).
                     let file = cut.source.strip_prefix(super::CAPTURE_SOURCE).and_then(|n| n.strip_prefix('/'));
@@ -345,6 +311,7 @@ impl<W: Write> Replay<W> {
                         cut.t_contact_s
                     );
                 }
+                Outcome::NewBillet => {}
             }
         }
         Ok(())
@@ -352,32 +319,30 @@ impl<W: Write> Replay<W> {
 
     /// The end of the input: the last blow and billet closed, the recording finished.
     fn finish(mut self) -> anyhow::Result<Feeder> {
-        self.feeder.pipeline_mut().end_of_stream(&mut self.events);
-        self.feeder.pipeline_mut().close_billet(&mut self.events);
+        let files = self.session.finish(0, &mut self.outcomes);
         self.handle()?;
         self.out.flush()?;
-        if let Some(rec) = self.writer.take() {
-            for f in rec.finish()? {
-                eprintln!("forgemon: recorded {}", f.display());
-            }
+        for f in files? {
+            eprintln!("forgemon: recorded {}", f.display());
         }
-        let reversed = self.feeder.pipeline_mut().reversed_encoder_blows();
+        let mut feeder = self.session.into_feeder();
+        let reversed = feeder.pipeline_mut().reversed_encoder_blows();
         if reversed > 0 {
             eprintln!(
                 "forgemon: the ram encoder counts up (away from the die) in {reversed} blows: read negated; \
                  --encoder-direction up (or [encoder] direction = \"up\") says so"
             );
         }
-        let s = self.feeder.pipeline_mut().segment_stats();
+        let s = feeder.pipeline_mut().segment_stats();
         eprintln!(
             "forgemon: replayed {} samples: {} blows, {} not estimated, {} triggers without contact, {} batches dropped",
-            self.feeder.samples(),
+            feeder.samples(),
             self.blows,
             self.rejected,
             s.triggers_without_contact,
             s.batches_dropped
         );
-        Ok(self.feeder)
+        Ok(feeder)
     }
 }
 

@@ -33,8 +33,12 @@ use crate::estimate::BlowEstimate;
 use crate::estimate::billet_book::BilletSummary;
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
-use crate::pipeline::{Feeder, Pipeline, PipelineConfig};
+use crate::pipeline::{Pipeline, PipelineConfig};
 use crate::record::{RecordOptions, RecordWriter, Rotation};
+pub use crate::session::{
+    CONTROL_SOURCE, MACHINE_CONFIG_NAME, NEW_BILLET_STATE, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, new_billet_marker,
+};
+use crate::session::{Session, Stamp};
 use status::{SharedStatus, StatusSnapshot};
 
 /// Capacity of the channel from the sources to the service. Live, a relay empties it into
@@ -68,17 +72,6 @@ pub enum Control {
     NewBillet { at_device_ns: Option<i64> },
     /// The operator acknowledged the latched alert (`POST /ack`, the PLC's coil 0).
     Acknowledge,
-}
-
-/// Source name of the control markers in a recording.
-pub const CONTROL_SOURCE: &str = "control";
-/// State of the marker that says a new billet was put in the dies here.
-pub const NEW_BILLET_STATE: &str = "new_billet";
-
-/// The status message that marks a new billet in a recording, in stream order, so that a
-/// replay starts the billet at the same point as the live run did.
-pub fn new_billet_marker() -> crate::record::Status {
-    crate::record::Status { source: CONTROL_SOURCE.into(), state: NEW_BILLET_STATE.into(), ..Default::default() }
 }
 
 /// A front end's callback for each blow.
@@ -210,8 +203,8 @@ pub async fn serve(
         status.lock().map(|mut s| s.recipe = Some(recipe.name.clone())).ok();
         pipeline.set_recipe(Some(recipe));
     }
-    let feeder = Feeder::new(pipeline);
-    let mut service = service::Service::new(writer, feeder, status, live, sinks, hooks, parts.config_path.clone());
+    let session = Session::new(pipeline, Some(writer), Stamp::Arrival);
+    let mut service = service::Service::new(session, status, live, sinks, hooks, parts.config_path.clone());
 
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
@@ -268,18 +261,6 @@ pub fn tuned_config(tuning: &PipelineTuning, machine: &Machine) -> PipelineConfi
     p.estimate.encoder_direction = tuning.encoder_direction;
     p
 }
-
-/// Name of the active recipe as a recording stores it (topic `/config`): a replay judges
-/// with it unless given another.
-pub const RECIPE_CONFIG_NAME: &str = "recipe.toml";
-
-/// Name of the machine file as a recording stores it (topic `/config`): at the start and
-/// again at each SIGHUP reload, where the model it holds took effect.
-pub const MACHINE_CONFIG_NAME: &str = "machine.toml";
-
-/// Name of the service configuration as a recording stores it (topic `/config`), at the
-/// start and again at each SIGHUP reload.
-pub const SERVICE_CONFIG_NAME: &str = "service.toml";
 
 /// The service file read again (SIGHUP), checked, with its text.
 pub(crate) fn reload(path: &std::path::Path) -> anyhow::Result<(ServiceConfig, String)> {

@@ -1,0 +1,248 @@
+//! The session core (DESIGN.md §3, live equals replay): one owner of everything between a
+//! sample source and the faces, driven the same way by `run` and `demo` (the service,
+//! `daemon::service`) and by `replay`:
+//!
+//! merge the sources' roles onto one timeline → feed the pipeline (segment, estimate,
+//! judge, alert) → record what came in and what came out.
+//!
+//! It also owns the control markers, each recorded where it took effect so that a replay
+//! of the recording takes it at the same sample: a new billet (now, or from a device time
+//! on), a recipe switch, a new machine model, new alert rules; and the stop, which closes
+//! the blow and billet in progress and finishes the recording.
+//!
+//! The drivers differ only in what they do with the outcomes (`Outcome`): the service
+//! serves them to its faces, `replay` prints them. A recording write that fails does not
+//! stop the session: it is kept for the driver (`take_record_errors`), which counts it
+//! (the service) or stops (replay).
+
+use crate::alert::AlertConfig;
+use crate::config::parse_machine;
+use crate::estimate::BlowEstimate;
+use crate::estimate::billet_book::BilletSummary;
+use crate::pipeline::{Cut, Feeder, Pipeline, PipelineEvent};
+use crate::recipe::Recipe;
+use crate::record::{Gap, Payload, RecordError, RecordWriter, Status};
+use crate::signal::merge::Merger;
+use crate::signal::sample::SampleBatch;
+
+/// Source name of the control markers in a recording.
+pub const CONTROL_SOURCE: &str = "control";
+/// State of the marker that says a new billet was put in the dies here.
+pub const NEW_BILLET_STATE: &str = "new_billet";
+/// Name of the active recipe as a recording stores it (topic `/config`): a replay judges
+/// with it unless given another.
+pub const RECIPE_CONFIG_NAME: &str = "recipe.toml";
+/// Name of the machine file as a recording stores it (topic `/config`): at the start and
+/// again at each reload, where the model it holds took effect.
+pub const MACHINE_CONFIG_NAME: &str = "machine.toml";
+/// Name of the service configuration as a recording stores it (topic `/config`), at the
+/// start and again at each reload.
+pub const SERVICE_CONFIG_NAME: &str = "service.toml";
+
+/// The status message that marks a new billet in a recording, in stream order.
+pub fn new_billet_marker() -> Status {
+    Status { source: CONTROL_SOURCE.into(), state: NEW_BILLET_STATE.into(), ..Default::default() }
+}
+
+/// Whether `st` is the new-billet marker.
+pub fn is_new_billet_marker(st: &Status) -> bool {
+    st.source == CONTROL_SOURCE && st.state == NEW_BILLET_STATE
+}
+
+/// The log time a blow's or a billet's messages are recorded at.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stamp {
+    /// When the samples that completed it arrived (live: the batch's host time).
+    Arrival,
+    /// Its end on the device's clock (replay of files that carry no arrival time).
+    DeviceEnd,
+}
+
+/// What a driver gets from the session.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    /// A blow, estimated and recorded; `log_ns` is the log time it was recorded at.
+    Blow { estimate: Box<BlowEstimate>, log_ns: i64 },
+    /// A blow was cut but could not be estimated.
+    Rejected { cut: Cut, error: crate::estimate::EstimateError },
+    /// A billet's summary, recorded.
+    Billet { summary: Box<BilletSummary>, log_ns: i64 },
+    /// A new billet started here (its marker recorded).
+    NewBillet,
+}
+
+/// The session: the input merge, the pipeline and the recording.
+pub struct Session {
+    feeder: Feeder,
+    merger: Merger,
+    merged: Vec<SampleBatch>,
+    events: Vec<PipelineEvent>,
+    /// A new billet announced for a device time the samples have not reached yet.
+    pending_billet: Option<i64>,
+    writer: Option<RecordWriter>,
+    stamp: Stamp,
+    record_errors: Vec<(&'static str, RecordError)>,
+}
+
+impl Session {
+    /// A session feeding `pipeline`, recording to `writer` (none: nothing recorded).
+    pub fn new(pipeline: Pipeline, writer: Option<RecordWriter>, stamp: Stamp) -> Self {
+        Session {
+            feeder: Feeder::new(pipeline),
+            merger: Merger::default(),
+            merged: Vec::new(),
+            events: Vec::new(),
+            pending_billet: None,
+            writer,
+            stamp,
+            record_errors: Vec::new(),
+        }
+    }
+
+    /// A source's batch: recorded, merged with the other sources' roles, fed (a new billet
+    /// announced for a device time inside it starts there), and the outcomes appended.
+    pub fn batch(&mut self, batch: &SampleBatch, out: &mut Vec<Outcome>) {
+        self.record("samples", |w| w.write_samples(batch));
+        let direct = self.merger.push(batch, &mut self.merged);
+        let merged = std::mem::take(&mut self.merged);
+        for b in direct.then_some(batch).into_iter().chain(merged.iter()) {
+            let batch_end_ns = b.device_time_ns + (b.period_ns * b.len() as f64) as i64;
+            if self.pending_billet.is_some_and(|at| batch_end_ns > at) {
+                self.pending_billet = None;
+                self.start_billet(batch.host_time_ns, out);
+            }
+            self.feeder.push(b, &mut self.events);
+        }
+        self.merged = merged;
+        self.merged.clear();
+        self.drain(batch.host_time_ns, out);
+    }
+
+    /// A source's gap, recorded.
+    pub fn gap(&mut self, log_ns: i64, gap: &Gap) {
+        self.record("a gap", |w| w.write_gap(log_ns, gap));
+    }
+
+    /// A source's status, recorded.
+    pub fn status(&mut self, log_ns: i64, status: &Status) {
+        self.record("a source's status", |w| w.write_status(log_ns, status));
+    }
+
+    /// A new billet in the dies: now (`None`), or from the sample at device time `at` on.
+    pub fn new_billet(&mut self, at_device_ns: Option<i64>, log_ns: i64, out: &mut Vec<Outcome>) {
+        match at_device_ns {
+            None => {
+                self.start_billet(log_ns, out);
+                self.drain(log_ns, out);
+            }
+            Some(at) => self.pending_billet = Some(at),
+        }
+    }
+
+    /// Judge the following blows against `recipe` (already checked), whose text is `text`.
+    pub fn set_recipe(&mut self, recipe: Option<Recipe>, text: &str, log_ns: i64) {
+        self.feeder.pipeline_mut().set_recipe(recipe);
+        self.record("the new recipe", |w| w.write_config(log_ns, RECIPE_CONFIG_NAME, text));
+    }
+
+    /// Take the machine file `text` (from `origin`) as the model from the next blow on;
+    /// the number of its effects, or why not (the old model kept).
+    pub fn set_model(&mut self, origin: &str, text: &str, log_ns: i64) -> Result<usize, String> {
+        let file = parse_machine(origin, text).map_err(|e| e.to_string())?;
+        let effects = file.effect_set();
+        self.feeder.pipeline_mut().set_model(file.machine, effects).map_err(|e| format!("{origin}: {e}"))?;
+        self.record("the machine file", |w| w.write_config(log_ns, MACHINE_CONFIG_NAME, text));
+        Ok(file.effects.len())
+    }
+
+    /// Take `alerts` (from the service file `text`) from the next blow on.
+    pub fn set_alerts(&mut self, alerts: AlertConfig, text: &str, log_ns: i64) {
+        self.feeder.pipeline_mut().set_alert_config(alerts);
+        self.record("the service file", |w| w.write_config(log_ns, SERVICE_CONFIG_NAME, text));
+    }
+
+    /// The end of the stream: the blow in progress and the billet in the dies closed and
+    /// recorded, and the recording finished; its files back. Nothing is recorded after.
+    pub fn finish(&mut self, log_ns: i64, out: &mut Vec<Outcome>) -> Result<Vec<std::path::PathBuf>, RecordError> {
+        self.feeder.pipeline_mut().end_of_stream(&mut self.events);
+        self.feeder.pipeline_mut().close_billet(&mut self.events);
+        self.drain(log_ns, out);
+        self.writer.take().map_or(Ok(Vec::new()), RecordWriter::finish)
+    }
+
+    /// The pipeline with what it has counted, once the session is over.
+    pub fn into_feeder(self) -> Feeder {
+        self.feeder
+    }
+
+    /// The failed recording writes since the last call, each with what it was writing.
+    pub fn take_record_errors(&mut self) -> Vec<(&'static str, RecordError)> {
+        std::mem::take(&mut self.record_errors)
+    }
+
+    pub fn feeder(&self) -> &Feeder {
+        &self.feeder
+    }
+
+    pub fn pipeline_mut(&mut self) -> &mut Pipeline {
+        self.feeder.pipeline_mut()
+    }
+
+    pub fn merger(&self) -> &Merger {
+        &self.merger
+    }
+
+    /// The file being recorded to.
+    pub fn recording_path(&self) -> Option<std::path::PathBuf> {
+        self.writer.as_ref().map(RecordWriter::current_path)
+    }
+
+    fn start_billet(&mut self, log_ns: i64, out: &mut Vec<Outcome>) {
+        self.feeder.pipeline_mut().new_billet(&mut self.events);
+        // The billet that ended is reported before the marker of the one that starts.
+        self.drain(log_ns, out);
+        self.record("the new-billet marker", |w| w.write_status(log_ns, &new_billet_marker()));
+        out.push(Outcome::NewBillet);
+    }
+
+    /// The pipeline's events recorded and handed on; `log_ns` is when the samples that
+    /// produced them arrived.
+    fn drain(&mut self, log_ns: i64, out: &mut Vec<Outcome>) {
+        for e in std::mem::take(&mut self.events) {
+            match e {
+                PipelineEvent::Blow { cut, estimate } => {
+                    let at = self.at(log_ns, cut.t_end_s);
+                    self.record("a blow's boundary", |w| {
+                        w.write_payload(at, &Payload::Boundary(cut.boundary(estimate.blow)))
+                    });
+                    self.record("a blow's result", |w| w.write_result(at, &estimate));
+                    if let Some(a) = &estimate.alert {
+                        self.record("an alert", |w| w.write_alert(at, a));
+                    }
+                    out.push(Outcome::Blow { estimate, log_ns: at });
+                }
+                PipelineEvent::Billet(summary) => {
+                    let at = self.at(log_ns, summary.t_end_s);
+                    self.record("a billet's summary", |w| w.write_billet(at, &summary));
+                    out.push(Outcome::Billet { summary, log_ns: at });
+                }
+                PipelineEvent::Rejected { cut, error } => out.push(Outcome::Rejected { cut, error }),
+            }
+        }
+    }
+
+    fn at(&self, log_ns: i64, t_end_s: f64) -> i64 {
+        match self.stamp {
+            Stamp::Arrival => log_ns,
+            Stamp::DeviceEnd => (t_end_s * 1e9).round() as i64,
+        }
+    }
+
+    fn record(&mut self, what: &'static str, write: impl FnOnce(&mut RecordWriter) -> Result<(), RecordError>) {
+        if let Some(w) = self.writer.as_mut()
+            && let Err(e) = write(w)
+        {
+            self.record_errors.push((what, e));
+        }
+    }
+}
