@@ -52,6 +52,25 @@ impl Drop for AdvisorTask {
     }
 }
 
+impl super::faces::Face for AdvisorTask {}
+
+/// The advisor as a face (`faces::FACES`): `[advisor]`.
+pub fn face<'a>(
+    ctx: &'a super::faces::FaceContext<'a>,
+) -> futures_util::future::BoxFuture<'a, anyhow::Result<Option<Box<dyn super::faces::Face>>>> {
+    let hook = ctx.on_advice.lock().ok().and_then(|mut h| h.take());
+    let task = start(
+        ctx.config.advisor.as_ref(),
+        ctx.machine,
+        ctx.machine_text,
+        ctx.process,
+        ctx.status.clone(),
+        ctx.bus,
+        hook,
+    );
+    Box::pin(async move { Ok(super::faces::boxed(task?)) })
+}
+
 /// Start the advisor when `[advisor]` is configured. It needs the billet's process sheet
 /// (the law it plans with and the start height); `machine_text` gives the machine's effects.
 pub fn start(

@@ -1,6 +1,7 @@
-//! The service's live feed to its front ends (the dashboard, the PLC image, the Foxglove
-//! view): each blow's result, each billet's summary and each change of the latched alert,
-//! as the pipeline produced them, on a broadcast channel. A front end that falls behind
+//! The service's bus to its faces (the dashboard, the PLC image, OPC UA, Sparkplug, the
+//! advisor, the webhook, the PLC coil; `faces.rs`): each blow's result, each alert, each
+//! billet's summary, each change of the latched alert and the stop, as the session produced
+//! them, on a broadcast channel. A front end that falls behind
 //! loses the oldest events (tokio's `broadcast` says how many) and reads the status
 //! snapshot again; it never holds up the service.
 
@@ -8,6 +9,7 @@ use std::sync::Arc;
 
 use tokio::sync::broadcast;
 
+use crate::alert::Alert;
 use crate::estimate::BlowEstimate;
 use crate::estimate::billet_book::BilletSummary;
 
@@ -27,6 +29,12 @@ pub enum LiveEvent {
     Advice(Arc<crate::advise::Advice>),
     /// The latched alert was acknowledged (`POST /ack`, the PLC's coil 0).
     Acknowledged,
+    /// A blow raised `alert` (published before the blow itself); `arrived_ns` is when the
+    /// samples that ended the blow arrived (host clock).
+    Alert { alert: Arc<Alert>, arrived_ns: i64 },
+    /// The service has stopped: the last event. A face that sends what it received
+    /// (`faces::Face::finish`) finishes it and ends.
+    Stopping,
 }
 
 /// The sending side, cloned into whatever publishes; `subscribe` for a front end.

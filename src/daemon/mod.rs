@@ -9,6 +9,7 @@
 
 pub mod advisor;
 pub mod dashboard;
+pub mod faces;
 pub mod foxglove;
 pub mod live;
 pub mod opcua;
@@ -97,6 +98,16 @@ pub struct Hooks {
     pub on_advice: Option<AdviceHook>,
 }
 
+/// Every face `serve` starts, by its config section (`faces.rs`). A new face is one line.
+pub const FACES: [(&str, faces::Start); 6] = [
+    ("plc_server", plc_server::face),
+    ("opcua", opcua::face),
+    ("uplink.mqtt", sparkplug::face),
+    ("advisor", advisor::face),
+    ("alerts.webhook", sinks::webhook_face),
+    ("alerts.plc_coil", sinks::coil_face),
+];
+
 /// What the service did, when it stops.
 #[derive(Debug, Clone, Default)]
 pub struct Summary {
@@ -168,23 +179,22 @@ pub async fn serve(
         Some(addr) => Some(foxglove::start(addr, &mut writer).await?),
         None => None,
     };
-    // The PLC result image (CONTRACTS §8), when configured; stops when `_plc` drops.
-    let _plc = plc_server::start(cfg.plc_listen, status.clone(), &live, control_tx.clone()).await?;
-    // The live advisor (`[advisor]`), when configured; stops when `_advisor` drops.
-    let _advisor = advisor::start(
-        cfg.advisor.as_ref(),
-        &parts.machine,
-        &parts.machine_text,
-        parts.process.as_ref(),
-        status.clone(),
-        &live,
-        hooks.on_advice.take(),
-    )?;
-    // The Sparkplug B uplink (CONTRACTS §10), when configured; flushed after the service.
-    let uplink = sparkplug::start(cfg.uplink_mqtt.as_ref(), &cfg.recording_dir, &live)?;
-    let _opcua =
-        opcua::start(cfg.opcua.as_ref(), parts.machine.kind(), status.clone(), &live, control_tx.clone()).await?;
-    let sinks = sinks::Sinks::new(cfg.webhook.clone(), cfg.plc_coil);
+    // Every face on the bus, each from its own section (`faces::FACES`).
+    let on_advice = Mutex::new(hooks.on_advice.take());
+    let ctx = faces::FaceContext {
+        config: cfg,
+        machine: &parts.machine,
+        machine_text: &parts.machine_text,
+        process: parts.process.as_ref(),
+        bus: &live,
+        status: &status,
+        control: &control_tx,
+        on_advice: &on_advice,
+    };
+    let mut running = Vec::new();
+    for (_, start) in FACES {
+        running.extend(start(&ctx).await?);
+    }
     let mut pipeline = Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine))
         .with_effects(parts.effects);
     if let Some(path) = &cfg.recipe_path {
@@ -204,7 +214,7 @@ pub async fn serve(
         pipeline.set_recipe(Some(recipe));
     }
     let session = Session::new(pipeline, Some(writer), Stamp::Arrival);
-    let mut service = service::Service::new(session, status, live, sinks, hooks, parts.config_path.clone());
+    let mut service = service::Service::new(session, status, live.clone(), hooks, parts.config_path.clone());
 
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
@@ -238,8 +248,9 @@ pub async fn serve(
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
     let _ = shutdown.send(true);
     let summary = service.finish()?;
-    if let Some(u) = uplink {
-        u.finish().await;
+    live.publish(live::LiveEvent::Stopping);
+    for face in running {
+        face.finish().await;
     }
     http.abort();
     Ok(summary)

@@ -18,6 +18,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use anyhow::Context;
+use futures_util::future::BoxFuture;
 use tokio::sync::{broadcast, mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio_modbus::server::Service;
@@ -25,6 +26,7 @@ use tokio_modbus::server::tcp::{Server, accept_tcp_connection};
 use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
 
 use super::Control;
+use super::faces::{FaceContext, boxed};
 use super::live::{Live, LiveEvent};
 use super::status::{SharedStatus, StatusSnapshot};
 use crate::estimate::result::AlertKind;
@@ -294,6 +296,15 @@ impl Drop for PlcServer {
     }
 }
 
+impl super::faces::Face for PlcServer {}
+
+/// The image as a face (`faces::FACES`): `[plc_server] listen`.
+pub fn face<'a>(ctx: &'a FaceContext<'a>) -> BoxFuture<'a, anyhow::Result<Option<Box<dyn super::faces::Face>>>> {
+    Box::pin(
+        async move { Ok(boxed(start(ctx.config.plc_listen, ctx.status.clone(), ctx.bus, ctx.control.clone()).await?)) },
+    )
+}
+
 /// Serve the image on `listen` when it is set (`[plc_server] listen`); `None` otherwise.
 /// Fails only when the address cannot be listened on.
 pub async fn start(
@@ -366,7 +377,13 @@ async fn update(
                     last = Some(b);
                 }
                 Ok(LiveEvent::Acknowledged) => warn = Warnings::default(),
-                Ok(LiveEvent::Billet(_) | LiveEvent::NewBillet | LiveEvent::Advice(_)) => {}
+                Ok(
+                    LiveEvent::Billet(_)
+                    | LiveEvent::NewBillet
+                    | LiveEvent::Advice(_)
+                    | LiveEvent::Alert { .. }
+                    | LiveEvent::Stopping,
+                ) => {}
                 Err(broadcast::error::RecvError::Lagged(n)) => {
                     // Fell behind: the snapshot has the last blow and the latched alert.
                     tracing::warn!(events = n, "PLC image fell behind the live feed");

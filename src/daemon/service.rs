@@ -18,7 +18,7 @@ use crate::signal::sample::SampleBatch;
 
 use super::live::{Live, LiveEvent};
 use super::status::SharedStatus;
-use super::{Control, Hooks, Summary, host_now_ns, reload, sinks};
+use super::{Control, Hooks, Summary, host_now_ns, reload};
 
 /// The service between its start and its stop.
 pub(super) struct Service {
@@ -27,22 +27,14 @@ pub(super) struct Service {
     outcomes: Vec<Outcome>,
     status: SharedStatus,
     live: Live,
-    sinks: sinks::Sinks,
     hooks: Hooks,
     summary: Summary,
     config_path: PathBuf,
 }
 
 impl Service {
-    pub fn new(
-        session: Session,
-        status: SharedStatus,
-        live: Live,
-        sinks: sinks::Sinks,
-        hooks: Hooks,
-        config_path: PathBuf,
-    ) -> Self {
-        Service { session, outcomes: Vec::new(), status, live, sinks, hooks, summary: Summary::default(), config_path }
+    pub fn new(session: Session, status: SharedStatus, live: Live, hooks: Hooks, config_path: PathBuf) -> Self {
+        Service { session, outcomes: Vec::new(), status, live, hooks, summary: Summary::default(), config_path }
     }
 
     pub fn on_source_event(&mut self, ev: SourceEvent) {
@@ -191,7 +183,7 @@ impl Service {
         if let Some(alert) = &estimate.alert {
             self.summary.alerts += 1;
             tracing::warn!(kind = alert.kind.as_str(), blow = alert.blow, "{}", alert.reason);
-            self.sinks.fire(alert, log_time_ns, &self.status);
+            self.live.publish(LiveEvent::Alert { alert: Arc::new(alert.clone()), arrived_ns: log_time_ns });
         }
         // The hook first: a front end's line for the blow comes before what the live feed's
         // listeners (the advisor's plan after it) make of it.

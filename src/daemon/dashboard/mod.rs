@@ -108,11 +108,14 @@ fn sse_event(e: &LiveEvent) -> Event {
         LiveEvent::Advice(a) => named("advice", serde_json::to_string(&**a)),
         LiveEvent::NewBillet => Event::default().event("new_billet").data("{}"),
         LiveEvent::Acknowledged => Event::default().event("ack").data("{}"),
+        LiveEvent::Alert { alert, .. } => named("alert", serde_json::to_string(&**alert)),
+        LiveEvent::Stopping => Event::default().event("stopping").data("{}"),
     }
 }
 
-/// `GET /events`: the live feed as server-sent events (`blow`, `billet`, `new_billet`,
-/// `ack`; `resync` with the count when this client fell behind and lost events).
+/// `GET /events`: the live feed as server-sent events (`blow`, `alert`, `billet`,
+/// `new_billet`, `advice`, `ack`, `stopping`; `resync` with the count when this client fell
+/// behind and lost events).
 async fn events(State(sh): State<Shared>) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
     let stream = futures_util::stream::unfold(sh.live.subscribe(), |mut rx| async move {
         let ev = match rx.recv().await {

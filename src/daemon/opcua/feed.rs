@@ -51,7 +51,8 @@ impl Feed {
             match live.recv().await {
                 Ok(LiveEvent::Blow(b)) => self.on_blow(&b),
                 Ok(LiveEvent::Acknowledged) => self.on_acknowledged(),
-                Ok(LiveEvent::Billet(_) | LiveEvent::NewBillet | LiveEvent::Advice(_)) => {}
+                Ok(LiveEvent::Billet(_) | LiveEvent::NewBillet | LiveEvent::Advice(_) | LiveEvent::Alert { .. }) => {}
+                Ok(LiveEvent::Stopping) => break,
                 Err(broadcast::error::RecvError::Lagged(n)) => {
                     // The events of the blows missed are lost; the values show the last blow.
                     tracing::warn!(events = n, "OPC UA server fell behind the live feed");

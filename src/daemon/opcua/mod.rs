@@ -123,6 +123,19 @@ fn builder(cfg: &OpcuaConfig) -> anyhow::Result<ServerBuilder> {
     })
 }
 
+impl crate::daemon::faces::Face for OpcuaServer {}
+
+/// The server as a face (`faces::FACES`): `[opcua]`.
+pub fn face<'a>(
+    ctx: &'a crate::daemon::faces::FaceContext<'a>,
+) -> futures_util::future::BoxFuture<'a, anyhow::Result<Option<Box<dyn crate::daemon::faces::Face>>>> {
+    Box::pin(async move {
+        let server =
+            start(ctx.config.opcua.as_ref(), ctx.machine.kind(), ctx.status.clone(), ctx.bus, ctx.control.clone());
+        Ok(crate::daemon::faces::boxed(server.await?))
+    })
+}
+
 /// Serve the machine on `cfg` when it is set (`[opcua]`); `None` otherwise. Fails when
 /// the password cannot be read or the address cannot be listened on.
 pub async fn start(

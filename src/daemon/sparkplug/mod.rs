@@ -117,6 +117,21 @@ impl Drop for Uplink {
     }
 }
 
+/// The uplink finishes by flushing its queue (`Uplink::finish`).
+impl crate::daemon::faces::Face for Uplink {
+    fn finish(self: Box<Self>) -> futures_util::future::BoxFuture<'static, ()> {
+        Box::pin(Uplink::finish(*self))
+    }
+}
+
+/// The uplink as a face (`faces::FACES`): `[uplink.mqtt]`.
+pub fn face<'a>(
+    ctx: &'a crate::daemon::faces::FaceContext<'a>,
+) -> futures_util::future::BoxFuture<'a, anyhow::Result<Option<Box<dyn crate::daemon::faces::Face>>>> {
+    let uplink = start(ctx.config.uplink_mqtt.as_ref(), &ctx.config.recording_dir, ctx.bus);
+    Box::pin(async move { Ok(crate::daemon::faces::boxed(uplink?)) })
+}
+
 /// Start the uplink when `[uplink.mqtt]` is configured: open (or resume) the queue under
 /// `recording_dir`, subscribe to the live feed, and connect.
 pub fn start(cfg: Option<&MqttUplink>, recording_dir: &Path, live: &Live) -> anyhow::Result<Option<Uplink>> {
