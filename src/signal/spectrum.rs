@@ -35,10 +35,6 @@ use std::sync::Arc;
 
 use realfft::num_complex::Complex;
 use realfft::{RealFftPlanner, RealToComplex};
-use rustfft::FftPlanner;
-
-mod band;
-use band::Band;
 
 /// Longest FFT computed, points (128 MiB of input). A longer request gives an empty spectrum.
 pub const MAX_FFT_LEN: usize = 1 << 24;
@@ -125,9 +121,6 @@ pub struct SpectrumPlanner {
     input: Vec<f64>,
     output: Vec<Complex<f64>>,
     scratch: Vec<Complex<f64>>,
-    /// `amplitudes_up_to`'s low bins without the rest (`band`), and its plans.
-    band_planner: FftPlanner<f64>,
-    band: Option<Band>,
 }
 
 impl fmt::Debug for SpectrumPlanner {
@@ -150,8 +143,27 @@ impl SpectrumPlanner {
             input: Vec::new(),
             output: Vec::new(),
             scratch: Vec::new(),
-            band_planner: FftPlanner::new(),
-            band: None,
+        }
+    }
+
+    /// Bins 1, 2, ... of [`SpectrumPlanner::spectrum`] up to the last at or below
+    /// `f_max_hz` (a fit's cost function compares about a tenth of a padded spectrum's
+    /// bins, and takes one per simulated blow): realfft's whole transform, cut.
+    pub fn amplitudes_up_to(
+        &mut self,
+        signal: &[f64],
+        dt_s: f64,
+        pad_factor: usize,
+        min_len: usize,
+        f_max_hz: f64,
+    ) -> Vec<f64> {
+        let Some(m) = checked_len(signal, dt_s, pad_factor, min_len) else { return Vec::new() };
+        let scale = 2.0 / signal.len() as f64;
+        let df_hz = 1.0 / (m as f64 * dt_s);
+        let last = (1..=m / 2).take_while(|&k| k as f64 * df_hz <= f_max_hz).last().unwrap_or(0);
+        match self.transform_to(signal, m) {
+            Some(_) => self.output[1..=last].iter().map(|c| c.norm_sqr().sqrt() * scale).collect(),
+            None => Vec::new(),
         }
     }
 
