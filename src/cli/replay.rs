@@ -115,13 +115,50 @@ pub(crate) fn replay_into<W: Write>(
     setup: impl FnOnce(&mut Pipeline),
 ) -> anyhow::Result<(ExitCode, Feeder)> {
     let (input, stored) = open_input(&args.input)?;
-    let Some((machine_origin, machine_text)) = pick(&args.machine, stored.machine, &args.input, "machine.toml")? else {
+    let (mut pipeline, writer, kind) = configured(args, &stored)?;
+    setup(&mut pipeline);
+    // The recipe the live run judged with, unless the caller gave one.
+    if let (None, Some(text)) = (pipeline.recipe(), &stored.recipe) {
+        let origin = format!("{} (recipe.toml stored in it)", args.input.display());
+        pipeline.set_recipe(crate::daemon::recipe_switch::from_recorded(&origin, text)?);
+    }
+    if let Some(r) = pipeline.recipe()
+        && r.machine != kind.as_str()
+    {
+        bail!("recipe '{}' was taught on a {} but the machine model is a {}", r.name, r.machine, kind.as_str());
+    }
+    let mut replay = Replay {
+        session: Session::new(pipeline, writer, Stamp::DeviceEnd),
+        outcomes: Vec::new(),
+        input: args.input.clone(),
+        out: std::io::BufWriter::new(out),
+        json: args.json,
+        blows: 0,
+        rejected: 0,
+    };
+    if !args.json {
+        writeln!(replay.out, "{TABLE_HEADER}")?;
+    }
+    let status = replay.play(input, args)?;
+    let feeder = replay.finish()?;
+    Ok((status, feeder))
+}
+
+/// The pipeline and the recording (`--out`) `args` and the input's stored files make, and
+/// the machine's kind.
+fn configured(
+    args: &ReplayArgs,
+    stored: &Stored,
+) -> anyhow::Result<(Pipeline, Option<RecordWriter>, crate::physics::machine::MachineKind)> {
+    let Some((machine_origin, machine_text)) =
+        pick(&args.machine, stored.machine.clone(), &args.input, "machine.toml")?
+    else {
         bail!("{}: holds no machine model; give one with --machine M.toml", args.input.display());
     };
     let machine_file = parse_machine(&machine_origin, &machine_text)?;
     let machine = machine_file.machine;
     let effects = machine_file.effect_set();
-    let process_text = pick(&args.process, stored.process, &args.input, "process.toml")?;
+    let process_text = pick(&args.process, stored.process.clone(), &args.input, "process.toml")?;
     let process: Option<Process> = match &process_text {
         Some((origin, text)) => {
             let p = parse_process_warn(origin, text)?;
@@ -137,7 +174,7 @@ pub(crate) fn replay_into<W: Write>(
         None => None,
     };
     // The alert rules and billet detection the live run used, unless the caller gives others.
-    let service_text = pick(&args.service, stored.service, &args.input, SERVICE_CONFIG_NAME)?;
+    let service_text = pick(&args.service, stored.service.clone(), &args.input, SERVICE_CONFIG_NAME)?;
     let mut tuning = match &service_text {
         Some((origin, text)) => parse_tuning(origin, text)?,
         None => parse_tuning("defaults", "")?,
@@ -166,87 +203,8 @@ pub(crate) fn replay_into<W: Write>(
              billet's process sheet; give one with --process P.toml"
         );
     }
-    let mut pipeline = Pipeline::new(machine, process, tuned_config(&tuning, &machine)).with_effects(effects);
-    setup(&mut pipeline);
-    // The recipe the live run judged with, unless the caller gave one.
-    if let (None, Some(text)) = (pipeline.recipe(), &stored.recipe) {
-        let origin = format!("{} (recipe.toml stored in it)", args.input.display());
-        pipeline.set_recipe(crate::daemon::recipe_switch::from_recorded(&origin, text)?);
-    }
-    if let Some(r) = pipeline.recipe()
-        && r.machine != machine.kind().as_str()
-    {
-        bail!(
-            "recipe '{}' was taught on a {} but the machine model is a {}",
-            r.name,
-            r.machine,
-            machine.kind().as_str()
-        );
-    }
-    let mut replay = Replay {
-        session: Session::new(pipeline, writer, Stamp::DeviceEnd),
-        outcomes: Vec::new(),
-        input: args.input.clone(),
-        out: std::io::BufWriter::new(out),
-        json: args.json,
-        blows: 0,
-        rejected: 0,
-    };
-    if !args.json {
-        writeln!(replay.out, "{TABLE_HEADER}")?;
-    }
-    let mut status = ExitCode::SUCCESS;
-    match input {
-        Input::Files(files) => {
-            for path in files {
-                super::for_each_capture_batch(&path, |batch| replay.batch(&batch))?;
-            }
-        }
-        Input::Recording { mut reader, ahead } => {
-            for batch in &ahead {
-                replay.batch(batch)?;
-            }
-            for m in reader.by_ref() {
-                let m = m?;
-                let log_ns = m.log_time_ns;
-                match m.payload {
-                    Payload::Samples(batch) => replay.batch(&batch)?,
-                    // A new billet went into the dies here during the live run.
-                    Payload::Status(st) if is_new_billet_marker(&st) => {
-                        replay.session.new_billet(None, log_ns, &mut replay.outcomes);
-                        replay.handle()?;
-                    }
-                    // The live run switched recipes here (`POST /recipe`); a rotated file
-                    // repeats the same text, which changes nothing.
-                    Payload::Config(c) if c.name == RECIPE_CONFIG_NAME && args.recipe.is_none() => {
-                        let origin = format!("{} (recipe.toml stored in it)", args.input.display());
-                        let recipe = crate::daemon::recipe_switch::from_recorded(&origin, &c.text)?;
-                        replay.session.set_recipe(recipe, &c.text, log_ns);
-                    }
-                    // The live run reloaded its machine model here (SIGHUP, after `diagnose
-                    // --adopt`); a rotated file repeats the same text, which changes nothing.
-                    Payload::Config(c) if c.name == MACHINE_CONFIG_NAME && args.machine.is_none() => {
-                        let origin = format!("{} (machine.toml stored in it)", args.input.display());
-                        replay.session.set_model(&origin, &c.text, log_ns).map_err(anyhow::Error::msg)?;
-                    }
-                    // The live run reloaded its alert rules here (SIGHUP); a rotated file
-                    // repeats the same text, which changes nothing.
-                    Payload::Config(c) if c.name == SERVICE_CONFIG_NAME && args.service.is_none() => {
-                        let origin = format!("{} (service.toml stored in it)", args.input.display());
-                        replay.session.set_alerts(parse_tuning(&origin, &c.text)?.alerts, &c.text, log_ns);
-                    }
-                    _ => {}
-                }
-                replay.recorded()?;
-            }
-            if !reader.report().complete {
-                eprintln!("forgemon: {}", reader.report());
-            }
-            status = super::inspect::input_status(reader.report());
-        }
-    }
-    let feeder = replay.finish()?;
-    Ok((status, feeder))
+    let pipeline = Pipeline::new(machine, process, tuned_config(&tuning, &machine)).with_effects(effects);
+    Ok((pipeline, writer, machine.kind()))
 }
 
 const TABLE_HEADER: &str =
@@ -265,6 +223,61 @@ struct Replay<W: Write> {
 }
 
 impl<W: Write> Replay<W> {
+    /// The whole input through the session; the exit status the input's state gives.
+    fn play(&mut self, input: Input, args: &ReplayArgs) -> anyhow::Result<ExitCode> {
+        let mut status = ExitCode::SUCCESS;
+        match input {
+            Input::Files(files) => {
+                for path in files {
+                    super::for_each_capture_batch(&path, |batch| self.batch(&batch))?;
+                }
+            }
+            Input::Recording { mut reader, ahead } => {
+                for batch in &ahead {
+                    self.batch(batch)?;
+                }
+                for m in reader.by_ref() {
+                    let m = m?;
+                    let log_ns = m.log_time_ns;
+                    match m.payload {
+                        Payload::Samples(batch) => self.batch(&batch)?,
+                        // A new billet went into the dies here during the live run.
+                        Payload::Status(st) if is_new_billet_marker(&st) => {
+                            self.session.new_billet(None, log_ns, &mut self.outcomes);
+                            self.handle()?;
+                        }
+                        // The live run switched recipes here (`POST /recipe`); a rotated file
+                        // repeats the same text, which changes nothing.
+                        Payload::Config(c) if c.name == RECIPE_CONFIG_NAME && args.recipe.is_none() => {
+                            let origin = format!("{} (recipe.toml stored in it)", args.input.display());
+                            let recipe = crate::daemon::recipe_switch::from_recorded(&origin, &c.text)?;
+                            self.session.set_recipe(recipe, &c.text, log_ns);
+                        }
+                        // The live run reloaded its machine model here (SIGHUP, after `diagnose
+                        // --adopt`); a rotated file repeats the same text, which changes nothing.
+                        Payload::Config(c) if c.name == MACHINE_CONFIG_NAME && args.machine.is_none() => {
+                            let origin = format!("{} (machine.toml stored in it)", args.input.display());
+                            self.session.set_model(&origin, &c.text, log_ns).map_err(anyhow::Error::msg)?;
+                        }
+                        // The live run reloaded its alert rules here (SIGHUP); a rotated file
+                        // repeats the same text, which changes nothing.
+                        Payload::Config(c) if c.name == SERVICE_CONFIG_NAME && args.service.is_none() => {
+                            let origin = format!("{} (service.toml stored in it)", args.input.display());
+                            self.session.set_alerts(parse_tuning(&origin, &c.text)?.alerts, &c.text, log_ns);
+                        }
+                        _ => {}
+                    }
+                    self.recorded()?;
+                }
+                if !reader.report().complete {
+                    eprintln!("forgemon: {}", reader.report());
+                }
+                status = super::inspect::input_status(reader.report());
+            }
+        }
+        Ok(status)
+    }
+
     /// A batch through the session: recorded (with `--out`), merged, fed.
     fn batch(&mut self, batch: &SampleBatch) -> anyhow::Result<()> {
         self.session.batch(batch, &mut self.outcomes);

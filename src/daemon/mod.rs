@@ -138,11 +138,62 @@ pub async fn serve(
     parts: ServiceParts,
     rx: mpsc::Receiver<SourceEvent>,
     shutdown: watch::Sender<bool>,
-    mut stop: watch::Receiver<bool>,
+    stop: watch::Receiver<bool>,
     mut hooks: Hooks,
     control: Option<(mpsc::Sender<Control>, mpsc::Receiver<Control>)>,
 ) -> anyhow::Result<Summary> {
-    let (control_tx, mut control_rx) = control.unwrap_or_else(|| mpsc::channel(16));
+    let (control_tx, control_rx) = control.unwrap_or_else(|| mpsc::channel(16));
+    let cfg = &parts.config;
+    let mut writer = open_recording(&parts)?;
+    let status: SharedStatus = Arc::new(Mutex::new(StatusSnapshot::new(parts.machine.kind().as_str())));
+    let listener = tokio::net::TcpListener::bind(cfg.http_listen)
+        .await
+        .with_context(|| format!("http.listen {}: cannot listen", cfg.http_listen))?;
+    if let (Some(f), Ok(addr)) = (hooks.on_listening.take(), listener.local_addr()) {
+        f(addr);
+    }
+    let live = live::Live::default();
+    let token = dashboard::auth::Token::read(cfg.http_token_file.as_deref())?;
+    let (recipe_tx, recipe_rx) = mpsc::channel::<recipe_switch::RecipeChange>(4);
+    let pages = recipe_switch::routes(recipe_tx, parts.machine.kind().as_str()).merge(dashboard::routes(
+        status.clone(),
+        control_tx.clone(),
+        live.clone(),
+    ));
+    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone(), token, pages));
+    // The Foxglove live view: the recorder's tap feeds it; it stops when `serve` returns.
+    let _foxglove = match cfg.foxglove_listen {
+        Some(addr) => Some(foxglove::start(addr, &mut writer).await?),
+        None => None,
+    };
+    let on_advice = Mutex::new(hooks.on_advice.take());
+    let ctx = faces::FaceContext {
+        config: cfg,
+        machine: &parts.machine,
+        machine_text: &parts.machine_text,
+        process: parts.process.as_ref(),
+        bus: &live,
+        status: &status,
+        control: &control_tx,
+        on_advice: &on_advice,
+    };
+    let running = start_faces(&ctx).await?;
+    let pipeline = pipeline_with_recipe(&parts, &mut writer, &status)?;
+    let session = Session::new(pipeline, Some(writer), Stamp::Arrival);
+    let service = service::Service::new(session, status, live.clone(), hooks, parts.config_path.clone());
+    let rx = queue::SourceQueue::new(rx, parts.backpressure);
+    tracing::info!(listen = %cfg.http_listen, dir = %cfg.recording_dir.display(), "forgemon service ready");
+    let summary = run_loop(service, rx, control_rx, recipe_rx, stop, &shutdown).await?;
+    live.publish(live::LiveEvent::Stopping);
+    for face in running {
+        face.finish().await;
+    }
+    http.abort();
+    Ok(summary)
+}
+
+/// The recording directory's writer, with the machine, process and service files recorded.
+fn open_recording(parts: &ServiceParts) -> anyhow::Result<RecordWriter> {
     let cfg = &parts.config;
     std::fs::create_dir_all(&cfg.recording_dir)
         .with_context(|| format!("{}: cannot create the recording directory", cfg.recording_dir.display()))?;
@@ -157,73 +208,58 @@ pub async fn serve(
         writer.write_config(t0, "process.toml", t)?;
     }
     writer.write_config(t0, SERVICE_CONFIG_NAME, &parts.config_text)?;
+    Ok(writer)
+}
 
-    let status: SharedStatus = Arc::new(Mutex::new(StatusSnapshot::new(parts.machine.kind().as_str())));
-    let listener = tokio::net::TcpListener::bind(cfg.http_listen)
-        .await
-        .with_context(|| format!("http.listen {}: cannot listen", cfg.http_listen))?;
-    if let (Some(f), Ok(addr)) = (hooks.on_listening.take(), listener.local_addr()) {
-        f(addr);
-    }
-    let live = live::Live::default();
-    let token = dashboard::auth::Token::read(cfg.http_token_file.as_deref())?;
-    let (recipe_tx, mut recipe_rx) = mpsc::channel::<recipe_switch::RecipeChange>(4);
-    let pages = recipe_switch::routes(recipe_tx, parts.machine.kind().as_str()).merge(dashboard::routes(
-        status.clone(),
-        control_tx.clone(),
-        live.clone(),
-    ));
-    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone(), token, pages));
-    // The Foxglove live view: the recorder's tap feeds it; it stops when `serve` returns.
-    let _foxglove = match cfg.foxglove_listen {
-        Some(addr) => Some(foxglove::start(addr, &mut writer).await?),
-        None => None,
-    };
-    // Every face on the bus, each from its own section (`faces::FACES`).
-    let on_advice = Mutex::new(hooks.on_advice.take());
-    let ctx = faces::FaceContext {
-        config: cfg,
-        machine: &parts.machine,
-        machine_text: &parts.machine_text,
-        process: parts.process.as_ref(),
-        bus: &live,
-        status: &status,
-        control: &control_tx,
-        on_advice: &on_advice,
-    };
+/// Every face on the bus, each from its own section (`FACES`).
+async fn start_faces(ctx: &faces::FaceContext<'_>) -> anyhow::Result<Vec<Box<dyn faces::Face>>> {
     let mut running = Vec::new();
     for (_, start) in FACES {
-        running.extend(start(&ctx).await?);
+        running.extend(start(ctx).await?);
     }
+    Ok(running)
+}
+
+/// The pipeline of `parts`, judging with `[recipe]` when set: read, checked and recorded
+/// (so a replay judges with it), or the start stops here.
+fn pipeline_with_recipe(
+    parts: &ServiceParts,
+    writer: &mut RecordWriter,
+    status: &SharedStatus,
+) -> anyhow::Result<Pipeline> {
+    let cfg = &parts.config;
+    let kind = parts.machine.kind().as_str();
     let mut pipeline = Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine))
         .with_effects(parts.effects);
     if let Some(path) = &cfg.recipe_path {
-        // Read, checked and recorded (so a replay judges with it), or the start stops here.
         let text = std::fs::read_to_string(path).with_context(|| format!("recipe {}: cannot read", path.display()))?;
         let recipe = crate::config::recipe::parse_recipe(&path.display().to_string(), &text)?;
-        if recipe.machine != parts.machine.kind().as_str() {
-            anyhow::bail!(
-                "{}: recipe for a {} but the machine is a {}",
-                path.display(),
-                recipe.machine,
-                parts.machine.kind().as_str()
-            );
+        if recipe.machine != kind {
+            anyhow::bail!("{}: recipe for a {} but the machine is a {kind}", path.display(), recipe.machine);
         }
-        writer.write_config(t0, RECIPE_CONFIG_NAME, &text)?;
+        writer.write_config(host_now_ns(), RECIPE_CONFIG_NAME, &text)?;
         status.lock().map(|mut s| s.recipe = Some(recipe.name.clone())).ok();
         pipeline.set_recipe(Some(recipe));
     }
-    let session = Session::new(pipeline, Some(writer), Stamp::Arrival);
-    let mut service = service::Service::new(session, status, live.clone(), hooks, parts.config_path.clone());
+    Ok(pipeline)
+}
 
+/// The event loop: one `Service` method per event, until SIGTERM/SIGINT, `stop` or the
+/// sources hang up; then the sources are told to stop (`shutdown`) and the service finishes.
+async fn run_loop(
+    mut service: service::Service,
+    mut rx: queue::SourceQueue,
+    mut control_rx: mpsc::Receiver<Control>,
+    mut recipe_rx: mpsc::Receiver<recipe_switch::RecipeChange>,
+    mut stop: watch::Receiver<bool>,
+    shutdown: &watch::Sender<bool>,
+) -> anyhow::Result<Summary> {
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
     // systemd's watchdog wants a ping at least every WATCHDOG_USEC; ping at half of it.
     let watchdog = sd_notify::watchdog_enabled();
     let mut tick = tokio::time::interval(watchdog.map_or(Duration::from_secs(1), |d| d / 2));
-    let mut rx = queue::SourceQueue::new(rx, parts.backpressure);
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
-    tracing::info!(listen = %cfg.http_listen, dir = %cfg.recording_dir.display(), "forgemon service ready");
     loop {
         tokio::select! {
             ev = rx.recv() => match ev {
@@ -247,13 +283,7 @@ pub async fn serve(
     }
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
     let _ = shutdown.send(true);
-    let summary = service.finish()?;
-    live.publish(live::LiveEvent::Stopping);
-    for face in running {
-        face.finish().await;
-    }
-    http.abort();
-    Ok(summary)
+    service.finish()
 }
 
 /// The pipeline's thresholds: the machine's defaults with the service file's alert rules
