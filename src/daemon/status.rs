@@ -204,113 +204,19 @@ impl StatusSnapshot {
     /// Prometheus text exposition (version 0.0.4).
     pub fn metrics(&self) -> String {
         let mut m = String::new();
-        let mut metric = |name: &str, kind: &str, help: &str, rows: Vec<(String, f64)>| {
+        for (name, kind, help, value) in METRICS {
+            let rows: Vec<(String, f64)> = match value {
+                Value::Service(f) => f(self).map(|v| (String::new(), v)).into_iter().collect(),
+                Value::Source(f) => self.sources.iter().map(|(k, s)| (format!("{{source=\"{k}\"}}"), f(s))).collect(),
+            };
+            // A gauge with no value yet (no blow, no finished billet) is left out.
+            if matches!(value, Value::Service(_)) && rows.is_empty() {
+                continue;
+            }
             let _ = writeln!(m, "# HELP forgemon_{name} {help}\n# TYPE forgemon_{name} {kind}");
             for (labels, v) in rows {
                 let _ = writeln!(m, "forgemon_{name}{labels} {v}");
             }
-        };
-        let per_source = |f: &dyn Fn(&SourceState) -> f64| -> Vec<(String, f64)> {
-            self.sources.iter().map(|(k, s)| (format!("{{source=\"{k}\"}}"), f(s))).collect()
-        };
-        metric("samples_total", "counter", "Samples received.", per_source(&|s| s.samples as f64));
-        metric("drops_total", "counter", "Events dropped at a full pipeline channel.", per_source(&|s| s.drops as f64));
-        metric(
-            "queue_dropped_events_total",
-            "counter",
-            "Oldest events the live queue dropped because the pipeline fell behind.",
-            vec![(String::new(), self.dropped_events as f64)],
-        );
-        metric(
-            "record_errors_total",
-            "counter",
-            "Recording writes that failed.",
-            vec![(String::new(), self.record_errors as f64)],
-        );
-        metric("billets_total", "counter", "Billets started.", vec![(String::new(), self.billets as f64)]);
-        metric(
-            "billets_finished_total",
-            "counter",
-            "Billets finished (the next one started).",
-            vec![(String::new(), self.billets_finished as f64)],
-        );
-        metric(
-            "billet_blows",
-            "gauge",
-            "Blows on the billet in the dies.",
-            vec![(String::new(), self.billet_blows as f64)],
-        );
-        if let Some(n) = self.last_billet_blows {
-            metric(
-                "last_billet_blows",
-                "gauge",
-                "Blows the last finished billet took.",
-                vec![(String::new(), n as f64)],
-            );
-        }
-        metric(
-            "incomplete_blows_total",
-            "counter",
-            "Blows with samples lost inside them, reported without energies.",
-            vec![(String::new(), self.incomplete_blows as f64)],
-        );
-        metric(
-            "implausible_blows_total",
-            "counter",
-            "Blows with a value outside its physical range, reported without energies.",
-            vec![(String::new(), self.implausible_blows as f64)],
-        );
-        metric("gaps_total", "counter", "Gaps in the sample stream.", per_source(&|s| s.gaps as f64));
-        metric("samples_lost_total", "counter", "Samples lost in gaps.", per_source(&|s| s.samples_lost as f64));
-        metric("crc_errors_total", "counter", "Frames with a bad CRC.", per_source(&|s| s.crc_errors as f64));
-        metric(
-            "decode_errors_total",
-            "counter",
-            "Frames or lines that did not decode.",
-            per_source(&|s| s.decode_errors as f64),
-        );
-        metric("reconnects_total", "counter", "Transport reconnections.", per_source(&|s| s.reconnects as f64));
-        metric(
-            "source_up",
-            "gauge",
-            "1 when the source is connected.",
-            per_source(&|s| f64::from(u8::from(s.state == "connected"))),
-        );
-        metric(
-            "merged_samples_total",
-            "counter",
-            "Timeline samples with roles merged from several sources.",
-            vec![(String::new(), self.merge.merged_samples as f64)],
-        );
-        metric(
-            "merge_held_values_total",
-            "counter",
-            "Merged role values held because their source was late.",
-            vec![(String::new(), self.merge.held_values as f64)],
-        );
-        metric(
-            "merge_dropped_samples_total",
-            "counter",
-            "Timeline samples dropped because a role's source had sent nothing.",
-            vec![(String::new(), self.merge.dropped_samples as f64)],
-        );
-        metric("blows_total", "counter", "Blows estimated.", vec![(String::new(), self.blows as f64)]);
-        metric("alerts_total", "counter", "Alerts raised.", vec![(String::new(), self.alerts as f64)]);
-        if let Some(l) = self.last_result_latency_ms {
-            metric(
-                "result_latency_ms",
-                "gauge",
-                "Receipt of the blow's last samples to its result, ms.",
-                vec![(String::new(), l)],
-            );
-        }
-        if let Some(e) = self.last_efficiency {
-            metric(
-                "last_efficiency",
-                "gauge",
-                "Efficiency of the last blow (plastic / kinetic in).",
-                vec![(String::new(), e)],
-            );
         }
         m
     }
@@ -354,6 +260,104 @@ pub async fn serve_http(
         tracing::error!("status endpoint stopped: {e}");
     }
 }
+
+/// Where a metric's value comes from: the service's state, or each source's (labelled).
+enum Value {
+    Service(fn(&StatusSnapshot) -> Option<f64>),
+    Source(fn(&SourceState) -> f64),
+}
+
+/// `/metrics`, in order: name (after `forgemon_`), type, help, value.
+const METRICS: [(&str, &str, &str, Value); 23] = [
+    ("samples_total", "counter", "Samples received.", Value::Source(|s| s.samples as f64)),
+    ("drops_total", "counter", "Events dropped at a full pipeline channel.", Value::Source(|s| s.drops as f64)),
+    (
+        "queue_dropped_events_total",
+        "counter",
+        "Oldest events the live queue dropped because the pipeline fell behind.",
+        Value::Service(|s| Some(s.dropped_events as f64)),
+    ),
+    (
+        "record_errors_total",
+        "counter",
+        "Recording writes that failed.",
+        Value::Service(|s| Some(s.record_errors as f64)),
+    ),
+    ("billets_total", "counter", "Billets started.", Value::Service(|s| Some(s.billets as f64))),
+    (
+        "billets_finished_total",
+        "counter",
+        "Billets finished (the next one started).",
+        Value::Service(|s| Some(s.billets_finished as f64)),
+    ),
+    ("billet_blows", "gauge", "Blows on the billet in the dies.", Value::Service(|s| Some(s.billet_blows as f64))),
+    (
+        "last_billet_blows",
+        "gauge",
+        "Blows the last finished billet took.",
+        Value::Service(|s| s.last_billet_blows.map(|n| n as f64)),
+    ),
+    (
+        "incomplete_blows_total",
+        "counter",
+        "Blows with samples lost inside them, reported without energies.",
+        Value::Service(|s| Some(s.incomplete_blows as f64)),
+    ),
+    (
+        "implausible_blows_total",
+        "counter",
+        "Blows with a value outside its physical range, reported without energies.",
+        Value::Service(|s| Some(s.implausible_blows as f64)),
+    ),
+    ("gaps_total", "counter", "Gaps in the sample stream.", Value::Source(|s| s.gaps as f64)),
+    ("samples_lost_total", "counter", "Samples lost in gaps.", Value::Source(|s| s.samples_lost as f64)),
+    ("crc_errors_total", "counter", "Frames with a bad CRC.", Value::Source(|s| s.crc_errors as f64)),
+    (
+        "decode_errors_total",
+        "counter",
+        "Frames or lines that did not decode.",
+        Value::Source(|s| s.decode_errors as f64),
+    ),
+    ("reconnects_total", "counter", "Transport reconnections.", Value::Source(|s| s.reconnects as f64)),
+    (
+        "source_up",
+        "gauge",
+        "1 when the source is connected.",
+        Value::Source(|s| f64::from(u8::from(s.state == "connected"))),
+    ),
+    (
+        "merged_samples_total",
+        "counter",
+        "Timeline samples with roles merged from several sources.",
+        Value::Service(|s| Some(s.merge.merged_samples as f64)),
+    ),
+    (
+        "merge_held_values_total",
+        "counter",
+        "Merged role values held because their source was late.",
+        Value::Service(|s| Some(s.merge.held_values as f64)),
+    ),
+    (
+        "merge_dropped_samples_total",
+        "counter",
+        "Timeline samples dropped because a role's source had sent nothing.",
+        Value::Service(|s| Some(s.merge.dropped_samples as f64)),
+    ),
+    ("blows_total", "counter", "Blows estimated.", Value::Service(|s| Some(s.blows as f64))),
+    ("alerts_total", "counter", "Alerts raised.", Value::Service(|s| Some(s.alerts as f64))),
+    (
+        "result_latency_ms",
+        "gauge",
+        "Receipt of the blow's last samples to its result, ms.",
+        Value::Service(|s| s.last_result_latency_ms),
+    ),
+    (
+        "last_efficiency",
+        "gauge",
+        "Efficiency of the last blow (plastic / kinetic in).",
+        Value::Service(|s| s.last_efficiency),
+    ),
+];
 
 #[cfg(test)]
 mod tests {
