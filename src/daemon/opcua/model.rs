@@ -218,6 +218,30 @@ fn blow_event_type(space: &mut AddressSpace, ns: u16) {
     }
 }
 
+/// The condition's `Acknowledge(EventId, Comment)` method, `method` under `condition`.
+fn acknowledge_method(space: &mut AddressSpace, condition: &NodeId, method: &NodeId, args: &NodeId) {
+    let arg = |name: &str, data_type: DataTypeId, description: &str| Argument {
+        name: name.into(),
+        data_type: data_type.into(),
+        value_rank: -1,
+        array_dimensions: None,
+        description: description.into(),
+    };
+    MethodBuilder::new(method, QualifiedName::new(0, "Acknowledge"), "Acknowledge")
+        .component_of(condition.clone())
+        .executable(true)
+        .user_executable(true)
+        .input_args(
+            space,
+            args,
+            &[
+                arg("EventId", DataTypeId::ByteString, "the event being acknowledged"),
+                arg("Comment", DataTypeId::LocalizedText, "the operator's comment"),
+            ],
+        )
+        .insert(space);
+}
+
 /// One alert condition: an `AlarmConditionType` instance under the working unit
 /// (`HasCondition`), with the state an operator reads and the `Acknowledge` method.
 fn condition(
@@ -263,31 +287,7 @@ fn condition(
     variable(space, &sub("ConditionName"), base("ConditionName"), name, DataTypeId::String, &id, true);
     variable(space, &sub("InputNode"), base("InputNode"), input.clone(), DataTypeId::NodeId, &id, true);
     let acknowledge = sub("Acknowledge");
-    MethodBuilder::new(&acknowledge, base("Acknowledge"), "Acknowledge")
-        .component_of(id.clone())
-        .executable(true)
-        .user_executable(true)
-        .input_args(
-            space,
-            &sub("Acknowledge.InputArguments"),
-            &[
-                Argument {
-                    name: "EventId".into(),
-                    data_type: DataTypeId::ByteString.into(),
-                    value_rank: -1,
-                    array_dimensions: None,
-                    description: "the event being acknowledged".into(),
-                },
-                Argument {
-                    name: "Comment".into(),
-                    data_type: DataTypeId::LocalizedText.into(),
-                    value_rank: -1,
-                    array_dimensions: None,
-                    description: "the operator's comment".into(),
-                },
-            ],
-        )
-        .insert(space);
+    acknowledge_method(space, &id, &acknowledge, &sub("Acknowledge.InputArguments"));
     ConditionNodes {
         kind,
         node: id,
