@@ -119,6 +119,13 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
     crate::identify::report::write_identify_report(&report, &report_path)
         .with_context(|| format!("{}: cannot write the report", report_path.display()))?;
 
+    print_summary(&result, started.elapsed().as_secs_f64());
+    eprintln!("forgemon: wrote {} and {}", args.out.display(), report_path.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The fitted parameters, each blow's error and the verdict on the fit, on stdout.
+fn print_summary(result: &crate::identify::Identified, elapsed_s: f64) {
     println!("{:<24} {:>14} {:>10}  determined", "parameter", "value", "± 1σ");
     for (i, p) in result.set.params.iter().enumerate() {
         let u = &result.uncertainty;
@@ -149,11 +156,9 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
         result.objective,
         result.runs_agreeing,
         result.runs.len(),
-        started.elapsed().as_secs_f64()
+        elapsed_s
     );
     println!("{}", result.fit_check.verdict());
-    eprintln!("forgemon: wrote {} and {}", args.out.display(), report_path.display());
-    Ok(ExitCode::SUCCESS)
 }
 
 /// The reference blows of a capture directory, split into fitted and held out.
