@@ -112,44 +112,7 @@ pub fn diagnose(
         .collect();
     let mut ranked = singles.clone();
     ranked.sort_by(|a, b| a.1.holdout.total_cmp(&b.1.holdout));
-    // Pairs: each single effect the holdout cannot tell from the best (the ties the verdict
-    // settles by parsimony, so the winner is among them) with each other one (a second
-    // effect that only shows once the first is in place need not rank high alone).
-    type Ranked<'a> = &'a (usize, Fitted);
-    let anchors: Vec<Ranked> = ranked
-        .first()
-        .map(|best| {
-            ranked
-                .iter()
-                .filter(|r| r.0 == best.0 || evidence::equivalent(&best.1.holdout_per_blow, &r.1.holdout_per_blow))
-                .collect()
-        })
-        .unwrap_or_default();
-    let is_anchor = |i: usize| anchors.iter().position(|a| a.0 == i);
-    let pairs_in: Vec<(Ranked, Ranked)> = anchors
-        .iter()
-        .enumerate()
-        .flat_map(|(k, a)| {
-            // A pair of two anchors is fitted once, from the better-ranked one.
-            ranked.iter().filter(move |o| o.0 != a.0 && is_anchor(o.0).is_none_or(|j| j > k)).map(move |o| (*a, o))
-        })
-        .collect();
-    let pairs: Vec<Fitted> = pairs_in
-        .par_iter()
-        .filter_map(|((ia, fa), (ib, _))| {
-            let cands: Vec<&Candidate> = vec![&lib[*ia], &lib[*ib]];
-            // The best single effect starts where its own fit ended.
-            let all = fa.effects[0].params();
-            let held: Vec<f64> = lib[*ia]
-                .params
-                .iter()
-                .map(|p| all.iter().find(|(k, _)| *k == p.key).map_or(p.lo, |(_, v)| *v))
-                .collect();
-            let f = attribute::fit_candidates(machine, effects, &cands, &held, &calib, &holdout);
-            progress();
-            f
-        })
-        .collect();
+    let pairs = fit_pairs(machine, effects, &lib, &ranked, &calib, &holdout, progress);
     let mut candidates: Vec<Fitted> = ranked.iter().map(|(_, f)| f.clone()).chain(pairs.iter().cloned()).collect();
     candidates.sort_by(|a, b| a.holdout.total_cmp(&b.holdout));
     let noise_nrmse = holdout.noise_nrmse();
@@ -173,6 +136,57 @@ pub fn diagnose(
         calib,
         holdout,
     })
+}
+
+/// The pairs worth fitting, fitted: each single effect the holdout cannot tell from the
+/// best (`ranked[0]`), with each other one.
+fn fit_pairs(
+    machine: &Machine,
+    effects: &EffectSet,
+    lib: &[Candidate],
+    ranked: &[(usize, Fitted)],
+    calib: &BlowSet,
+    holdout: &BlowSet,
+    progress: &(dyn Fn() + Sync),
+) -> Vec<Fitted> {
+    // Pairs: each single effect the holdout cannot tell from the best (the ties the verdict
+    // settles by parsimony, so the winner is among them) with each other one (a second
+    // effect that only shows once the first is in place need not rank high alone).
+    type Ranked<'a> = &'a (usize, Fitted);
+    let anchors: Vec<Ranked> = ranked
+        .first()
+        .map(|best| {
+            ranked
+                .iter()
+                .filter(|r| r.0 == best.0 || evidence::equivalent(&best.1.holdout_per_blow, &r.1.holdout_per_blow))
+                .collect()
+        })
+        .unwrap_or_default();
+    let is_anchor = |i: usize| anchors.iter().position(|a| a.0 == i);
+    let pairs_in: Vec<(Ranked, Ranked)> = anchors
+        .iter()
+        .enumerate()
+        .flat_map(|(k, a)| {
+            // A pair of two anchors is fitted once, from the better-ranked one.
+            ranked.iter().filter(move |o| o.0 != a.0 && is_anchor(o.0).is_none_or(|j| j > k)).map(move |o| (*a, o))
+        })
+        .collect();
+    pairs_in
+        .par_iter()
+        .filter_map(|((ia, fa), (ib, _))| {
+            let cands: Vec<&Candidate> = vec![&lib[*ia], &lib[*ib]];
+            // The best single effect starts where its own fit ended.
+            let all = fa.effects[0].params();
+            let held: Vec<f64> = lib[*ia]
+                .params
+                .iter()
+                .map(|p| all.iter().find(|(k, _)| *k == p.key).map_or(p.lo, |(_, v)| *v))
+                .collect();
+            let f = attribute::fit_candidates(machine, effects, &cands, &held, calib, holdout);
+            progress();
+            f
+        })
+        .collect()
 }
 
 /// JSON has no NaN: a missing number is null.
