@@ -10,6 +10,7 @@ pub mod can;
 pub mod modbus;
 pub mod serial;
 
+pub use crate::signal::sample::Counters;
 use crate::signal::sample::{Gap, Status};
 use crate::signal::sample::{Role, SampleBatch};
 
@@ -36,39 +37,6 @@ pub struct ChannelSpec {
 impl ChannelSpec {
     pub fn physical(&self, raw: f64) -> f64 {
         self.offset + self.gain * raw
-    }
-}
-
-/// Counters every transport keeps (they go into `Status`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Counters {
-    pub samples: u64,
-    pub frames: u64,
-    /// Events dropped because the pipeline's channel was full.
-    pub drops: u64,
-    /// Sequence gaps (or missing frames) seen.
-    pub gaps: u64,
-    pub crc_errors: u64,
-    /// Frames or lines that did not decode (garbage, bad lengths, malformed text).
-    pub decode_errors: u64,
-    pub reconnects: u64,
-}
-
-impl Counters {
-    /// The status message of source `source` in state `state`.
-    pub fn status(&self, source: &str, state: &str, detail: impl Into<String>) -> Status {
-        Status {
-            source: source.to_string(),
-            state: state.to_string(),
-            samples: self.samples,
-            frames: self.frames,
-            drops: self.drops,
-            gaps: self.gaps,
-            crc_errors: self.crc_errors,
-            decode_errors: self.decode_errors,
-            reconnects: self.reconnects,
-            detail: detail.into(),
-        }
     }
 }
 

@@ -95,6 +95,39 @@ pub struct Gap {
     pub reason: String,
 }
 
+/// Counters every transport keeps (they go into `Status`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Counters {
+    pub samples: u64,
+    pub frames: u64,
+    /// Events dropped because the pipeline's channel was full.
+    pub drops: u64,
+    /// Sequence gaps (or missing frames) seen.
+    pub gaps: u64,
+    pub crc_errors: u64,
+    /// Frames or lines that did not decode (garbage, bad lengths, malformed text).
+    pub decode_errors: u64,
+    pub reconnects: u64,
+}
+
+impl Counters {
+    /// The status message of source `source` in state `state`.
+    pub fn status(&self, source: &str, state: &str, detail: impl Into<String>) -> Status {
+        Status {
+            source: source.to_string(),
+            state: state.to_string(),
+            samples: self.samples,
+            frames: self.frames,
+            drops: self.drops,
+            gaps: self.gaps,
+            crc_errors: self.crc_errors,
+            decode_errors: self.decode_errors,
+            reconnects: self.reconnects,
+            detail: detail.into(),
+        }
+    }
+}
+
 /// A source's state and counters since it started (topic `/status`).
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct Status {
