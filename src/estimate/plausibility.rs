@@ -104,9 +104,24 @@ pub fn settle(e: &mut BlowEstimate, r: &Ranges, classify: impl Fn(f64) -> BlowCl
     }
 }
 
+/// A value bounded: its name, its value as computed, and the bound it is reported at.
+type Bounded = (&'static str, f64, f64);
+
 /// The values to report at a bound (field, value as computed, bound), or the first check
 /// the blow fails.
-fn check(e: &BlowEstimate, r: &Ranges) -> Result<Vec<(&'static str, f64, f64)>, Implausible> {
+fn check(e: &BlowEstimate, r: &Ranges) -> Result<Vec<Bounded>, Implausible> {
+    check_inputs(e, r)?;
+    let mut bounded = Vec::new();
+    check_final_load(e, &mut bounded)?;
+    if let Some(kinetic_j) = e.kinetic_in_j {
+        check_energies(e, kinetic_j, &mut bounded)?;
+    }
+    Ok(bounded)
+}
+
+/// The impact speed within the machine's reach, the start height within the billet and
+/// the end height below it.
+fn check_inputs(e: &BlowEstimate, r: &Ranges) -> Result<(), Implausible> {
     let v = e.v_impact_mps;
     if !(v > 0.0 && v <= r.v_max_mps) {
         return Err(Implausible::new(
@@ -140,12 +155,16 @@ fn check(e: &BlowEstimate, r: &Ranges) -> Result<Vec<(&'static str, f64, f64)>, 
             ));
         }
     }
+    Ok(())
+}
+
+/// The load at the end of forming, not below zero beyond the estimate's accuracy.
+fn check_final_load(e: &BlowEstimate, bounded: &mut Vec<Bounded>) -> Result<(), Implausible> {
     // The load at the end of forming is the sensor's, and a billet in compression cannot
     // pull on the tools: a reading below zero by more than the estimate's accuracy of the
     // peak is a sensor's zero or lost low frequencies (a piezo's high-pass), or an end of
     // forming placed in the spring-back's ringing (issue 37: -986 kN on a moving
     // foundation). Within it, it is reported at zero.
-    let mut bounded = Vec::new();
     let load_noise_n = NOISE_FRACTION_OF_KINETIC * e.peak_load_n.abs();
     if e.final_load_n.is_nan() || e.final_load_n < -load_noise_n {
         return Err(Implausible::new(
@@ -163,7 +182,12 @@ fn check(e: &BlowEstimate, r: &Ranges) -> Result<Vec<(&'static str, f64, f64)>, 
     if e.final_load_n < 0.0 {
         bounded.push(("final_load_N", e.final_load_n, 0.0));
     }
-    let Some(kinetic_j) = e.kinetic_in_j else { return Ok(bounded) };
+    Ok(())
+}
+
+/// Each energy term non-negative, the efficiency in [0, 1] and the terms summing to the
+/// `kinetic_j` in, each within the estimate's accuracy.
+fn check_energies(e: &BlowEstimate, kinetic_j: f64, bounded: &mut Vec<Bounded>) -> Result<(), Implausible> {
     let noise_j = NOISE_FRACTION_OF_KINETIC * kinetic_j;
     let terms = [
         ("plastic_J", e.plastic_j),
@@ -219,7 +243,7 @@ fn check(e: &BlowEstimate, r: &Ranges) -> Result<Vec<(&'static str, f64, f64)>, 
             ),
         ));
     }
-    Ok(bounded)
+    Ok(())
 }
 
 /// Set the field named `field` to `x`.
