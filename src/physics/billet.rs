@@ -20,9 +20,6 @@ pub const STRAIN_FLOOR: f64 = 1e-4;
 /// power laws finite there. Blows run at 1–100 /s.
 pub const STRAIN_RATE_FLOOR_PER_S: f64 = 1e-2;
 
-/// `A = 2 mu r / h` below which the friction factor uses its series expansion.
-const SMALL_A: f64 = 1e-6;
-
 /// The billet as the process sheet describes it (CONTRACTS.md §2).
 #[derive(Debug, Clone, PartialEq)]
 pub struct BilletGeometry {
@@ -206,35 +203,30 @@ impl BilletLaw {
 
     /// Upsetting load at height `h_m` while compressed at `epsdot_per_s` (eq. 3).
     pub fn load(&self, h_m: f64, epsdot_per_s: f64) -> UpsetLoad {
-        let r_sq = self.r0sq_h0_m3 / h_m;
-        let r = r_sq.sqrt();
-        let sigma = self.sigma_pa(h_m, epsdot_per_s);
-        let frictionless_n = PI * r_sq * sigma;
-        let a = 2.0 * self.friction_at(h_m) * r / h_m;
-        UpsetLoad { total_n: frictionless_n * friction_factor(a), frictionless_n }
+        self.load_given(h_m, 1.0 / h_m, epsdot_per_s)
     }
 
-    /// `load` with the divisions by `h` and by eq. 3's `A` each taken as one reciprocal:
-    /// two fewer divisions on the dependent chain of the fits' hot path (`BaseHammer`'s
-    /// exact-phase plant), which has `inv_h = 1 / h_m` already for the strain rate. The same
-    /// law within a few ulp, not to the bit, so the other paths (whose fixtures are kept to
-    /// the bit) keep `load`.
-    pub fn load_fast(&self, h_m: f64, inv_h: f64, epsdot_per_s: f64) -> UpsetLoad {
+    /// Upsetting load at height `h_m` while the dies close at `ddelta_mps` (the strain
+    /// rate is `ddelta / h`, and no strain rate while they part): the plant's form of
+    /// `load`, which shares the reciprocal of `h`.
+    pub fn load_closing(&self, h_m: f64, ddelta_mps: f64) -> UpsetLoad {
+        let inv_h = 1.0 / h_m;
+        self.load_given(h_m, inv_h, ddelta_mps.max(0.0) * inv_h)
+    }
+
+    /// Eq. 3 with `inv_h = 1 / h_m`: the divisions by `h` and by `A` are each taken as one
+    /// reciprocal, off the dependent chain of the blow's hot path.
+    fn load_given(&self, h_m: f64, inv_h: f64, epsdot_per_s: f64) -> UpsetLoad {
         let r_sq = self.r0sq_h0_m3 * inv_h;
         let r = r_sq.sqrt();
         let sigma = self.sigma_pa(h_m, epsdot_per_s);
         let frictionless_n = PI * r_sq * sigma;
         let a = 2.0 * self.friction_at(h_m) * r * inv_h;
-        UpsetLoad { total_n: frictionless_n * friction_factor_fast(a), frictionless_n }
+        UpsetLoad { total_n: frictionless_n * friction_factor(a), frictionless_n }
     }
 }
 
-/// `F / (pi r^2 sigma)` of eq. 3: `(2/A) ((e^A - 1)/A - 1)`, which tends to 1 as A -> 0.
-pub fn friction_factor(a: f64) -> f64 {
-    if a < SMALL_A { 1.0 + a / 3.0 + a * a / 12.0 } else { 2.0 / a * (a.exp_m1() / a - 1.0) }
-}
-
-/// Largest `A` at which `friction_factor_fast` sums eq. 3's series instead of calling
+/// Largest `A` at which `friction_factor` sums eq. 3's series instead of calling
 /// `expm1`: its first left-out term, `2 A^17 / 19!`, is 1.6e-17 of the sum here (below half
 /// an ulp), and A stays below it until a billet is flattened to `h < 2 mu r` (A = 2 mu r / h).
 const SERIES_MAX_A: f64 = 1.0;
@@ -253,12 +245,12 @@ const SERIES: [f64; 17] = {
     c
 };
 
-/// `friction_factor` as the fits' hot path evaluates it (`load_fast`): up to
-/// `SERIES_MAX_A`, the series' polynomial by Estrin's scheme (all terms positive, so no
-/// cancellation: a few ulp, where `friction_factor`'s `(e^A - 1)/A - 1` cancels to about
-/// `A/2` and loses `2/A` ulps), with no call to `expm1` and no division; above it, one
-/// reciprocal of `A` instead of two divisions (within a few ulp).
-fn friction_factor_fast(a: f64) -> f64 {
+/// `F / (pi r^2 sigma)` of eq. 3, `(2/A) ((e^A - 1)/A - 1)`, which tends to 1 as A -> 0.
+/// Up to `SERIES_MAX_A` it is the series' polynomial by Estrin's scheme: every term is
+/// positive, so nothing cancels (a few ulp), where the closed form's `(e^A - 1)/A - 1`
+/// cancels to about `A/2` and loses `2/A` ulps; and it needs no `expm1` and no division.
+/// Above it, the closed form with one reciprocal of `A`.
+pub fn friction_factor(a: f64) -> f64 {
     if a <= SERIES_MAX_A {
         let c = &SERIES;
         let a2 = a * a;
@@ -290,14 +282,6 @@ mod tests {
     }
 
     #[test]
-    fn friction_factor_is_continuous_at_the_series_switch() {
-        let below = friction_factor(SMALL_A * 0.999_999);
-        let above = friction_factor(SMALL_A * 1.000_001);
-        assert!((below - above).abs() < 1e-9, "{below} vs {above}");
-        assert_eq!(friction_factor(0.0), 1.0);
-    }
-
-    #[test]
     fn frictionless_limit_is_area_times_stress() {
         let law = BilletLaw::new(
             BilletGeometry { diameter_m: 0.060, height_m: 0.112 },
@@ -320,11 +304,22 @@ mod tests {
         assert!((l.total_n / 322e3 - 1.0).abs() < 0.005, "load at 92.93 mm: {}", l.total_n);
     }
 
+    /// Eq. 3 as the paper writes it, by another path than `load`: divisions, and the
+    /// closed form's `expm1` at every `A` (its second-order series below 1e-6, where the
+    /// closed form cancels completely).
+    fn eq3_closed_form(law: &BilletLaw, h_m: f64, rate: f64) -> (f64, f64) {
+        let r = (law.r0sq_h0_m3 / h_m).sqrt();
+        let a = 2.0 * law.friction_at(h_m) * r / h_m;
+        let factor = if a < 1e-6 { 1.0 + a / 3.0 + a * a / 12.0 } else { 2.0 / a * (a.exp_m1() / a - 1.0) };
+        let frictionless = PI * r * r * law.sigma_pa(h_m, rate);
+        (frictionless * factor, frictionless)
+    }
+
     #[test]
-    fn the_fast_load_is_the_law_within_a_few_ulp() {
-        // `load_fast` reorders `load`'s divisions as reciprocals; each rounding moves a result
-        // by an ulp (1.1e-16), but eq. 3's `(e^A - 1)/A - 1` (about A/2) cancels, so an ulp of
-        // its first term is 2/A ulps of the difference, in both forms; and `e^A` turns an ulp
+    fn the_load_is_eq3_in_closed_form_within_a_few_ulp() {
+        // `load` takes `h`'s and `A`'s divisions as reciprocals; each rounding moves a result
+        // by an ulp (1.1e-16), but the closed form's `(e^A - 1)/A - 1` (about A/2) cancels,
+        // so an ulp of its first term is 2/A ulps of the difference; and `e^A` turns an ulp
         // of A into A ulps. Allowed: 16 ulps times (1 + 2/A + A); A is 0.1–0.6 at the heights
         // a blow reaches on these billets, so about 1e-14 (the fits' rtol is 1e-6).
         let ulps = |a: f64| 16.0 * f64::EPSILON * (1.0 + 2.0 / a + a);
@@ -335,26 +330,27 @@ mod tests {
             for h_m in [0.112, 0.1, 0.0893, 0.05, 0.02, 0.005] {
                 let a = 2.0 * law.friction_at(h_m) * law.geometry.radius_at(h_m) / h_m;
                 for rate in [0.0, 3.0, 40.0] {
-                    let (l, f) = (law.load(h_m, rate), law.load_fast(h_m, 1.0 / h_m, rate));
-                    assert!((f.total_n / l.total_n - 1.0).abs() <= ulps(a), "h {h_m}: {l:?} vs {f:?}");
-                    assert!((f.frictionless_n / l.frictionless_n - 1.0).abs() <= ulps(1.0), "h {h_m}");
+                    let (total, frictionless) = eq3_closed_form(&law, h_m, rate);
+                    let l = law.load(h_m, rate);
+                    assert!((l.total_n / total - 1.0).abs() <= ulps(a), "h {h_m}: {l:?} vs {total}");
+                    assert!((l.frictionless_n / frictionless - 1.0).abs() <= ulps(1.0), "h {h_m}");
+                    let closing = law.load_closing(h_m, rate * h_m);
+                    assert!((closing.total_n / l.total_n - 1.0).abs() <= ulps(1.0), "h {h_m} rate {rate}");
                 }
+                assert_eq!(law.load_closing(h_m, -1.0), law.load(h_m, 0.0), "parting dies strain at no rate");
             }
         }
-        for a in [0.0, 1e-7, 2e-6, 0.01, 0.5, SERIES_MAX_A, SERIES_MAX_A * (1.0 + 1e-12), 3.0] {
-            let (f, l) = (friction_factor_fast(a), friction_factor(a));
-            assert!((f / l - 1.0).abs() <= ulps(a.max(SMALL_A)), "A {a}: {f} vs {l}");
-        }
+        assert_eq!(friction_factor(0.0), 1.0);
     }
 
     #[test]
-    fn the_fast_friction_factor_sums_the_series_to_a_few_ulp() {
+    fn the_friction_factor_sums_the_series_to_a_few_ulp() {
         // Another path to eq. 3's factor: its series summed term by term (40 terms, each
         // with its own power and factorial, added smallest first), accurate to about an ulp
         // for A in [0, 1]; the Estrin polynomial must agree within 4 ulps (its own
         // rounding, every term positive). Across the switch to `expm1` at
-        // `SERIES_MAX_A`, the two forms agree within `friction_factor`'s own 2/A ulps of
-        // cancellation (`the_fast_load_is_the_law_within_a_few_ulp`).
+        // `SERIES_MAX_A`, the two forms agree within the closed form's own 2/A ulps of
+        // cancellation (`the_load_is_eq3_in_closed_form_within_a_few_ulp`).
         let series = |a: f64| {
             let terms: Vec<f64> = (0..40)
                 .map(|n| {
@@ -366,10 +362,10 @@ mod tests {
         };
         for i in 0..=2000 {
             let a = SERIES_MAX_A * f64::from(i) / 2000.0;
-            let (f, s) = (friction_factor_fast(a), series(a));
+            let (f, s) = (friction_factor(a), series(a));
             assert!((f / s - 1.0).abs() <= 4.0 * f64::EPSILON, "A {a}: {f} vs {s}");
         }
-        let (below, above) = (friction_factor_fast(SERIES_MAX_A), friction_factor_fast(SERIES_MAX_A + 1e-15));
+        let (below, above) = (friction_factor(SERIES_MAX_A), friction_factor(SERIES_MAX_A + 1e-15));
         assert!((above / below - 1.0).abs() <= 16.0 * f64::EPSILON * (1.0 + 2.0 / SERIES_MAX_A), "{below} vs {above}");
     }
 

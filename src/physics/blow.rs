@@ -159,8 +159,8 @@ pub fn simulate_blow_traced_from(
 enum Path {
     /// The general plant.
     General,
-    /// The specialised plant, the general one's to the bit: `simulate_blow` and the traced
-    /// blows, so that `simulate`, the estimator, replay and their fixtures keep their bits.
+    /// The specialised plant, the general one's within roundoff: `simulate_blow` and the
+    /// traced blows (`simulate`, the estimator, replay).
     Specialised,
     /// The specialised plant with its phases without plastic flow advanced exactly under
     /// Dormand–Prince (`BaseHammer::with_exact_phases`): `simulate_blow_sensor`, the fits'.
@@ -279,9 +279,16 @@ mod tests {
         EffectSet::from_effects(&[Effect::parse_spec(spec).unwrap()])
     }
 
-    /// Blows `v0s` in sequence on both paths; asserts each result (indicators, ledger, work
-    /// counts and the trace) and each sensor trace equal, and returns how many blows ran on
-    /// the specialised plant.
+    /// Roundoff-level floors of the differences `differences` measures (final height m, an
+    /// instant s, a load N, an energy over the energy in, a sensor sample N): a few ulp per
+    /// evaluation of the vector field, carried through a blow's steps and its events'
+    /// root-finding (`integrator::ROOT_REL_TOL`), far below what a capture resolves
+    /// (`the_exact_phases_move_the_blow_by_less_than_the_sensors_can_see`' physical bounds).
+    const ROUNDOFF: [f64; 5] = [1e-10, 1e-9, 1.0, 1e-8, 1.0];
+
+    /// Blows `v0s` in sequence on both paths; asserts each result (indicators, ledger and
+    /// the trace) and each sensor trace within `ROUNDOFF`, and returns how many blows ran
+    /// on the specialised plant.
     fn both_paths(m: &Machine, fx: &EffectSet, p: &Process, v0s: &[f64], opts: &SimOptions) -> usize {
         let mut h = p.billet.height_m;
         let mut specialised = 0;
@@ -291,23 +298,63 @@ mod tests {
             let outputs = || Trace::Outputs(Vec::new());
             let (fast, _) = run(&plant, v0, opts, 0.0, outputs(), Path::Specialised).unwrap();
             let (general, _) = run(&plant, v0, opts, 0.0, outputs(), Path::General).unwrap();
-            // Equal, not close: the specialisation drops only terms that are exactly zero,
-            // so any difference is a bug in it (the fits' fixtures compare to 1e-12).
-            assert_eq!(fast, general, "blow {} at {v0} m/s", i + 1);
+            let d = differences(&fast, &general);
+            let within = d.iter().zip(ROUNDOFF).all(|(d, tol)| *d <= tol);
+            assert!(within, "blow {} at {v0} m/s: {d:?} over {ROUNDOFF:?}", i + 1);
             let (_, Trace::Sensor(fast_s)) =
                 run(&plant, v0, opts, 0.0, Trace::Sensor(Vec::new()), Path::Specialised).unwrap()
             else {
                 panic!("a sensor trace")
             };
             let general_s: Vec<f64> = general.trace.iter().map(|p| p.out.sensor_n).collect();
-            assert_eq!(fast_s, general_s, "sensor trace of blow {} at {v0} m/s", i + 1);
+            assert!(fast_s.len().abs_diff(general_s.len()) <= 1, "sensor trace of blow {} at {v0} m/s", i + 1);
+            for (a, b) in fast_s.iter().zip(&general_s) {
+                assert!((a - b).abs() <= ROUNDOFF[4], "sensor trace of blow {} at {v0} m/s: {a} vs {b}", i + 1);
+            }
             h = general.forming.map_or(h, |f| f.h_end_m);
         }
         specialised
     }
 
+    /// The largest differences of `run_` from `reference`: final height m, an instant s (end
+    /// of forming, spring-back, contact), a load N (final, peak), an energy term over the
+    /// energy in, a sensor sample N (the traces may differ by a sample in length: the post
+    /// window follows the contact's end, which moves by a fraction of a sample).
+    fn differences(run_: &BlowResult, reference: &BlowResult) -> [f64; 5] {
+        let mut d = [0.0f64; 5];
+        let (fe, fg) = (run_.forming.unwrap(), reference.forming.unwrap());
+        d[0] = (fe.h_end_m - fg.h_end_m).abs();
+        let spring_back = |f: Forming| f.spring_back_time_s.unwrap_or(f64::NAN);
+        for dt in [
+            fe.forming_time_s - fg.forming_time_s,
+            spring_back(fe) - spring_back(fg),
+            run_.contact_time_s - reference.contact_time_s,
+        ] {
+            d[1] = d[1].max(dt.abs());
+        }
+        for dl in [fe.final_load_n - fg.final_load_n, run_.peak_load_n - reference.peak_load_n] {
+            d[2] = d[2].max(dl.abs());
+        }
+        let (ee, eg) = (&run_.energy, &reference.energy);
+        for (a, b) in [
+            (ee.plastic_j, eg.plastic_j),
+            (ee.friction_j, eg.friction_j),
+            (ee.damped_j, eg.damped_j),
+            (ee.elastic_j, eg.elastic_j),
+        ] {
+            d[3] = d[3].max((a - b).abs() / eg.kinetic_in_j);
+        }
+        let n = run_.trace.len().min(reference.trace.len());
+        assert!(n + 2 >= reference.trace.len(), "{} vs {}", run_.trace.len(), reference.trace.len());
+        for (a, b) in run_.trace[..n].iter().zip(&reference.trace[..n]) {
+            assert_eq!(a.t_s, b.t_s);
+            d[4] = d[4].max((a.out.sensor_n - b.out.sensor_n).abs());
+        }
+        d
+    }
+
     #[test]
-    fn the_base_hammer_blow_is_the_general_plants_to_the_bit() {
+    fn the_base_hammer_blow_is_the_general_plants_within_roundoff() {
         let traced =
             SimOptions { method: Method::Dopri5 { rtol: 1e-6 }, trace_dt_s: Some(1e-5), ..SimOptions::default() };
         // The paper's hammer and steel billet (seed 000 §3.2: 3.9 m/s, then up to 5.3 m/s),
@@ -353,39 +400,14 @@ mod tests {
             if path == Path::Exact {
                 assert!(run_.stats.exact_steps > 0, "{:?}", run_.stats);
             }
-            let (fe, fg) = (run_.forming.unwrap(), reference.forming.unwrap());
-            d[0] = d[0].max((fe.h_end_m - fg.h_end_m).abs());
-            let spring_back = |f: Forming| f.spring_back_time_s.unwrap_or(f64::NAN);
-            for dt in [
-                fe.forming_time_s - fg.forming_time_s,
-                spring_back(fe) - spring_back(fg),
-                run_.contact_time_s - reference.contact_time_s,
-            ] {
-                d[1] = d[1].max(dt.abs());
+            assert!(run_.trace.len() > 100 || reference.trace.is_empty(), "{}", run_.trace.len());
+            for (d, e) in d.iter_mut().zip(differences(&run_, &reference)) {
+                *d = d.max(e);
             }
-            for dl in [fe.final_load_n - fg.final_load_n, run_.peak_load_n - reference.peak_load_n] {
-                d[2] = d[2].max(dl.abs());
-            }
-            let (ee, eg) = (&run_.energy, &reference.energy);
-            for (a, b) in [
-                (ee.plastic_j, eg.plastic_j),
-                (ee.friction_j, eg.friction_j),
-                (ee.damped_j, eg.damped_j),
-                (ee.elastic_j, eg.elastic_j),
-            ] {
-                d[3] = d[3].max((a - b).abs() / eg.kinetic_in_j);
-            }
-            // The post window follows the contact's end, which moves by a fraction of a
-            // sample: the traces may differ by a sample in length.
-            let n = run_.trace.len().min(reference.trace.len());
-            assert!(n + 2 >= reference.trace.len() && n > 100, "{} vs {}", run_.trace.len(), reference.trace.len());
-            for (a, b) in run_.trace[..n].iter().zip(&reference.trace[..n]) {
-                assert_eq!(a.t_s, b.t_s);
-                d[4] = d[4].max((a.out.sensor_n - b.out.sensor_n).abs());
-            }
+            let ee = &run_.energy;
             let sum = ee.plastic_j + ee.friction_j + ee.damped_j + ee.elastic_j;
             closure = closure.max((sum / ee.kinetic_in_j - 1.0).abs());
-            h = fg.h_end_m;
+            h = reference.forming.unwrap().h_end_m;
         }
         (d, closure)
     }
@@ -404,8 +426,6 @@ mod tests {
         // captures' 2 kN load noise (`synth::CaptureSpec::hammer`), 1e-3 of CONTRACTS.md §4's
         // 1 % ledger closure.
         let physical = [1e-8, 1e-6, 200.0, 1e-5, 200.0];
-        // Roundoff-level floors for the comparison with the general plant.
-        let floor = [1e-10, 1e-9, 1.0, 1e-8, 1.0];
         for (m, v0s, opts, at_fits) in [
             (paper_hammer(), &[3.9, 4.5, 5.3][..], fits, true),
             (small, &[4.0, 4.5, 5.0][..], fits, true),
@@ -433,7 +453,7 @@ mod tests {
                     assert!(e[3] <= physical[3], "energy: {:e} (general {:e})", e[3], g[3]);
                     continue;
                 }
-                assert!(e[i] <= 1.5 * g[i] + floor[i], "quantity {i}: exact {:e} vs general {:e}", e[i], g[i]);
+                assert!(e[i] <= 1.5 * g[i] + ROUNDOFF[i], "quantity {i}: exact {:e} vs general {:e}", e[i], g[i]);
                 if at_fits {
                     assert!(e[i] <= physical[i], "quantity {i}: {:e} at the fits' tolerance", e[i]);
                 }

@@ -108,6 +108,21 @@ pub struct Plant {
     pub(super) f_max_hz: f64,
 }
 
+/// A rigid contact's force, its frictionless part, and the billet's plastic rate
+/// (`Plant::rigid_flow`).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Flow {
+    pub contact_n: f64,
+    pub frictionless_n: f64,
+    pub p_rate_mps: f64,
+}
+
+/// The frictionless part's share of an upsetting load (1 where the load is not finite and
+/// positive: a bare strike, or a billet of no height).
+fn frictionless_share(total_n: f64, frictionless_n: f64) -> f64 {
+    if total_n.is_finite() && total_n > 0.0 { frictionless_n / total_n } else { 1.0 }
+}
+
 /// Forces and rates at one state, shared by the vector field, the guards and the outputs.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct Eval {
@@ -115,7 +130,9 @@ pub(super) struct Eval {
     ddelta_mps: f64,
     h_m: f64,
     contact_n: f64,
-    frictionless_share: f64,
+    /// The part of `contact_n` that upsets a frictionless billet; the rest works against
+    /// friction.
+    frictionless_n: f64,
     p_rate_mps: f64,
     link_n: f64,
     support_n: f64,
@@ -226,10 +243,25 @@ impl Plant {
     fn upset(&self, h: f64, ddelta: f64) -> (f64, f64) {
         match &self.billet {
             Some(b) => {
-                let l = b.load(h, ddelta.max(0.0) / h);
+                let l = b.load_closing(h, ddelta);
                 (l.total_n, l.frictionless_n)
             }
             None => (f64::INFINITY, f64::INFINITY),
+        }
+    }
+
+    /// The billet at a rigid contact in phase `contact`, at height `h_m` with the tools
+    /// closing at `ddelta_mps`: stuck tools press on it with `stick_n`; flowing, it pushes
+    /// back with the upsetting load and is compressed at the approach rate. The general
+    /// plant and the base hammer's (`BaseHammer`) both evaluate it.
+    pub(super) fn rigid_flow(law: &BilletLaw, contact: Contact, h_m: f64, ddelta_mps: f64, stick_n: f64) -> Flow {
+        match contact {
+            Contact::Free | Contact::Elastic => Flow { contact_n: 0.0, frictionless_n: 0.0, p_rate_mps: 0.0 },
+            Contact::Stuck => Flow { contact_n: stick_n, frictionless_n: stick_n, p_rate_mps: 0.0 },
+            Contact::Plastic => {
+                let l = law.load_closing(h_m, ddelta_mps);
+                Flow { contact_n: l.total_n, frictionless_n: l.frictionless_n, p_rate_mps: ddelta_mps }
+            }
         }
     }
 
@@ -297,22 +329,13 @@ impl Plant {
     /// Forces and rates at a state: `kinematics`, then the billet law and the dynamics.
     pub(super) fn eval(&self, y: &[f64; N], mode: Mode) -> Eval {
         let mut e = self.kinematics(y, mode);
-        // The upsetting load is needed only while the billet flows.
-        let (total, frictionless) = if mode.contact == Contact::Plastic {
-            self.upset(e.h_m, e.ddelta_mps)
+        if self.rigid()
+            && let Some(law) = &self.billet
+        {
+            let f = Plant::rigid_flow(law, mode.contact, e.h_m, e.ddelta_mps, e.stick_n);
+            (e.contact_n, e.frictionless_n, e.p_rate_mps) = (f.contact_n, f.frictionless_n, f.p_rate_mps);
         } else {
-            (f64::INFINITY, f64::INFINITY)
-        };
-        e.frictionless_share = if total.is_finite() && total > 0.0 { frictionless / total } else { 1.0 };
-        if self.rigid() {
-            match mode.contact {
-                Contact::Free | Contact::Elastic => {}
-                Contact::Stuck => e.contact_n = e.stick_n,
-                Contact::Plastic => {
-                    e.contact_n = total;
-                    e.p_rate_mps = e.ddelta_mps;
-                }
-            }
+            e.frictionless_n = e.contact_n;
         }
         // Accelerations of the bodies either side of the billet.
         e.acc_upper = (e.link_n - e.contact_n) / self.m_upper_kg;
@@ -326,7 +349,10 @@ impl Plant {
             e.acc_lower = e.acc_upper;
         }
         if !self.rigid() && mode.contact == Contact::Plastic {
+            // The upsetting load is needed only while the billet flows.
+            let (total, frictionless) = self.upset(e.h_m, e.ddelta_mps);
             e.p_rate_mps = self.consistency(&e, total);
+            e.frictionless_n = e.contact_n * frictionless_share(total, frictionless);
         }
         e.sensor_raw_n = match self.lower {
             Lower::Mass { .. } => e.support_n,

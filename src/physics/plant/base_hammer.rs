@@ -4,11 +4,12 @@
 //! kept), integrated without the six state components it never moves and without the
 //! general plant's branches on parts it does not have.
 //!
-//! It is the general plant to the bit, not an approximation of it: the hot functions (the
-//! vector field, the guards, the sensor and its rate) evaluate the same expressions in the
-//! same order with the absent parts' zeros folded in exactly (`x - 0.0` is `x`), the error
-//! norm sees the same components in the same order, and the rare calls (events, initial
-//! state, energies, full outputs) expand the state and ask the general plant.
+//! It is the general plant on fewer components, not an approximation of it: the vector
+//! field evaluates the same contact law (`Plant::rigid_flow`, the billet's one law) with the
+//! absent parts' zeros folded in and the masses' reciprocals taken once, the guards and the
+//! sensor are the general plant's terms, the error norm sees the same components in the
+//! same order, and the rare calls (events, initial state, energies, full outputs) expand the
+//! state and ask the general plant. The results agree within roundoff, not to the bit.
 //! `blow::run` selects it automatically; `blow`'s tests compare the two paths.
 //!
 //! With `with_exact_phases` (what `blow::simulate_blow_sensor`, the fits' blow, uses under
@@ -63,9 +64,6 @@ struct Exact {
     stuck_step: Propagator,
     free_span: Propagator,
     stuck_span: Propagator,
-    /// `1 / m1` and `1 / m2`, kg⁻¹, for `rhs_fast`.
-    inv_m1: f64,
-    inv_m2: f64,
 }
 
 /// `with_exact_phases`' tables for one machine and grid step, on a grid from 0. A fit's
@@ -114,6 +112,9 @@ pub struct BaseHammer<'a> {
     m2_kg: f64,
     k_n_per_m: f64,
     c_ns_per_m: f64,
+    /// `1 / m1` and `1 / m2`, kg⁻¹: the vector field multiplies by them.
+    inv_m1: f64,
+    inv_m2: f64,
     exact: Option<Exact>,
     /// The plastic flow's exponential steps (`etd`), with the exact phases on a
     /// rate-independent law, and the last one's stages.
@@ -141,6 +142,8 @@ impl<'a> BaseHammer<'a> {
             m2_kg: m_kg,
             k_n_per_m,
             c_ns_per_m,
+            inv_m1: 1.0 / plant.m_upper_kg,
+            inv_m2: 1.0 / m_kg,
             exact: None,
             etd: None,
             last_etd: Cell::new(None),
@@ -187,8 +190,6 @@ impl<'a> BaseHammer<'a> {
             stuck_step: stuck.propagator(grid.dt_s),
             free_span: free.propagator(grid.span_s()),
             stuck_span: stuck.propagator(grid.span_s()),
-            inv_m1: 1.0 / self.m1_kg,
-            inv_m2: 1.0 / self.m2_kg,
         };
         // The exponential plastic steps: not on a rate-dependent law (`etd`).
         let w0 = (self.k_n_per_m / self.m2_kg).sqrt();
@@ -220,7 +221,7 @@ impl<'a> BaseHammer<'a> {
 
     /// The force that keeps the tools together while stuck (`Plant::kinematics`, no ram).
     fn stick_n(&self, support_n: f64) -> f64 {
-        (0.0 / self.m1_kg + support_n / self.m2_kg) / (1.0 / self.m1_kg + 1.0 / self.m2_kg)
+        support_n * self.inv_m2 / (self.inv_m1 + self.inv_m2)
     }
 
     /// Sensor output (`Plant::sensor_at`).
@@ -267,7 +268,7 @@ impl<'a> BaseHammer<'a> {
         let (step, inv_m) = if mode.contact == Contact::Stuck {
             (&e.stuck_step, 1.0 / (self.m1_kg + self.m2_kg))
         } else {
-            (&e.free_step, e.inv_m2)
+            (&e.free_step, self.inv_m2)
         };
         let (mut x, mut v) = (y0[BL], y0[BVL]);
         let mut j = 1.0;
@@ -286,10 +287,10 @@ impl<'a> BaseHammer<'a> {
     /// each grid point within it, on the scheme's continuous extension; false, and no call,
     /// where the step is not that one.
     fn etd_points<F: FnMut(&GridPoint)>(&self, t0_s: f64, h_s: f64, mut f: F) -> bool {
-        let (Some(etd), Some(e), Some(s)) = (self.etd.as_ref(), self.exact.as_ref(), self.last_etd.get()) else {
+        let (Some(etd), Some(_), Some(s)) = (self.etd.as_ref(), self.exact.as_ref(), self.last_etd.get()) else {
             return false;
         };
-        let inv_m2 = e.inv_m2;
+        let inv_m2 = self.inv_m2;
         // The observer's step is `t1 - t0`, the span to roundoff.
         if !(s.t0_s == t0_s && (h_s - s.h_s).abs() <= 1e-9 * s.h_s) {
             return false;
@@ -343,85 +344,27 @@ impl<'a> BaseHammer<'a> {
     }
 }
 
-impl BaseHammer<'_> {
-    /// `Plant::eval` and `Plant::rhs` for this plant, term for term.
-    fn rhs_general(&self, y: &[f64; NB], mode: Mode, dy: &mut [f64; NB]) {
-        let h_m = self.plant.h_start_m - y[BP];
-        let ddelta_mps = y[BVU] - y[BVL];
-        let support_n = self.support_n(y);
-        let (mut contact_n, mut p_rate_mps, mut frictionless_share) = (0.0, 0.0, 1.0);
-        match mode.contact {
-            Contact::Free | Contact::Elastic => {}
-            Contact::Stuck => contact_n = self.stick_n(support_n),
-            Contact::Plastic => {
-                let l = self.law.load(h_m, ddelta_mps.max(0.0) / h_m);
-                if l.total_n.is_finite() && l.total_n > 0.0 {
-                    frictionless_share = l.frictionless_n / l.total_n;
-                }
-                contact_n = l.total_n;
-                p_rate_mps = ddelta_mps;
-            }
-        }
-        let acc_upper = (0.0 - contact_n) / self.m1_kg;
-        let acc_lower = if mode.contact == Contact::Stuck { acc_upper } else { (contact_n - support_n) / self.m2_kg };
-        dy[BU] = y[BVU];
-        dy[BVU] = acc_upper;
-        dy[BL] = y[BVL];
-        dy[BVL] = acc_lower;
-        dy[BP] = p_rate_mps;
-        let work = contact_n * p_rate_mps;
-        dy[BWP] = work * frictionless_share;
-        dy[BWF] = work * (1.0 - frictionless_share);
-        dy[BWD] = 0.0 + self.c_ns_per_m * y[BVL].powi(2);
-    }
-
-    /// `rhs` as the fits evaluate it (`with_exact_phases`): the billet law's `load_fast` and
-    /// the masses' reciprocals instead of four divisions on the chain from the state to its
-    /// rate, the same within a few ulp per evaluation (not to the bit: the plant without
-    /// exact phases keeps `rhs`'s expressions, the general plant's).
-    fn rhs_fast(&self, e: &Exact, y: &[f64; NB], mode: Mode, dy: &mut [f64; NB]) {
-        let h_m = self.plant.h_start_m - y[BP];
-        let ddelta_mps = y[BVU] - y[BVL];
-        let support_n = self.support_n(y);
-        // The contact load and its frictionless part, whose rates of work split the plastic
-        // work as `rhs_general`'s share does (`work * frictionless / total`), without its
-        // division.
-        let (mut contact_n, mut frictionless_n, mut p_rate_mps) = (0.0, 0.0, 0.0);
-        match mode.contact {
-            Contact::Free | Contact::Elastic => {}
-            Contact::Stuck => contact_n = self.stick_n(support_n),
-            Contact::Plastic => {
-                let inv_h = 1.0 / h_m;
-                let l = self.law.load_fast(h_m, inv_h, ddelta_mps.max(0.0) * inv_h);
-                contact_n = l.total_n;
-                // `rhs_general`'s share of 1 where the load is not finite and positive.
-                frictionless_n = if l.total_n.is_finite() && l.total_n > 0.0 { l.frictionless_n } else { l.total_n };
-                p_rate_mps = ddelta_mps;
-            }
-        }
-        let acc_upper = -contact_n * e.inv_m1;
-        let acc_lower = if mode.contact == Contact::Stuck { acc_upper } else { (contact_n - support_n) * e.inv_m2 };
-        dy[BU] = y[BVU];
-        dy[BVU] = acc_upper;
-        dy[BL] = y[BVL];
-        dy[BVL] = acc_lower;
-        dy[BP] = p_rate_mps;
-        dy[BWP] = frictionless_n * p_rate_mps;
-        dy[BWF] = (contact_n - frictionless_n) * p_rate_mps;
-        dy[BWD] = self.c_ns_per_m * y[BVL] * y[BVL];
-    }
-}
-
 impl Hybrid<NB> for BaseHammer<'_> {
     type Mode = Mode;
 
-    /// `rhs_general`, the general plant's to the bit; with the exact phases (the fits'
-    /// plant), `rhs_fast`.
+    /// `Plant::rhs` on the components this plant moves: the same contact law
+    /// (`Plant::rigid_flow`), the absent parts' zeros folded in, and the masses'
+    /// reciprocals where the general plant divides (within a few ulp of it per evaluation).
     fn rhs(&self, y: &[f64; NB], mode: Mode, dy: &mut [f64; NB]) {
-        match &self.exact {
-            Some(e) => self.rhs_fast(e, y, mode, dy),
-            None => self.rhs_general(y, mode, dy),
-        }
+        let support_n = self.support_n(y);
+        let stick_n = if mode.contact == Contact::Stuck { self.stick_n(support_n) } else { 0.0 };
+        let f = Plant::rigid_flow(self.law, mode.contact, self.plant.h_start_m - y[BP], y[BVU] - y[BVL], stick_n);
+        let acc_upper = -f.contact_n * self.inv_m1;
+        let acc_lower =
+            if mode.contact == Contact::Stuck { acc_upper } else { (f.contact_n - support_n) * self.inv_m2 };
+        dy[BU] = y[BVU];
+        dy[BVU] = acc_upper;
+        dy[BL] = y[BVL];
+        dy[BVL] = acc_lower;
+        dy[BP] = f.p_rate_mps;
+        dy[BWP] = f.frictionless_n * f.p_rate_mps;
+        dy[BWF] = (f.contact_n - f.frictionless_n) * f.p_rate_mps;
+        dy[BWD] = self.c_ns_per_m * y[BVL] * y[BVL];
     }
 
     /// `Plant::guards` for a rigid contact with an engaged support and a raw sensor.
