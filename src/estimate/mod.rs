@@ -32,12 +32,14 @@ mod track;
 pub use config::{EncoderDirection, EstimatorConfig};
 pub use result::{BilletTag, BlowClass, BlowEstimate, HeightCheck, HeightSource};
 
+use std::borrow::Cow;
+
 use crate::physics::billet::BilletLaw;
 use crate::physics::effects::EffectSet;
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
 use crate::signal::segment::Blow;
-use approach::{ApproachError, fit_impact_speed};
+use approach::{ApproachError, ApproachFit, fit_impact_speed};
 use billet::{BilletCheck, BilletDetect};
 pub use contact::contact_between_samples;
 use model_fit::FitStart;
@@ -275,7 +277,6 @@ impl Estimator {
         self.blows += 1;
         self.last_method = None;
         self.last_course = None;
-        let n = self.blows;
         // The sensor chain's high-pass, undone on the measured load (`sensor_chain`).
         let restored;
         let blow = if self.effects.highpass_tau_s.is_finite() {
@@ -284,32 +285,8 @@ impl Estimator {
         } else {
             blow
         };
-        // The encoder as configured to count (`EncoderDirection`); under `Auto`, one whose
-        // reading fell before contact counts up, and is read negated if then it rises.
-        let fit = |b: &Blow| {
-            fit_impact_speed(&b.samples, b.i_contact, self.cfg.fit_s, b.period_s)
-                .map_err(|source| EstimateError::Approach { blow: n, source })
-        };
-        let negated;
-        let (blow, approach) = match (self.cfg.encoder_direction, fit(blow)) {
-            (EncoderDirection::Up, _) => {
-                negated = negate_encoder(blow);
-                (&negated, fit(&negated)?)
-            }
-            (_, Ok(a)) => (blow, a),
-            (direction, Err(e @ EstimateError::Approach { source: ApproachError::NotApproaching { v_mps }, .. }))
-                if v_mps < 0.0 =>
-            {
-                if direction == EncoderDirection::Down {
-                    return Err(EstimateError::EncoderCountsUp { blow: n, v_mps });
-                }
-                negated = negate_encoder(blow);
-                let a = fit(&negated).map_err(|_| e)?;
-                self.reversed_blows += 1;
-                (&negated, a)
-            }
-            (_, Err(e)) => return Err(e),
-        };
+        let (blow, approach) = self.approach(blow)?;
+        let blow = blow.as_ref();
         let mut h_guess_m = self.h_m.or(self.process.as_ref().map(|p| p.billet.height_m));
         // Contact between samples: from the load's rise, or where the model fits it.
         let delta0 = self.locate_contact(blow, approach.v_impact_mps, h_guess_m);
@@ -330,142 +307,72 @@ impl Estimator {
         let wants_fit = complete && self.method_for(blow.period_s) == Method::ModelFit;
         // The residual of the last fit tried, good or not: the blow's model check.
         let mut check = None;
-        let mut fitted = match h_guess_m {
-            Some(h) if wants_fit => self.fit(
-                blow,
-                approach,
-                FitStart {
-                    h0_m: h,
-                    scale0: self.scale,
-                    delta0,
-                    search_contact: true,
-                    blow_index: self.billet_blows + 1,
-                },
-                &mut check,
-            ),
+        let fitted = match h_guess_m {
+            Some(h) if wants_fit => {
+                self.fit(blow, approach, FitStart::at(h, self.scale, delta0, true, self.billet_blows + 1), &mut check)
+            }
             _ => None,
         };
         let delta = fitted.as_ref().map_or(delta0, |f| f.contact_samples);
         let fit = approach.at(delta * blow.period_s);
-        let v0 = fit.v_impact_mps;
         let t_contact_s = blow.samples[blow.i_contact].t_s + delta * blow.period_s;
-        let tolerance_m = self.contact_tolerance_m(v0 * blow.period_s);
-        let (mut billet_check, continuity) = self.follow_billet(fit.x_contact_m, t_contact_s, tolerance_m);
-        let mut h_start_off_sheet_m = None;
-        // Whether this contact measured the billet's height (the die reference), or taught
-        // the reference (the first billet's first blow, taken at the sheet's height).
-        let (mut measured, mut taught) = (false, false);
-        if self.billet_blows == 0 {
-            taught = self.die_x_m.is_none();
-            h_start_off_sheet_m = self.first_blow_height(fit.x_contact_m, tolerance_m);
-            measured = !taught && (self.cfg.encoder_at_die_m.is_some() || h_start_off_sheet_m.is_some());
-            if self.prev_billet_blows == 1 && self.billet > 1 {
-                billet_check = billet_check.or(Some(BilletCheck::PreviousBilletOneBlow));
-            }
-        }
-        self.billet_blows += 1;
-        let first = self.billet_blows == 1;
-        let (mut h_start_m, height_check, height_source) =
-            self.start_height(fit.x_contact_m, v0 * blow.period_s, continuity == Continuity::OffsetUnknown);
-        measured |= !first && height_source == HeightSource::Encoder;
-        // An encoder zeroed anew: the height came from elsewhere, and this contact is where
-        // the ram meets a billet of that height in the new offset (the die reference too).
-        if continuity == Continuity::OffsetUnknown && self.cfg.encoder_at_die_m.is_none() {
-            self.die_x_m = h_start_m.map(|h| fit.x_contact_m + h);
-            taught = self.die_x_m.is_some();
-        }
-        let mut x_contact_m = fit.x_contact_m;
-        let mut e = BlowEstimate {
-            judgement: None,
-            blow: n,
-            t_contact_s,
-            v_impact_mps: v0,
-            kinetic_in_j: None,
-            plastic_j: None,
-            friction_j: None,
-            damped_j: None,
-            elastic_j: None,
-            efficiency: None,
-            final_load_n: 0.0,
-            h_end_m: None,
-            class: BlowClass::Incomplete,
-            alert: None,
-            t_end_s: blow.samples[blow.i_end].t_s,
-            peak_load_n: 0.0,
-            residual: None,
-            sensor_check: None,
-            method: None,
-            gap_s,
-            h_start_m,
-            height_source,
-            height_check,
-            billet: BilletTag {
-                billet: self.billet,
-                billet_blow: self.billet_blows as u32,
-                billet_check,
-                h_start_off_sheet_m,
-            },
-            implausible: None,
-            flow_stress_scale: None,
-            scale_by_half: None,
-            model_residual: None,
-            model_residual_by_phase: None,
-            at_bound: Default::default(),
-        };
-        self.chain = h_start_m.map(|h| (fit.x_contact_m, h));
-        let t_end_s = e.t_end_s;
-        self.last_end = Some(LastEnd { x_m: fit.x_contact_m, end_known: false, h_end_m: None, t_s: t_end_s });
+        let tolerance_m = self.contact_tolerance_m(fit.v_impact_mps * blow.period_s);
+        let placed = self.place(fit.x_contact_m, fit.v_impact_mps * blow.period_s, t_contact_s, tolerance_m);
+        let mut e = started(self.blows, blow, (t_contact_s, fit.v_impact_mps), gap_s, &placed);
+        self.chain = placed.h_start_m.map(|h| (fit.x_contact_m, h));
+        self.last_end = Some(LastEnd { x_m: fit.x_contact_m, end_known: false, h_end_m: None, t_s: e.t_end_s });
         if !complete {
             // Cut short or holed beyond bridging: nothing after the hole is known, not even
             // the billet's height (the encoder chain takes it up again at the next blow).
             self.h_m = None;
             return Ok(e);
         }
+        let first = FirstFit { fitted, check, delta0, premeasured, wants_fit, h_guess_m };
+        self.complete(&mut e, blow, approach, first, &placed, tolerance_m);
+        Ok(e)
+    }
+
+    /// A complete blow's energies, from its first fit on: refitted where the billet's
+    /// follow-up put its start height elsewhere than the fit's guess, the contact moved
+    /// where the refit moved it, the energies from the fit or the observer, the model check,
+    /// and the blow settled (`settle`).
+    fn complete(
+        &mut self,
+        e: &mut BlowEstimate,
+        blow: &Blow,
+        approach: ApproachFit,
+        first: FirstFit,
+        placed: &Placed,
+        tolerance_m: f64,
+    ) {
+        let FirstFit { mut fitted, mut check, delta0, premeasured, wants_fit, h_guess_m } = first;
+        let delta = fitted.as_ref().map_or(delta0, |f| f.contact_samples);
+        let mut h_start_m = placed.h_start_m;
         // The fit ran on a guess of the start height: again from its optimum if the
-        // billet's follow-up says otherwise.
-        // A fit that failed on the guess (a new billet the guess did not know) is tried
-        // afresh from the follow-up's height and the locator's contact.
+        // billet's follow-up says otherwise. A fit that failed on the guess (a new billet the
+        // guess did not know) is tried afresh from the follow-up's height and the locator's
+        // contact.
+        let n = self.billet_blows;
         match (&fitted, h_start_m) {
             (Some(f), Some(h0)) if !premeasured && (f.h_start_m - h0).abs() > REFIT_HEIGHT_M => {
-                fitted = self.fit(
-                    blow,
-                    approach,
-                    FitStart {
-                        h0_m: h0,
-                        scale0: f.scale,
-                        delta0: f.contact_samples,
-                        search_contact: false,
-                        blow_index: self.billet_blows,
-                    },
-                    &mut check,
-                );
+                fitted = self.fit(blow, approach, FitStart::at(h0, f.scale, f.contact_samples, false, n), &mut check);
             }
             (None, Some(h0)) if wants_fit && h_guess_m.is_none_or(|h| (h - h0).abs() > REFIT_HEIGHT_M) => {
-                fitted = self.fit(
-                    blow,
-                    approach,
-                    FitStart {
-                        h0_m: h0,
-                        scale0: self.scale,
-                        delta0,
-                        search_contact: true,
-                        blow_index: self.billet_blows,
-                    },
-                    &mut check,
-                );
+                fitted = self.fit(blow, approach, FitStart::at(h0, self.scale, delta0, true, n), &mut check);
             }
             _ => {}
         }
         // The refit may have moved contact. A height the encoder measured moves with it
         // (the ram met the billet lower by the shift, so it was that much shorter); a die
         // reference taught by this contact moves the other way; the chain takes the new one.
+        let mut x_contact_m = approach.at(delta * blow.period_s).x_contact_m;
         if let Some(f) = fitted.as_ref().filter(|f| f.contact_samples != delta) {
             let x_m = approach.at(f.contact_samples * blow.period_s).x_contact_m;
             let shift_m = x_m - x_contact_m;
-            if measured {
+            if placed.measured {
                 h_start_m = h_start_m.map(|h| h - shift_m);
                 e.h_start_m = h_start_m;
-            } else if taught {
+            } else if placed.taught {
                 self.die_x_m = self.die_x_m.map(|d| d + shift_m);
             }
             x_contact_m = x_m;
@@ -477,19 +384,14 @@ impl Estimator {
         let h_end_m = match &fitted {
             Some(f) => {
                 self.scale = f.scale;
-                self.fill_from_fit(&mut e, blow, f)
+                self.fill_from_fit(e, blow, f)
             }
-            None => self.fill_from_observer(&mut e, blow, h_start_m, delta0),
+            None => self.fill_from_observer(e, blow, h_start_m, delta0),
         };
         // Where the observer takes the blow by the rule, the model is fitted all the same, as
         // the check that it still describes the machine (a few ms a blow: `fit`).
         if let (false, Some(h0)) = (wants_fit, h_start_m)
-            && let Some(f) = self.fit(
-                blow,
-                approach,
-                FitStart { h0_m: h0, scale0: self.scale, delta0, search_contact: false, blow_index: self.billet_blows },
-                &mut check,
-            )
+            && let Some(f) = self.fit(blow, approach, FitStart::at(h0, self.scale, delta0, false, n), &mut check)
         {
             self.scale = f.scale;
         }
@@ -498,6 +400,85 @@ impl Estimator {
             e.model_residual_by_phase = check.map(|c| c.load_by_phase);
         }
         e.sensor_check = sensor::sensor_check(&self.machine, blow, e.v_impact_mps).ok();
+        self.settle(e, blow, placed.first, tolerance_m, (x_contact_m, h_start_m, h_end_m));
+    }
+
+    /// The approach fit of `blow`'s encoder as configured to count (`EncoderDirection`);
+    /// under `Auto`, one whose reading fell before contact counts up, and is read negated
+    /// if then it rises. The blow as read, and its fit.
+    fn approach<'b>(&mut self, blow: &'b Blow) -> Result<(Cow<'b, Blow>, ApproachFit), EstimateError> {
+        let n = self.blows;
+        let fit = |b: &Blow| {
+            fit_impact_speed(&b.samples, b.i_contact, self.cfg.fit_s, b.period_s)
+                .map_err(|source| EstimateError::Approach { blow: n, source })
+        };
+        match (self.cfg.encoder_direction, fit(blow)) {
+            (EncoderDirection::Up, _) => {
+                let negated = negate_encoder(blow);
+                let a = fit(&negated)?;
+                Ok((Cow::Owned(negated), a))
+            }
+            (_, Ok(a)) => Ok((Cow::Borrowed(blow), a)),
+            (direction, Err(e @ EstimateError::Approach { source: ApproachError::NotApproaching { v_mps }, .. }))
+                if v_mps < 0.0 =>
+            {
+                if direction == EncoderDirection::Down {
+                    return Err(EstimateError::EncoderCountsUp { blow: n, v_mps });
+                }
+                let negated = negate_encoder(blow);
+                let a = fit(&negated).map_err(|_| e)?;
+                self.reversed_blows += 1;
+                Ok((Cow::Owned(negated), a))
+            }
+            (_, Err(e)) => Err(e),
+        }
+    }
+
+    /// Where a contact at encoder position `x_contact_m` puts the blow on its billet: the
+    /// billet's follow-up, the start height and its source, and whether this contact
+    /// measured the billet's height (the die reference) or taught the reference (the first
+    /// billet's first blow, taken at the sheet's height). Counts the blow on its billet.
+    fn place(&mut self, x_contact_m: f64, step_m: f64, t_contact_s: f64, tolerance_m: f64) -> Placed {
+        let (mut billet_check, continuity) = self.follow_billet(x_contact_m, t_contact_s, tolerance_m);
+        let mut h_start_off_sheet_m = None;
+        let (mut measured, mut taught) = (false, false);
+        if self.billet_blows == 0 {
+            taught = self.die_x_m.is_none();
+            h_start_off_sheet_m = self.first_blow_height(x_contact_m, tolerance_m);
+            measured = !taught && (self.cfg.encoder_at_die_m.is_some() || h_start_off_sheet_m.is_some());
+            if self.prev_billet_blows == 1 && self.billet > 1 {
+                billet_check = billet_check.or(Some(BilletCheck::PreviousBilletOneBlow));
+            }
+        }
+        self.billet_blows += 1;
+        let first = self.billet_blows == 1;
+        let (h_start_m, height_check, height_source) =
+            self.start_height(x_contact_m, step_m, continuity == Continuity::OffsetUnknown);
+        measured |= !first && height_source == HeightSource::Encoder;
+        // An encoder zeroed anew: the height came from elsewhere, and this contact is where
+        // the ram meets a billet of that height in the new offset (the die reference too).
+        if continuity == Continuity::OffsetUnknown && self.cfg.encoder_at_die_m.is_none() {
+            self.die_x_m = h_start_m.map(|h| x_contact_m + h);
+            taught = self.die_x_m.is_some();
+        }
+        let billet =
+            BilletTag { billet: self.billet, billet_blow: self.billet_blows as u32, billet_check, h_start_off_sheet_m };
+        Placed { billet, first, measured, taught, h_start_m, height_check, height_source }
+    }
+
+    /// The blow's last word: incomplete when the stream ended before its spring-back,
+    /// every number checked against its range (`plausibility`), and where the billet was
+    /// left for the next contact. `at` is the contact's encoder position and the start and
+    /// end heights the energies gave.
+    fn settle(
+        &mut self,
+        e: &mut BlowEstimate,
+        blow: &Blow,
+        first: bool,
+        tolerance_m: f64,
+        at: (f64, Option<f64>, Option<f64>),
+    ) {
+        let (x_contact_m, h_start_m, h_end_m) = at;
         // The stream ended before the load had held quiet (a capture's end, a stop): the blow
         // is whole only if its samples show the spring-back, the load back under the end
         // level after the blow's own end of forming (CONTRACTS §5: cut by the end of the
@@ -507,9 +488,7 @@ impl Estimator {
                 e.class = BlowClass::Incomplete;
                 (e.kinetic_in_j, e.plastic_j, e.friction_j, e.damped_j, e.elastic_j) = (None, None, None, None, None);
                 (e.efficiency, e.residual, e.method, e.h_end_m, e.sensor_check) = (None, None, None, None, None);
-                self.h_m = None;
-                self.last_method = None;
-                self.last_course = None;
+                self.forget_end();
                 None
             }
             _ => h_end_m,
@@ -524,28 +503,32 @@ impl Estimator {
             height_tolerance_m: tolerance_m,
         };
         let cfg = self.cfg;
-        plausibility::settle(&mut e, &ranges, |x| cfg.classify(x));
+        plausibility::settle(e, &ranges, |x| cfg.classify(x));
         // An implausible blow's end is not known: the encoder's chain takes the billet up
         // again from its contact at the next blow (its start height too, when that was in
         // range), as after an incomplete one.
         let h_end_m = if e.class == BlowClass::Implausible {
-            self.h_m = None;
+            self.forget_end();
             self.chain = e.h_start_m.map(|h| (x_contact_m, h));
-            self.last_method = None;
-            self.last_course = None;
             None
         } else {
             h_end_m
         };
         // The next contact on this billet comes lower by what the billet lost; without a
         // height, by the ram's deepest travel past contact is all that is known.
+        let t_s = e.t_end_s;
         self.last_end = Some(match (h_start_m, h_end_m) {
-            (Some(h0), Some(h1)) => {
-                LastEnd { x_m: x_contact_m + (h0 - h1), end_known: true, h_end_m: Some(h1), t_s: t_end_s }
-            }
-            _ => LastEnd { x_m: x_contact_m, end_known: false, h_end_m: None, t_s: t_end_s },
+            (Some(h0), Some(h1)) => LastEnd { x_m: x_contact_m + (h0 - h1), end_known: true, h_end_m: Some(h1), t_s },
+            _ => LastEnd { x_m: x_contact_m, end_known: false, h_end_m: None, t_s },
         });
-        Ok(e)
+    }
+
+    /// The billet's height after this blow is not known: the encoder's chain takes it up
+    /// at the next blow.
+    fn forget_end(&mut self) {
+        self.h_m = None;
+        self.last_method = None;
+        self.last_course = None;
     }
 
     /// First contact, samples after the segmenter's contact sample: the hinge shaped by the
@@ -608,6 +591,71 @@ pub fn fit_only_effect(effects: &EffectSet) -> Option<&'static str> {
 /// with. The caller refuses it, naming the file and the key.
 pub fn unhonoured(effects: &EffectSet, process: Option<&Process>) -> Option<&'static str> {
     fit_only_effect(effects).filter(|_| process.is_none())
+}
+
+/// A blow's first fit, on the guess of its start height, and what decides a refit
+/// (`Estimator::complete`).
+struct FirstFit {
+    fitted: Option<fit::ModelFit>,
+    /// The residual of the last fit tried, good or not: the blow's model check.
+    check: Option<fit::ModelResidual>,
+    /// The locator's contact, samples.
+    delta0: f64,
+    /// The start height came from the die reference before the fit.
+    premeasured: bool,
+    wants_fit: bool,
+    h_guess_m: Option<f64>,
+}
+
+/// Where a blow's contact put it on its billet (`Estimator::place`).
+struct Placed {
+    billet: BilletTag,
+    first: bool,
+    /// The contact measured the billet's height against the die reference.
+    measured: bool,
+    /// The contact taught the die reference.
+    taught: bool,
+    h_start_m: Option<f64>,
+    height_check: Option<HeightCheck>,
+    height_source: HeightSource,
+}
+
+/// A blow's estimate before its energies: incomplete, with its contact (time, impact
+/// speed), the time bridged and its place on the billet.
+fn started(n: u32, blow: &Blow, contact: (f64, f64), gap_s: f64, placed: &Placed) -> BlowEstimate {
+    let (t_contact_s, v_impact_mps) = contact;
+    BlowEstimate {
+        judgement: None,
+        blow: n,
+        t_contact_s,
+        v_impact_mps,
+        kinetic_in_j: None,
+        plastic_j: None,
+        friction_j: None,
+        damped_j: None,
+        elastic_j: None,
+        efficiency: None,
+        final_load_n: 0.0,
+        h_end_m: None,
+        class: BlowClass::Incomplete,
+        alert: None,
+        t_end_s: blow.samples[blow.i_end].t_s,
+        peak_load_n: 0.0,
+        residual: None,
+        sensor_check: None,
+        method: None,
+        gap_s,
+        h_start_m: placed.h_start_m,
+        height_source: placed.height_source,
+        height_check: placed.height_check,
+        billet: placed.billet,
+        implausible: None,
+        flow_stress_scale: None,
+        scale_by_half: None,
+        model_residual: None,
+        model_residual_by_phase: None,
+        at_bound: Default::default(),
+    }
 }
 
 /// `blow` with its encoder read negated (an encoder counting up, away from the die).

@@ -21,6 +21,12 @@ pub(super) struct FitStart {
     pub blow_index: usize,
 }
 
+impl FitStart {
+    pub(super) fn at(h0_m: f64, scale0: f64, delta0: f64, search_contact: bool, blow_index: usize) -> FitStart {
+        FitStart { h0_m, scale0, delta0, search_contact, blow_index }
+    }
+}
+
 impl Estimator {
     /// The model fitted to `blow` from start height `h0_m` (`None`: it could not be, or
     /// its residuals say it did not fit, `fit::MAX_GOOD_RMS`, and the observer takes the
