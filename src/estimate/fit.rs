@@ -275,30 +275,9 @@ impl<'a> Setup<'a> {
             }
         }
         let m = self.k1 - self.k0 + 1;
-        let centre = |k: usize| ((k as i64) * os + h) as usize;
-        // The analogue channels through the DAQ's filter: the declared one at the DAQ's
-        // rate, its delay at low frequencies taken out as a DAQ that aligns its channels
-        // does (and, on a decimated copy, then the nominal one of the decimation), or the
-        // nominal one.
-        let filter = self.p.effects.load_filter;
-        let analogue = |v: &[f64]| -> Vec<f64> {
-            if filter == LoadFilter::None {
-                return (0..m).map(|k| self.aa.at(v, centre(k))).collect();
-            }
-            // At rest at the first point's value (the approach's steady acceleration).
-            let v0 = v.first().copied().unwrap_or(0.0);
-            let from_rest: Vec<f64> = v.iter().map(|x| x - v0).collect();
-            let lead = filter.dc_delay_s(self.p.daq_period_s) / fine_dt;
-            let y = resample::shifted(&filter.apply(&from_rest, fine_dt, self.p.daq_period_s), v.len(), lead);
-            let y: Vec<f64> = y.iter().map(|x| x + v0).collect();
-            if self.decimated {
-                (0..m).map(|k| self.aa.at(&y, centre(k))).collect()
-            } else {
-                (0..m).map(|k| y[centre(k)]).collect()
-            }
-        };
-        let load_s = analogue(&load);
-        let acc_s = analogue(&acc);
+        let centre = |k: usize| self.centre(k);
+        let load_s = self.analogue(&load, m, fine_dt);
+        let acc_s = self.analogue(&acc, m, fine_dt);
         let load_lp = self.lp.apply(&load_s);
         let acc_lp = self.lp.apply(&acc_s);
         let first = self.lp.half();
@@ -313,6 +292,33 @@ impl<'a> Setup<'a> {
         }
         let ram_end_mps = v[centre(m - 1)];
         Ok(Eval { r, blow, ram_end_mps })
+    }
+
+    /// The fine grid's point at the measured window's sample `k`.
+    fn centre(&self, k: usize) -> usize {
+        ((k as i64) * self.os as i64 + self.aa.half() as i64) as usize
+    }
+
+    /// An analogue channel simulated on the fine grid (step `fine_dt`), read at the
+    /// window's `m` samples through the DAQ's filter: the declared one at the DAQ's rate,
+    /// its delay at low frequencies taken out as a DAQ that aligns its channels does (and,
+    /// on a decimated copy, then the nominal one of the decimation), or the nominal one.
+    fn analogue(&self, v: &[f64], m: usize, fine_dt: f64) -> Vec<f64> {
+        let filter = self.p.effects.load_filter;
+        if filter == LoadFilter::None {
+            return (0..m).map(|k| self.aa.at(v, self.centre(k))).collect();
+        }
+        // At rest at the first point's value (the approach's steady acceleration).
+        let v0 = v.first().copied().unwrap_or(0.0);
+        let from_rest: Vec<f64> = v.iter().map(|x| x - v0).collect();
+        let lead = filter.dc_delay_s(self.p.daq_period_s) / fine_dt;
+        let y = resample::shifted(&filter.apply(&from_rest, fine_dt, self.p.daq_period_s), v.len(), lead);
+        let y: Vec<f64> = y.iter().map(|x| x + v0).collect();
+        if self.decimated {
+            (0..m).map(|k| self.aa.at(&y, self.centre(k))).collect()
+        } else {
+            (0..m).map(|k| y[self.centre(k)]).collect()
+        }
     }
 
     /// The ram's speed at the window's last sample from the approach and the integrated
