@@ -346,65 +346,9 @@ pub fn fit_candidates(
         return None;
     }
     let params: Vec<Param> = cands.iter().flat_map(|c| c.params.iter().copied()).collect();
-    let effects_of = |v: &[f64]| -> Vec<Effect> {
-        let mut k = 0;
-        cands
-            .iter()
-            .map(|c| {
-                let n = c.params.len();
-                let e = c.effect(&v[k..k + n]);
-                k += n;
-                e
-            })
-            .collect()
-    };
-    let set_of = |v: &[f64]| {
-        let mut s = *base;
-        for e in effects_of(v) {
-            s.apply(&e);
-        }
-        s
-    };
-    let f = |v: &[f64]| calib.residuals(machine, &set_of(v));
+    let f = |v: &[f64]| calib.residuals(machine, &set_of(base, cands, v));
     let cost = |v: &[f64]| f(v).map_or(f64::INFINITY, |r| r.iter().map(|x| x * x).sum::<f64>());
-    // The coarse grid over each candidate not held, every combination.
-    let mut k = 0;
-    let axes: Vec<Vec<Vec<f64>>> = cands
-        .iter()
-        .map(|c| {
-            let n = c.params.len();
-            let axis = if k + n <= held.len() { vec![held[k..k + n].to_vec()] } else { c.grid_points() };
-            k += n;
-            axis
-        })
-        .collect();
-    let mut points: Vec<Vec<f64>> = vec![Vec::new()];
-    for axis in &axes {
-        points = points.into_iter().flat_map(|pt| axis.iter().map(move |v| [pt.clone(), v.clone()].concat())).collect();
-    }
-    use rayon::prelude::*;
-    let mut known = Costed::default();
-    let mut costs = known.costs(&points, &cost);
-    // The global stage's second step: each fine-scanned parameter over its whole range,
-    // the others at each of the best grid points.
-    let fine = fine_points(
-        cands,
-        &params,
-        held.len(),
-        &best(&costs, GRID_STARTS).map(|i| points[i].clone()).collect::<Vec<_>>(),
-    );
-    costs.extend(known.costs(&fine, &cost));
-    points.extend(fine);
-    // And the gaps the measured closure shows, the others again at the best grid points.
-    let closure = closure_points(
-        cands,
-        held.len(),
-        calib,
-        machine,
-        &best(&costs, GRID_STARTS).map(|i| points[i].clone()).collect::<Vec<_>>(),
-    );
-    costs.extend(known.costs(&closure, &cost));
-    points.extend(closure);
+    let mut scan = Scan::global(cands, &params, held, calib, machine, &cost);
     // Levenberg–Marquardt from the best few points (the costs have several valleys),
     // keeping the best.
     let local = |from: &[f64], c: f64| {
@@ -413,46 +357,128 @@ pub fn fit_candidates(
     };
     // The starts in parallel: once the quick candidates are done, the slowest one's
     // searches would otherwise run one after the other on a core each.
-    // A start that repeats an earlier one (a point the scans reached twice) would repeat its
-    // search to the bit.
-    let mut starts: Vec<usize> = best(&costs, GRID_STARTS).collect();
-    let mut seen = Vec::new();
-    starts.retain(|&i| {
-        let fresh = !seen.contains(&bits(&points[i]));
-        seen.push(bits(&points[i]));
-        fresh
-    });
-    let mut start = starts.par_iter().map(|i| local(&points[*i], costs[*i])).min_by(|a, b| a.0.total_cmp(&b.0))?;
+    use rayon::prelude::*;
+    let starts = scan.distinct_best(GRID_STARTS);
+    let mut start =
+        starts.par_iter().map(|i| local(&scan.points[*i], scan.costs[*i])).min_by(|a, b| a.0.total_cmp(&b.0))?;
     // The fine scan again, the other parameters as fitted: a clearance's gap is a shallow
     // valley along which the local search stalls once the die's mass (a sharp one) is
     // right (issue #17's 20 kHz press: a 0.3 mm gap under 50 kg fitted at 52 µm, its
     // calibration error 8 % above the true gap's).
     let again = fine_points(cands, &params, held.len(), std::slice::from_ref(&start.1));
-    if !again.is_empty() {
-        let k = points.len();
-        costs.extend(known.costs(&again, &cost));
-        points.extend(again);
-        let i = best(&costs[k..], 1).next().map_or(k, |i| i + k);
-        if costs[i] < start.0 {
-            let polished = local(&points[i], costs[i]);
-            if polished.0 < start.0 {
-                start = polished;
-            }
+    if let Some(i) = scan.add_best(again)
+        && scan.costs[i] < start.0
+    {
+        let polished = local(&scan.points[i], scan.costs[i]);
+        if polished.0 < start.0 {
+            start = polished;
         }
     }
-    let start = start.1;
-    let values = start;
-    let set = set_of(&values);
+    let values = start.1;
+    let set = set_of(base, cands, &values);
     let calib_n = calib.nrmse(machine, &set)?;
     let hold_n = holdout.nrmse(machine, &set)?;
     Some(Fitted {
         name: cands.iter().map(|c| c.name).collect::<Vec<_>>().join("+"),
-        effects: effects_of(&values),
+        effects: effects_of(cands, &values),
         n_params: params.len(),
         calib: mean(&calib_n),
         holdout: mean(&hold_n),
         holdout_per_blow: hold_n,
     })
+}
+
+/// The effects of `cands` at the parameter vector `v` (their parameters in order).
+fn effects_of(cands: &[&Candidate], v: &[f64]) -> Vec<Effect> {
+    let mut k = 0;
+    cands
+        .iter()
+        .map(|c| {
+            let n = c.params.len();
+            let e = c.effect(&v[k..k + n]);
+            k += n;
+            e
+        })
+        .collect()
+}
+
+/// `base` with the effects of `cands` at `v`.
+fn set_of(base: &EffectSet, cands: &[&Candidate], v: &[f64]) -> EffectSet {
+    let mut s = *base;
+    for e in effects_of(cands, v) {
+        s.apply(&e);
+    }
+    s
+}
+
+/// The global stage's points and their costs, each distinct point costed once (`Costed`).
+struct Scan<'c> {
+    points: Vec<Vec<f64>>,
+    costs: Vec<f64>,
+    known: Costed,
+    cost: &'c (dyn Fn(&[f64]) -> f64 + Sync),
+}
+
+impl<'c> Scan<'c> {
+    /// The coarse grid over each candidate not held (every combination), then each
+    /// fine-scanned parameter over its whole range and the gaps the measured closure shows,
+    /// the others at each of the best grid points.
+    fn global(
+        cands: &[&Candidate],
+        params: &[Param],
+        held: &[f64],
+        calib: &BlowSet,
+        machine: &Machine,
+        cost: &'c (dyn Fn(&[f64]) -> f64 + Sync),
+    ) -> Scan<'c> {
+        let mut k = 0;
+        let mut points: Vec<Vec<f64>> = vec![Vec::new()];
+        for c in cands {
+            let n = c.params.len();
+            let axis = if k + n <= held.len() { vec![held[k..k + n].to_vec()] } else { c.grid_points() };
+            k += n;
+            points =
+                points.into_iter().flat_map(|pt| axis.iter().map(move |v| [pt.clone(), v.clone()].concat())).collect();
+        }
+        let mut scan = Scan { points: Vec::new(), costs: Vec::new(), known: Costed::default(), cost };
+        scan.add(points);
+        let fine = fine_points(cands, params, held.len(), &scan.best_points());
+        scan.add(fine);
+        let closure = closure_points(cands, held.len(), calib, machine, &scan.best_points());
+        scan.add(closure);
+        scan
+    }
+
+    fn add(&mut self, points: Vec<Vec<f64>>) {
+        self.costs.extend(self.known.costs(&points, self.cost));
+        self.points.extend(points);
+    }
+
+    /// Adds `points`; the index of the best of them, if any.
+    fn add_best(&mut self, points: Vec<Vec<f64>>) -> Option<usize> {
+        let k = self.points.len();
+        self.add(points);
+        best(&self.costs[k..], 1).next().map(|i| i + k)
+    }
+
+    /// The `GRID_STARTS` best points so far.
+    fn best_points(&self) -> Vec<Vec<f64>> {
+        best(&self.costs, GRID_STARTS).map(|i| self.points[i].clone()).collect()
+    }
+
+    /// The indices of the `k` best points, each distinct: a start that repeats an earlier
+    /// one (a point the scans reached twice) would repeat its search to the bit.
+    fn distinct_best(&self, k: usize) -> Vec<usize> {
+        let mut seen = Vec::new();
+        best(&self.costs, k)
+            .filter(|&i| {
+                let key = bits(&self.points[i]);
+                let fresh = !seen.contains(&key);
+                seen.push(key);
+                fresh
+            })
+            .collect()
+    }
 }
 
 /// The costs the global stage has evaluated, by point. The fine and closure scans around
