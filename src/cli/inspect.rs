@@ -12,6 +12,7 @@ use std::process::ExitCode;
 use clap::Args;
 use serde_json::json;
 
+use crate::estimate::billet_book::BilletSummary;
 use crate::estimate::{BlowClass, BlowEstimate};
 use crate::record::{Payload, ReadReport, RecordReader};
 
@@ -136,24 +137,51 @@ struct SourceSummary {
 
 pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
     let mut reader = RecordReader::open(&args.file)?;
-    let mut sources: BTreeMap<String, SourceSummary> = BTreeMap::new();
-    let (mut boundaries, mut gaps, mut samples_lost) = (0u64, 0u64, 0u64);
-    let mut classes: BTreeMap<String, u64> = BTreeMap::new();
-    let mut alerts: BTreeMap<String, u64> = BTreeMap::new();
-    let mut drops: BTreeMap<String, u64> = BTreeMap::new();
-    let mut configs = Vec::new();
-    let mut efficiency = Vec::new();
-    let mut billets = Vec::new();
-    let mut results = Vec::new();
+    let mut tally = Tally::default();
     for m in reader.by_ref() {
-        match m?.payload {
+        tally.add(m?.payload);
+    }
+    let report = reader.report().clone();
+    let out = tally.json(&args.file.display().to_string(), &report);
+    let stdout = std::io::stdout();
+    let mut w = stdout.lock();
+    if args.json {
+        writeln!(w, "{out}")?;
+    } else {
+        writeln!(w, "{}", args.file.display())?;
+        print_report(&mut w, &report)?;
+        tally.print(&mut w, &out)?;
+    }
+    w.flush()?;
+    Ok(input_status(&report))
+}
+
+/// What a recording holds, counted message by message.
+#[derive(Default)]
+struct Tally {
+    sources: BTreeMap<String, SourceSummary>,
+    boundaries: u64,
+    gaps: u64,
+    samples_lost: u64,
+    classes: BTreeMap<String, u64>,
+    alerts: BTreeMap<String, u64>,
+    drops: BTreeMap<String, u64>,
+    configs: Vec<String>,
+    efficiency: Vec<f64>,
+    billets: Vec<BilletSummary>,
+    results: Vec<BlowEstimate>,
+}
+
+impl Tally {
+    fn add(&mut self, payload: Payload) {
+        match payload {
             Payload::Samples(b) => {
                 // A capture directory's files, each a source of its own, are one machine.
                 let (name, file) = match b.source.split_once('/') {
                     Some((group, file)) if group == super::CAPTURE_SOURCE => (group.to_string(), Some(file)),
                     _ => (b.source.clone(), None),
                 };
-                let s = sources.entry(name).or_default();
+                let s = self.sources.entry(name).or_default();
                 s.captures.extend(file.map(str::to_string));
                 s.batches += 1;
                 s.samples += b.len() as u64;
@@ -162,68 +190,125 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
                 s.end_ns = s.end_ns.max(b.device_time_ns as f64 + b.period_ns * b.len() as f64);
                 s.channels = b.roles.iter().map(|r| r.column()).collect::<Vec<_>>().join(",");
             }
-            Payload::Boundary(_) => boundaries += 1,
+            Payload::Boundary(_) => self.boundaries += 1,
             Payload::Result(r) => {
-                *classes.entry(r.class.as_str().to_string()).or_default() += 1;
-                efficiency.extend(r.efficiency);
-                results.push(*r);
+                *self.classes.entry(r.class.as_str().to_string()).or_default() += 1;
+                self.efficiency.extend(r.efficiency);
+                self.results.push(*r);
             }
-            Payload::Alert(a) => *alerts.entry(a.kind.as_str().to_string()).or_default() += 1,
+            Payload::Alert(a) => *self.alerts.entry(a.kind.as_str().to_string()).or_default() += 1,
             Payload::Gap(g) => {
-                gaps += 1;
-                samples_lost += g.samples_lost;
+                self.gaps += 1;
+                self.samples_lost += g.samples_lost;
             }
             Payload::Status(s) => {
-                drops.insert(s.source.clone(), s.drops);
+                self.drops.insert(s.source.clone(), s.drops);
             }
-            Payload::Config(c) => configs.push(c.name),
-            Payload::Billet(b) => billets.push(*b),
+            Payload::Config(c) => self.configs.push(c.name),
+            Payload::Billet(b) => self.billets.push(*b),
         }
     }
-    let report = reader.report().clone();
-    let stats = billet_stats(&results);
-    let src_json: Vec<_> = sources
-        .iter()
-        .map(|(name, s)| {
-            let duration_s = s.first_ns.map_or(0.0, |f| (s.end_ns - f as f64) * 1e-9);
-            json!({"source": name, "channels": s.channels, "rate_hz": 1e9 / s.period_ns, "samples": s.samples,
-                   "batches": s.batches, "duration_s": duration_s, "captures": s.captures.len()})
+
+    /// `inspect --json`'s object.
+    fn json(&self, file: &str, report: &ReadReport) -> serde_json::Value {
+        let src_json: Vec<_> = self
+            .sources
+            .iter()
+            .map(|(name, s)| {
+                let duration_s = s.first_ns.map_or(0.0, |f| (s.end_ns - f as f64) * 1e-9);
+                json!({"source": name, "channels": s.channels, "rate_hz": 1e9 / s.period_ns, "samples": s.samples,
+                       "batches": s.batches, "duration_s": duration_s, "captures": s.captures.len()})
+            })
+            .collect();
+        let efficiency = &self.efficiency;
+        json!({
+            "file": file,
+            "complete": report.complete,
+            "recovered_messages": report.messages,
+            "bytes_recovered": report.bytes_recovered,
+            "total_bytes": report.total_bytes,
+            "chunks_verified": report.chunks_verified,
+            "chunks_unverified": report.chunks_unverified,
+            "corrupt_chunks": report.corrupt_chunks.iter().map(|c| json!({
+                "offset": c.offset, "length": c.length, "topics": c.topics, "error": c.error.to_string(),
+            })).collect::<Vec<_>>(),
+            "unknown_channel_messages": report.unknown_channel_messages,
+            "summary_error": report.summary_error,
+            "sources": src_json,
+            "blows": self.boundaries,
+            "results_by_class": self.classes,
+            "mean_efficiency": if efficiency.is_empty() { None } else { Some(efficiency.iter().sum::<f64>() / efficiency.len() as f64) },
+            "billets": self.billets.len(),
+            "billets_finished": self.billets.iter().filter(|b| b.finished).count(),
+            "billet_summaries": self.billets,
+            "billet_stats": billet_stats(&self.results),
+            "alerts": self.alerts,
+            "gaps": self.gaps,
+            "samples_lost": self.samples_lost,
+            "drops_by_source": self.drops,
+            "config_files": self.configs,
         })
-        .collect();
-    let out = json!({
-        "file": args.file.display().to_string(),
-        "complete": report.complete,
-        "recovered_messages": report.messages,
-        "bytes_recovered": report.bytes_recovered,
-        "total_bytes": report.total_bytes,
-        "chunks_verified": report.chunks_verified,
-        "chunks_unverified": report.chunks_unverified,
-        "corrupt_chunks": report.corrupt_chunks.iter().map(|c| json!({
-            "offset": c.offset, "length": c.length, "topics": c.topics, "error": c.error.to_string(),
-        })).collect::<Vec<_>>(),
-        "unknown_channel_messages": report.unknown_channel_messages,
-        "summary_error": report.summary_error,
-        "sources": src_json,
-        "blows": boundaries,
-        "results_by_class": classes,
-        "mean_efficiency": if efficiency.is_empty() { None } else { Some(efficiency.iter().sum::<f64>() / efficiency.len() as f64) },
-        "billets": billets.len(),
-        "billets_finished": billets.iter().filter(|b| b.finished).count(),
-        "billet_summaries": billets,
-        "billet_stats": stats,
-        "alerts": alerts,
-        "gaps": gaps,
-        "samples_lost": samples_lost,
-        "drops_by_source": drops,
-        "config_files": configs,
-    });
-    let stdout = std::io::stdout();
-    let mut w = stdout.lock();
-    if args.json {
-        writeln!(w, "{out}")?;
-        return Ok(input_status(&report));
     }
-    writeln!(w, "{}", args.file.display())?;
+
+    /// The terminal summary of what the recording holds (`out`: `json`'s object).
+    fn print(&self, w: &mut impl Write, out: &serde_json::Value) -> std::io::Result<()> {
+        for s in out["sources"].as_array().into_iter().flatten() {
+            let captures = match s["captures"].as_u64() {
+                Some(n @ 1..) => format!(" ({n} captures)"),
+                _ => String::new(),
+            };
+            writeln!(
+                w,
+                "  source {:<12} {} at {:.0} Hz: {} samples, {:.3} s{captures}",
+                s["source"].as_str().unwrap_or(""),
+                s["channels"].as_str().unwrap_or(""),
+                s["rate_hz"].as_f64().unwrap_or(0.0),
+                s["samples"],
+                s["duration_s"].as_f64().unwrap_or(0.0)
+            )?;
+        }
+        writeln!(w, "  blows: {}; results by class: {}", self.boundaries, counts(&self.classes, "none"))?;
+        if let Some(e) = out["mean_efficiency"].as_f64() {
+            writeln!(w, "  mean efficiency: {e:.3}")?;
+        }
+        let finished = self.billets.iter().filter(|b| b.finished).count();
+        writeln!(w, "  billets: {} ({finished} finished)", self.billets.len())?;
+        // Each billet's summary, then its statistics; statistics of billets no summary names
+        // (a recording from before the summaries) after them.
+        let stats = billet_stats(&self.results);
+        for b in &self.billets {
+            writeln!(w, "    {b}")?;
+            for s in stats.iter().filter(|s| s.billet == b.billet) {
+                writeln!(w, "      {s}")?;
+            }
+        }
+        for s in stats.iter().filter(|s| !self.billets.iter().any(|b| b.billet == s.billet)) {
+            writeln!(w, "    {s}")?;
+        }
+        writeln!(w, "  alerts: {}", counts(&self.alerts, "none"))?;
+        writeln!(
+            w,
+            "  gaps: {} ({} samples lost); drops: {}",
+            self.gaps,
+            self.samples_lost,
+            counts(&self.drops, "none reported")
+        )?;
+        let configs = if self.configs.is_empty() { "none".to_string() } else { self.configs.join(", ") };
+        writeln!(w, "  configuration stored: {configs}")
+    }
+}
+
+/// `name count, ...`, or `none` when there are none.
+fn counts(map: &BTreeMap<String, u64>, none: &str) -> String {
+    if map.is_empty() {
+        none.to_string()
+    } else {
+        map.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")
+    }
+}
+
+/// Whether the file was read whole, and what was lost if not.
+fn print_report(w: &mut impl Write, report: &ReadReport) -> std::io::Result<()> {
     if report.complete {
         writeln!(w, "  finished properly, {} messages", report.messages)?;
     } else {
@@ -239,71 +324,7 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
     if !report.corrupt_chunks.is_empty() {
         writeln!(w, "  CORRUPT: {} chunks skipped (named on stderr)", report.corrupt_chunks.len())?;
     }
-    for s in out["sources"].as_array().into_iter().flatten() {
-        let captures = match s["captures"].as_u64() {
-            Some(n @ 1..) => format!(" ({n} captures)"),
-            _ => String::new(),
-        };
-        writeln!(
-            w,
-            "  source {:<12} {} at {:.0} Hz: {} samples, {:.3} s{captures}",
-            s["source"].as_str().unwrap_or(""),
-            s["channels"].as_str().unwrap_or(""),
-            s["rate_hz"].as_f64().unwrap_or(0.0),
-            s["samples"],
-            s["duration_s"].as_f64().unwrap_or(0.0)
-        )?;
-    }
-    writeln!(
-        w,
-        "  blows: {boundaries}; results by class: {}",
-        if classes.is_empty() {
-            "none".to_string()
-        } else {
-            classes.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")
-        }
-    )?;
-    if let Some(e) = out["mean_efficiency"].as_f64() {
-        writeln!(w, "  mean efficiency: {e:.3}")?;
-    }
-    let finished = billets.iter().filter(|b| b.finished).count();
-    writeln!(w, "  billets: {} ({finished} finished)", billets.len())?;
-    // Each billet's summary, then its statistics; statistics of billets no summary names
-    // (a recording from before the summaries) after them.
-    for b in &billets {
-        writeln!(w, "    {b}")?;
-        for s in stats.iter().filter(|s| s.billet == b.billet) {
-            writeln!(w, "      {s}")?;
-        }
-    }
-    for s in stats.iter().filter(|s| !billets.iter().any(|b| b.billet == s.billet)) {
-        writeln!(w, "    {s}")?;
-    }
-    writeln!(
-        w,
-        "  alerts: {}",
-        if alerts.is_empty() {
-            "none".to_string()
-        } else {
-            alerts.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")
-        }
-    )?;
-    writeln!(
-        w,
-        "  gaps: {gaps} ({samples_lost} samples lost); drops: {}",
-        if drops.is_empty() {
-            "none reported".to_string()
-        } else {
-            drops.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")
-        }
-    )?;
-    writeln!(
-        w,
-        "  configuration stored: {}",
-        if configs.is_empty() { "none".to_string() } else { configs.join(", ") }
-    )?;
-    w.flush()?;
-    Ok(input_status(&report))
+    Ok(())
 }
 
 #[cfg(test)]
