@@ -19,6 +19,7 @@ use crate::config::service::ServiceConfig;
 use crate::config::uplink::MqttUplink;
 use crate::config::{parse_machine, parse_process};
 use crate::daemon::{Control, Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
+use crate::estimate::BlowEstimate;
 use crate::physics::effects::EffectSet;
 use crate::signal::sample::Role;
 use crate::simdevice::{BilletPlan, SerialDeviceSpec, SimMachine, drive_serial};
@@ -84,22 +85,7 @@ pub fn demo_channels() -> Vec<ChannelSpec> {
 }
 
 pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
-    if !(args.interval.is_finite() && args.interval >= 0.2) {
-        anyhow::bail!("--interval must be at least 0.2 s (a blow and its capture take 0.05 s)");
-    }
-    if let Some(a) = args.http.filter(|a| !a.ip().is_loopback()) {
-        anyhow::bail!(
-            "--http {a}: the demo serves loopback only (a service file's [http] token_file guards other addresses)"
-        );
-    }
-    if let Some(t) = args.target {
-        let limits = crate::config::limits::MEASURED_HEIGHT_M;
-        limits.check(t).map_err(|why| anyhow::anyhow!("--target {t}: {why}"))?;
-        let speed = crate::config::limits::IMPACT_SPEED_MPS;
-        for v in &args.settings {
-            speed.check(*v).map_err(|why| anyhow::anyhow!("--settings {v}: {why}"))?;
-        }
-    }
+    check(&args)?;
     let opcua = args
         .opcua
         .as_deref()
@@ -116,6 +102,37 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         CaptureSpec::hammer(7),
         args.interval,
     );
+    let parts = parts(&args, opcua.clone())?;
+    let hooks = hooks(&args, opcua.map(|o| o.url));
+    super::run::init_logging("error");
+    let rt = tokio::runtime::Runtime::new()?;
+    rt.block_on(serve_demo(args.fast, sim, parts, hooks))?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The flags' values, before anything opens.
+fn check(args: &DemoArgs) -> anyhow::Result<()> {
+    if !(args.interval.is_finite() && args.interval >= 0.2) {
+        anyhow::bail!("--interval must be at least 0.2 s (a blow and its capture take 0.05 s)");
+    }
+    if let Some(a) = args.http.filter(|a| !a.ip().is_loopback()) {
+        anyhow::bail!(
+            "--http {a}: the demo serves loopback only (a service file's [http] token_file guards other addresses)"
+        );
+    }
+    if let Some(t) = args.target {
+        let limits = crate::config::limits::MEASURED_HEIGHT_M;
+        limits.check(t).map_err(|why| anyhow::anyhow!("--target {t}: {why}"))?;
+        let speed = crate::config::limits::IMPACT_SPEED_MPS;
+        for v in &args.settings {
+            speed.check(*v).map_err(|why| anyhow::anyhow!("--settings {v}: {why}"))?;
+        }
+    }
+    Ok(())
+}
+
+/// The service the demo runs: the paper's hammer and steel, the faces the flags ask for.
+fn parts(args: &DemoArgs, opcua: Option<crate::config::opcua::OpcuaConfig>) -> anyhow::Result<ServiceParts> {
     let uplink = match args.mqtt.as_deref() {
         Some(url) => Some(MqttUplink::for_url(url).map_err(|e| anyhow::anyhow!("--mqtt: {e}"))?),
         None => None,
@@ -125,7 +142,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         http_listen: args.http.unwrap_or_else(|| "127.0.0.1:0".parse().expect("a valid address")),
         plc_listen: args.plc,
         foxglove_listen: args.foxglove,
-        opcua: opcua.clone(),
+        opcua,
         advisor: args.target.map(|target_height_m| AdvisorConfig {
             target_height_m,
             speeds: crate::advise::Speeds::Settings(args.settings.clone()),
@@ -135,111 +152,141 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     };
     // No new-billet signal: the service finds each billet from the encoder (issue 22), so it
     // tracks the billet's height and splits plastic from friction work on every billet.
-    let parts = ServiceParts {
+    Ok(ServiceParts {
         config,
         config_path: args.dir.join("demo.toml"),
         // Recorded as the service file: a replay of the demo's recording uses the defaults.
         config_text: "# forgemon demo: a simulated hammer, every threshold at its default\n".to_string(),
-        machine,
+        machine: parse_machine("hammer-lg1000.machine.toml", MACHINE)?.machine,
         effects: crate::physics::effects::EffectSet::NONE,
         machine_text: MACHINE.to_string(),
         process: Some(parse_process("steel-16NiCrMo13.process.toml", STEEL)?),
         process_text: Some(STEEL.to_string()),
         // Run fast, the simulated device waits for the service; in real time it cannot.
         backpressure: if args.fast { Backpressure::Wait } else { Backpressure::DropOldest },
+    })
+}
+
+/// The simulated hammer on one end of a pty, the service on the other, until the device
+/// has sent its last billet; then the summary line.
+async fn serve_demo(fast: bool, sim: SimMachine, parts: ServiceParts, hooks: Hooks) -> anyhow::Result<()> {
+    let (master, slave) = tokio_serial::SerialStream::pair().context("cannot open a pty pair")?;
+    let (tx, rx) = mpsc::channel(SOURCE_CHANNEL_CAPACITY);
+    let (shutdown_tx, shutdown_rx) = watch::channel(false);
+    let (_stop_tx, stop_rx) = watch::channel(false);
+    let spec = SerialDeviceSpec {
+        channels: demo_channels(),
+        frame_samples: 1000,
+        realtime: !fast,
+        faults: Default::default(),
     };
-    let parts_backpressure = parts.backpressure;
-    super::run::init_logging("error");
-    let rt = tokio::runtime::Runtime::new()?;
-    rt.block_on(async move {
-        let (master, slave) = tokio_serial::SerialStream::pair().context("cannot open a pty pair")?;
-        let (tx, rx) = mpsc::channel(SOURCE_CHANNEL_CAPACITY);
-        let (shutdown_tx, shutdown_rx) = watch::channel(false);
-        let (_stop_tx, stop_rx) = watch::channel(false);
-        let spec = SerialDeviceSpec { channels: demo_channels(), frame_samples: 1000, realtime: !args.fast, faults: Default::default() };
-        let device_stop = shutdown_rx.clone();
-        let (control_tx, control_rx) = mpsc::channel::<Control>(16);
-        let device = tokio::spawn(async move {
-            let mut master = master;
-            let stats = drive_serial(sim, &spec, &mut master, device_stop, |_, _| {}).await?;
-            // A pty discards what the reader has not read yet when its master closes (the
-            // last frame was lost this way: 1 of 24000 on `--fast --billets 20`). The reader
-            // needs room for a read's events to take it, which a pipeline at 10× real time
-            // frees within tens of ms: stay open a second after the last frame.
-            tokio::time::sleep(DEVICE_LINGER).await;
-            Ok::<_, std::io::Error>(stats)
-        });
-        let cfg = SerialConfig {
-            backpressure: parts_backpressure,
-            ..SerialConfig::new("daq", "pty", 0, SerialFormat::Binary, demo_channels())
-        };
-        tokio::spawn(run_on_stream(cfg, slave, system_clock_ns, tx, shutdown_rx));
-        let dir = args.dir.clone();
-        let (plc, foxglove, mqtt) = (args.plc, args.foxglove, args.mqtt.clone());
-        let opcua_url = opcua.map(|o| o.url);
-        let hooks = Hooks {
-            on_listening: Some(Box::new(move |addr| {
-                println!("forgemon demo: a simulated MONTBARD LG1000 drop hammer (paper Table 1) forges {} steel billets, 60 x 112 mm,", args.billets.max(1));
-                println!("  streaming 3 channels at 100 kHz over a pty; recording to {}/; status on http://{addr}/status", dir.display());
-                println!("  dashboard on http://{addr}/");
-                if let Some(plc) = plc {
-                    println!("  PLC result image (Modbus TCP, unit 1) on {plc}");
-                }
-                if let Some(url) = &opcua_url {
-                    println!("  OPC UA server (Metal Forming, anonymous) on {url}");
-                }
-                if let Some(fox) = foxglove {
-                    println!("  Foxglove live view on ws://{fox}");
-                }
-                if let Some(url) = &mqtt {
-                    println!("  Sparkplug B to {url} as spBv1.0/forge/DDATA/forgemon/machine");
-                }
-                println!("blow  billet  impact m/s  plastic J  efficiency                    class");
-            })),
-            on_blow: Some(Box::new(move |e| {
-                let billet = e.billet.billet;
-                match (e.plastic_j, e.efficiency) {
-                    (Some(plastic_j), Some(efficiency)) => {
-                        let bar_len = (efficiency.clamp(0.0, 1.0) * 24.0).round() as usize;
-                        let bar: String = "#".repeat(bar_len) + &".".repeat(24 - bar_len);
-                        println!("{:>4}  {:>6}  {:>10.2}  {plastic_j:>9.0}  [{bar}] {efficiency:.2}  {}", e.blow, billet, e.v_impact_mps, e.class.as_str());
-                    }
-                    _ => println!("{:>4}  {:>6}  {:>10.2}  {:>9}  {:<31}  {} ({:.1} ms lost)", e.blow, billet, e.v_impact_mps, "-", "(not estimated: samples lost)", e.class.as_str(), e.gap_s * 1e3),
-                }
-                if let Some(j) = e.judgement.as_ref().filter(|j| !j.ok) {
-                    println!("      NOK against recipe '{}': {}", j.recipe, j.reasons.join("; "));
-                }
-                if let Some(a) = &e.alert {
-                    println!("      ALERT {}: {}", a.kind.as_str(), a.reason);
-                }
-                let _ = std::io::stdout().flush();
-            })),
-            on_rejected: Some(Box::new(|m| println!("      (not estimated: {m})"))),
-            on_billet: Some(Box::new(|b| {
-                println!("      {b}");
-                let _ = std::io::stdout().flush();
-            })),
-            on_advice: Some(Box::new(|a| {
-                println!("      advisor: {}", advice_line(a));
-                let _ = std::io::stdout().flush();
-            })),
-        };
-        let summary = serve(parts, rx, shutdown_tx, stop_rx, hooks, Some((control_tx, control_rx))).await?;
-        let stats = device.await.context("the simulated device task")??;
-        println!(
-            "forgemon demo: {} billets, {} blows ({} incomplete), {} alerts, {} samples ({} frames from the device, {} events dropped); recorded {}",
-            summary.billets,
-            summary.blows,
-            summary.incomplete_blows,
-            summary.alerts,
-            summary.samples,
-            stats.frames,
-            summary.dropped_events,
-            summary.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
-        );
-        Ok::<_, anyhow::Error>(())
-    })?;
-    Ok(ExitCode::SUCCESS)
+    let device_stop = shutdown_rx.clone();
+    let (control_tx, control_rx) = mpsc::channel::<Control>(16);
+    let device = tokio::spawn(async move {
+        let mut master = master;
+        let stats = drive_serial(sim, &spec, &mut master, device_stop, |_, _| {}).await?;
+        // A pty discards what the reader has not read yet when its master closes (the
+        // last frame was lost this way: 1 of 24000 on `--fast --billets 20`). The reader
+        // needs room for a read's events to take it, which a pipeline at 10× real time
+        // frees within tens of ms: stay open a second after the last frame.
+        tokio::time::sleep(DEVICE_LINGER).await;
+        Ok::<_, std::io::Error>(stats)
+    });
+    let cfg = SerialConfig {
+        backpressure: parts.backpressure,
+        ..SerialConfig::new("daq", "pty", 0, SerialFormat::Binary, demo_channels())
+    };
+    tokio::spawn(run_on_stream(cfg, slave, system_clock_ns, tx, shutdown_rx));
+    let summary = serve(parts, rx, shutdown_tx, stop_rx, hooks, Some((control_tx, control_rx))).await?;
+    let stats = device.await.context("the simulated device task")??;
+    println!(
+        "forgemon demo: {} billets, {} blows ({} incomplete), {} alerts, {} samples ({} frames from the device, {} events dropped); recorded {}",
+        summary.billets,
+        summary.blows,
+        summary.incomplete_blows,
+        summary.alerts,
+        summary.samples,
+        stats.frames,
+        summary.dropped_events,
+        summary.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
+    );
+    Ok(())
+}
+
+/// What the demo prints: where each face listens, then a line per blow, billet and plan.
+fn hooks(args: &DemoArgs, opcua_url: Option<String>) -> Hooks {
+    let (billets, dir) = (args.billets.max(1), args.dir.clone());
+    let (plc, foxglove, mqtt) = (args.plc, args.foxglove, args.mqtt.clone());
+    Hooks {
+        on_listening: Some(Box::new(move |addr| {
+            println!(
+                "forgemon demo: a simulated MONTBARD LG1000 drop hammer (paper Table 1) forges {billets} steel billets, 60 x 112 mm,"
+            );
+            println!(
+                "  streaming 3 channels at 100 kHz over a pty; recording to {}/; status on http://{addr}/status",
+                dir.display()
+            );
+            println!("  dashboard on http://{addr}/");
+            if let Some(plc) = plc {
+                println!("  PLC result image (Modbus TCP, unit 1) on {plc}");
+            }
+            if let Some(url) = &opcua_url {
+                println!("  OPC UA server (Metal Forming, anonymous) on {url}");
+            }
+            if let Some(fox) = foxglove {
+                println!("  Foxglove live view on ws://{fox}");
+            }
+            if let Some(url) = &mqtt {
+                println!("  Sparkplug B to {url} as spBv1.0/forge/DDATA/forgemon/machine");
+            }
+            println!("blow  billet  impact m/s  plastic J  efficiency                    class");
+        })),
+        on_blow: Some(Box::new(print_blow)),
+        on_rejected: Some(Box::new(|m| println!("      (not estimated: {m})"))),
+        on_billet: Some(Box::new(|b| {
+            println!("      {b}");
+            let _ = std::io::stdout().flush();
+        })),
+        on_advice: Some(Box::new(|a| {
+            println!("      advisor: {}", advice_line(a));
+            let _ = std::io::stdout().flush();
+        })),
+    }
+}
+
+/// A blow's line: its figures and an efficiency bar, then its judgement and alert.
+fn print_blow(e: &BlowEstimate) {
+    let billet = e.billet.billet;
+    match (e.plastic_j, e.efficiency) {
+        (Some(plastic_j), Some(efficiency)) => {
+            let bar_len = (efficiency.clamp(0.0, 1.0) * 24.0).round() as usize;
+            let bar: String = "#".repeat(bar_len) + &".".repeat(24 - bar_len);
+            println!(
+                "{:>4}  {:>6}  {:>10.2}  {plastic_j:>9.0}  [{bar}] {efficiency:.2}  {}",
+                e.blow,
+                billet,
+                e.v_impact_mps,
+                e.class.as_str()
+            );
+        }
+        _ => println!(
+            "{:>4}  {:>6}  {:>10.2}  {:>9}  {:<31}  {} ({:.1} ms lost)",
+            e.blow,
+            billet,
+            e.v_impact_mps,
+            "-",
+            "(not estimated: samples lost)",
+            e.class.as_str(),
+            e.gap_s * 1e3
+        ),
+    }
+    if let Some(j) = e.judgement.as_ref().filter(|j| !j.ok) {
+        println!("      NOK against recipe '{}': {}", j.recipe, j.reasons.join("; "));
+    }
+    if let Some(a) = &e.alert {
+        println!("      ALERT {}: {}", a.kind.as_str(), a.reason);
+    }
+    let _ = std::io::stdout().flush();
 }
 
 /// The advisor's plan in one line: the blows left and the next blow's speed, or why not.
