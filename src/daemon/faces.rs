@@ -3,8 +3,9 @@
 //! its list (`daemon::FACES`) and stops them when the service stops; adding a face adds its
 //! files and one line there, not edits across the service, the demo and the tests.
 //!
-//! The dashboard and the status endpoint share the HTTP listener (`status.rs`), and the
-//! Foxglove view reads the recorder's tap; those two are started by `serve` itself.
+//! Besides the bus, a face may ask for two things through its context: HTTP routes on the
+//! service's listener (beside `/status`, behind its token: the dashboard), and the
+//! recorder's messages as the file gets them, samples included (the Foxglove view).
 
 use std::sync::Mutex;
 
@@ -17,6 +18,7 @@ use super::{AdviceHook, Control};
 use crate::config::service::ServiceConfig;
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
+use crate::record::tap::Tap;
 
 /// What every face is started with.
 pub struct FaceContext<'a> {
@@ -32,6 +34,23 @@ pub struct FaceContext<'a> {
     pub control: &'a mpsc::Sender<Control>,
     /// A front end's callback for the advisor's plans (the demo prints them).
     pub on_advice: &'a Mutex<Option<AdviceHook>>,
+    /// Routes a face serves on the service's HTTP listener; `serve` merges them.
+    pub routes: &'a Mutex<Vec<axum::Router>>,
+    /// Consumers of every message the recorder writes (`record::tap`), samples included;
+    /// `serve` hands each message to each of them.
+    pub recorded: &'a Mutex<Vec<Tap>>,
+}
+
+impl FaceContext<'_> {
+    /// Serve `routes` on the service's HTTP listener.
+    pub fn serve_routes(&self, routes: axum::Router) {
+        self.routes.lock().map(|mut r| r.push(routes)).ok();
+    }
+
+    /// Receive every message the recorder writes.
+    pub fn tap_recording(&self, tap: Tap) {
+        self.recorded.lock().map(|mut t| t.push(tap)).ok();
+    }
 }
 
 /// A running face. Dropping it stops it; `finish` lets it send what it still holds first

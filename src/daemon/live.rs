@@ -1,9 +1,9 @@
 //! The service's bus to its faces (the dashboard, the PLC image, OPC UA, Sparkplug, the
 //! advisor, the webhook, the PLC coil; `faces.rs`): each blow's result, each alert, each
-//! billet's summary, each change of the latched alert and the stop, as the session produced
-//! them, on a broadcast channel. A front end that falls behind
-//! loses the oldest events (tokio's `broadcast` says how many) and reads the status
-//! snapshot again; it never holds up the service.
+//! billet's summary, each change of the latched alert, the status snapshot (after each blow,
+//! and every second) and the stop, as the session produced them, on a broadcast channel. A
+//! front end that falls behind loses the oldest events (tokio's `broadcast` says how many)
+//! and catches up from the next snapshot; it never holds up the service.
 
 use std::sync::Arc;
 
@@ -32,6 +32,9 @@ pub enum LiveEvent {
     /// A blow raised `alert` (published before the blow itself); `arrived_ns` is when the
     /// samples that ended the blow arrived (host clock).
     Alert { alert: Arc<Alert>, arrived_ns: i64 },
+    /// The service's status (`/status`): published just before each blow's result, so a
+    /// face that shows both sees the counters that include the blow, and every second.
+    Status(Arc<super::status::StatusSnapshot>),
     /// The service has stopped: the last event. A face that sends what it received
     /// (`faces::Face::finish`) finishes it and ends.
     Stopping,

@@ -99,7 +99,9 @@ pub struct Hooks {
 }
 
 /// Every face `serve` starts, by its config section (`faces.rs`). A new face is one line.
-pub const FACES: [(&str, faces::Start); 6] = [
+pub const FACES: [(&str, faces::Start); 8] = [
+    ("http", dashboard::face),
+    ("foxglove", foxglove::face),
     ("plc_server", plc_server::face),
     ("opcua", opcua::face),
     ("uplink.mqtt", sparkplug::face),
@@ -155,18 +157,8 @@ pub async fn serve(
     let live = live::Live::default();
     let token = dashboard::auth::Token::read(cfg.http_token_file.as_deref())?;
     let (recipe_tx, recipe_rx) = mpsc::channel::<recipe_switch::RecipeChange>(4);
-    let pages = recipe_switch::routes(recipe_tx, parts.machine.kind().as_str()).merge(dashboard::routes(
-        status.clone(),
-        control_tx.clone(),
-        live.clone(),
-    ));
-    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone(), token, pages));
-    // The Foxglove live view: the recorder's tap feeds it; it stops when `serve` returns.
-    let _foxglove = match cfg.foxglove_listen {
-        Some(addr) => Some(foxglove::start(addr, &mut writer).await?),
-        None => None,
-    };
     let on_advice = Mutex::new(hooks.on_advice.take());
+    let (routes, recorded) = (Mutex::new(Vec::new()), Mutex::new(Vec::new()));
     let ctx = faces::FaceContext {
         config: cfg,
         machine: &parts.machine,
@@ -176,8 +168,20 @@ pub async fn serve(
         status: &status,
         control: &control_tx,
         on_advice: &on_advice,
+        routes: &routes,
+        recorded: &recorded,
     };
     let running = start_faces(&ctx).await?;
+    let pages = routes
+        .into_inner()
+        .unwrap_or_default()
+        .into_iter()
+        .fold(recipe_switch::routes(recipe_tx, parts.machine.kind().as_str()), axum::Router::merge);
+    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone(), token, pages));
+    let mut taps = recorded.into_inner().unwrap_or_default();
+    if !taps.is_empty() {
+        writer.set_tap(Box::new(move |m| taps.iter_mut().for_each(|tap| tap(m))));
+    }
     let pipeline = pipeline_with_recipe(&parts, &mut writer, &status)?;
     let session = Session::new(pipeline, Some(writer), Stamp::Arrival);
     let service = service::Service::new(session, status, live.clone(), hooks, parts.config_path.clone());

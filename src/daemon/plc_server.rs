@@ -318,18 +318,14 @@ pub async fn start(
         .await
         .with_context(|| format!("plc_server.listen {listen}: cannot listen"))?;
     let addr = listener.local_addr().with_context(|| format!("plc_server.listen {listen}"))?;
-    let (image_tx, image_rx) = watch::channel(encode(0, &snapshot(&status), None, Warnings::default()));
+    let status = Arc::new(status.lock().unwrap_or_else(|p| p.into_inner()).clone());
+    let (image_tx, image_rx) = watch::channel(encode(0, &status, None, Warnings::default()));
     let stats = Arc::new(PlcStats::default());
     let updater = tokio::spawn(update(live.subscribe(), status, image_tx));
     let service = ImageService { image: image_rx, control, stats: stats.clone() };
     let server = tokio::spawn(serve(Server::new(listener), service));
     tracing::info!(%addr, "PLC result image (Modbus TCP, unit {PLC_UNIT_ID}) listening");
     Ok(Some(PlcServer { addr, stats, tasks: [updater, server] }))
-}
-
-/// A copy of the status (a poisoned lock still holds plain data).
-fn snapshot(status: &SharedStatus) -> StatusSnapshot {
-    status.lock().unwrap_or_else(|p| p.into_inner()).clone()
 }
 
 /// Accept clients until aborted; a failed accept (out of file descriptors) is logged and
@@ -356,15 +352,19 @@ async fn serve(server: Server, service: ImageService) {
     }
 }
 
-/// Rebuild the image on every live event and heartbeat, until the service stops.
+/// Rebuild the image on every live event and heartbeat, until the service stops: the
+/// counters, sources and latched alert from the bus's last status snapshot (`status` until
+/// the first), the last blow and the warnings from the bus's results and alerts.
 async fn update(
     mut live: broadcast::Receiver<LiveEvent>,
-    status: SharedStatus,
+    mut status: Arc<StatusSnapshot>,
     image: watch::Sender<[u16; IMAGE_WORDS]>,
 ) {
     let mut heartbeat = 0u16;
     let mut last: Option<Arc<BlowEstimate>> = None;
     let mut warn = Warnings::default();
+    // Fell behind the bus: the next snapshot has the last blow and the latched alert.
+    let mut behind = false;
     let mut tick = tokio::time::interval_at(tokio::time::Instant::now() + HEARTBEAT_PERIOD, HEARTBEAT_PERIOD);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
@@ -376,30 +376,31 @@ async fn update(
                     }
                     last = Some(b);
                 }
-                Ok(LiveEvent::Acknowledged) => warn = Warnings::default(),
-                Ok(
-                    LiveEvent::Billet(_)
-                    | LiveEvent::NewBillet
-                    | LiveEvent::Advice(_)
-                    | LiveEvent::Alert { .. }
-                    | LiveEvent::Stopping,
-                ) => {}
-                Err(broadcast::error::RecvError::Lagged(n)) => {
-                    // Fell behind: the snapshot has the last blow and the latched alert.
-                    tracing::warn!(events = n, "PLC image fell behind the live feed");
-                    let s = snapshot(&status);
-                    last = s.last_blow.map(Arc::new);
-                    if let Some(a) = &s.latched_alert {
-                        warn.raise(a.kind);
+                Ok(LiveEvent::Status(s)) => {
+                    if std::mem::take(&mut behind) {
+                        last = s.last_blow.clone().map(Arc::new);
+                        if let Some(a) = &s.latched_alert {
+                            warn.raise(a.kind);
+                        }
                     }
+                    status = s;
+                }
+                // The advisor's plan comes after the blow's snapshot.
+                Ok(LiveEvent::Advice(a)) => Arc::make_mut(&mut status).advice = Some((*a).clone()),
+                Ok(LiveEvent::Acknowledged) => {
+                    warn = Warnings::default();
+                    Arc::make_mut(&mut status).acknowledge();
+                }
+                Ok(LiveEvent::Billet(_) | LiveEvent::NewBillet | LiveEvent::Alert { .. } | LiveEvent::Stopping) => {}
+                Err(broadcast::error::RecvError::Lagged(n)) => {
+                    tracing::warn!(events = n, "PLC image fell behind the live feed");
+                    behind = true;
                 }
                 Err(broadcast::error::RecvError::Closed) => break,
             },
             _ = tick.tick() => heartbeat = heartbeat.wrapping_add(1),
         }
-        // Encoded under the lock (about 50 ns, `benches/plc_image.rs`), not on a copy.
-        let words = encode(heartbeat, &status.lock().unwrap_or_else(|p| p.into_inner()), last.as_deref(), warn);
-        image.send_replace(words);
+        image.send_replace(encode(heartbeat, &status, last.as_deref(), warn));
     }
 }
 

@@ -128,6 +128,14 @@ impl Service {
     pub fn on_tick(&mut self) {
         let path = self.session.recording_path().map(|p| p.display().to_string()).unwrap_or_default();
         self.status.lock().map(|mut s| s.recording = path).ok();
+        self.publish_status();
+    }
+
+    /// The status snapshot on the bus.
+    fn publish_status(&self) {
+        if let Ok(s) = self.status.lock() {
+            self.live.publish(LiveEvent::Status(Arc::new(s.clone())));
+        }
     }
 
     /// The stream ends: the blow in progress and the billet in the dies are closed and
@@ -190,6 +198,7 @@ impl Service {
         if let Some(f) = self.hooks.on_blow.as_mut() {
             f(estimate);
         }
+        self.publish_status();
         self.live.publish(LiveEvent::Blow(Arc::new(estimate.clone())));
     }
 

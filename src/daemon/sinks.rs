@@ -147,6 +147,7 @@ mod tests {
         let status = Arc::new(Mutex::new(StatusSnapshot::new("hammer")));
         let (control, _rx) = tokio::sync::mpsc::channel(1);
         let on_advice = Mutex::new(None);
+        let (routes, recorded) = (Default::default(), Default::default());
         let ctx = |config| FaceContext {
             config,
             machine: &machine,
@@ -156,6 +157,8 @@ mod tests {
             status: &status,
             control: &control,
             on_advice: &on_advice,
+            routes: &routes,
+            recorded: &recorded,
         };
         assert!(webhook_face(&ctx(&bare)).await.unwrap().is_none(), "no [alerts] webhook, no face");
         let face = webhook_face(&ctx(&config)).await.unwrap().expect("a face");

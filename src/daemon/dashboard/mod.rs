@@ -19,11 +19,13 @@ use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use futures_util::Stream;
+use futures_util::future::BoxFuture;
 use serde::Serialize;
 use tokio::sync::broadcast::error::RecvError;
 use tokio::sync::mpsc;
 
 use super::Control;
+use super::faces::{Face, FaceContext, boxed};
 use super::live::{Live, LiveEvent};
 use super::status::{SharedStatus, StatusSnapshot};
 use board::Board;
@@ -39,6 +41,18 @@ struct Shared {
     control: mpsc::Sender<Control>,
     live: Live,
 }
+
+/// The dashboard as a face: its routes on the service's HTTP listener. Always on (the
+/// listener is the service's `[http]`); it stops with the listener.
+pub fn face<'a>(ctx: &'a FaceContext<'a>) -> BoxFuture<'a, anyhow::Result<Option<Box<dyn Face>>>> {
+    ctx.serve_routes(routes(ctx.status.clone(), ctx.control.clone(), ctx.bus.clone()));
+    Box::pin(async { Ok(boxed(Some(Dashboard))) })
+}
+
+/// The running dashboard: its routes are served by the service's listener.
+struct Dashboard;
+
+impl Face for Dashboard {}
 
 /// The dashboard's routes: `/`, its assets, `/dashboard/state`, `/blow/last/curve`,
 /// `/events` and `POST /ack`.
@@ -97,12 +111,13 @@ async fn ack(State(sh): State<Shared>) -> Response {
     }
 }
 
-/// The server-sent event for a live event: its name, and the result as JSON.
-fn sse_event(e: &LiveEvent) -> Event {
+/// The server-sent event for a live event: its name, and the result as JSON; none for the
+/// status snapshot (the page reads `/dashboard/state` on each event instead).
+fn sse_event(e: &LiveEvent) -> Option<Event> {
     let named = |name: &str, data: Result<String, serde_json::Error>| {
         Event::default().event(name).data(data.unwrap_or_else(|_| "null".into()))
     };
-    match e {
+    Some(match e {
         LiveEvent::Blow(b) => named("blow", serde_json::to_string(&**b)),
         LiveEvent::Billet(b) => named("billet", serde_json::to_string(&**b)),
         LiveEvent::Advice(a) => named("advice", serde_json::to_string(&**a)),
@@ -110,7 +125,8 @@ fn sse_event(e: &LiveEvent) -> Event {
         LiveEvent::Acknowledged => Event::default().event("ack").data("{}"),
         LiveEvent::Alert { alert, .. } => named("alert", serde_json::to_string(&**alert)),
         LiveEvent::Stopping => Event::default().event("stopping").data("{}"),
-    }
+        LiveEvent::Status(_) => return None,
+    })
 }
 
 /// `GET /events`: the live feed as server-sent events (`blow`, `alert`, `billet`,
@@ -118,13 +134,18 @@ fn sse_event(e: &LiveEvent) -> Event {
 /// behind and lost events).
 async fn events(State(sh): State<Shared>) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
     let stream = futures_util::stream::unfold(sh.live.subscribe(), |mut rx| async move {
-        let ev = match rx.recv().await {
-            Ok(e) => sse_event(&e),
-            Err(RecvError::Lagged(n)) => {
-                tracing::debug!(lost = n, "a dashboard fell behind the live feed");
-                Event::default().event("resync").data(n.to_string())
+        let ev = loop {
+            match rx.recv().await {
+                Ok(e) => match sse_event(&e) {
+                    Some(ev) => break ev,
+                    None => continue,
+                },
+                Err(RecvError::Lagged(n)) => {
+                    tracing::debug!(lost = n, "a dashboard fell behind the live feed");
+                    break Event::default().event("resync").data(n.to_string());
+                }
+                Err(RecvError::Closed) => return None,
             }
-            Err(RecvError::Closed) => return None,
         };
         Some((Ok(ev), rx))
     });

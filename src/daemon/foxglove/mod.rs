@@ -29,7 +29,10 @@ use tokio_tungstenite::tungstenite::http::{HeaderValue, StatusCode};
 use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 use tokio_tungstenite::tungstenite::{Bytes, Message};
 
+use super::faces::{Face, FaceContext, boxed};
 use crate::record::RecordWriter;
+use crate::record::tap::Tap;
+use futures_util::future::BoxFuture;
 
 use hub::{CLIENT_QUEUE_BYTES, Hub, HubStats, Outgoing};
 use protocol::{SUBPROTOCOL, ServerMessage};
@@ -50,6 +53,18 @@ pub struct FoxgloveServer {
     accept: tokio::task::JoinHandle<()>,
 }
 
+/// `[foxglove]` as a face: listening on its address, fed by the recorder's messages.
+pub fn face<'a>(ctx: &'a FaceContext<'a>) -> BoxFuture<'a, anyhow::Result<Option<Box<dyn Face>>>> {
+    Box::pin(async move {
+        let Some(addr) = ctx.config.foxglove_listen else { return Ok(None) };
+        let (server, tap) = listen(addr, CLIENT_QUEUE_BYTES).await?;
+        ctx.tap_recording(tap);
+        Ok(boxed(Some(server)))
+    })
+}
+
+impl Face for FoxgloveServer {}
+
 /// Listen on `addr` and feed the clients from `writer`'s tap, with the default outbox bound
 /// ([`CLIENT_QUEUE_BYTES`]).
 pub async fn start(addr: SocketAddr, writer: &mut RecordWriter) -> anyhow::Result<FoxgloveServer> {
@@ -62,15 +77,21 @@ pub async fn start_with(
     writer: &mut RecordWriter,
     queue_bytes: usize,
 ) -> anyhow::Result<FoxgloveServer> {
+    let (server, tap) = listen(addr, queue_bytes).await?;
+    writer.set_tap(tap);
+    Ok(server)
+}
+
+/// The server listening on `addr`, and the tap that feeds its clients.
+async fn listen(addr: SocketAddr, queue_bytes: usize) -> anyhow::Result<(FoxgloveServer, Tap)> {
     let listener = TcpListener::bind(addr).await.with_context(|| format!("foxglove.listen {addr}: cannot listen"))?;
     let local_addr = listener.local_addr().with_context(|| format!("foxglove.listen {addr}"))?;
     let hub = Hub::new(queue_bytes);
     let tap = hub.clone();
-    writer.set_tap(Box::new(move |m| tap.publish(m)));
     let session_id = format!("forgemon-{}", super::host_now_ns());
     let accept = tokio::spawn(accept_loop(listener, hub.clone(), session_id));
     tracing::info!(listen = %local_addr, "foxglove live view listening");
-    Ok(FoxgloveServer { hub, local_addr, accept })
+    Ok((FoxgloveServer { hub, local_addr, accept }, Box::new(move |m| tap.publish(m))))
 }
 
 impl FoxgloveServer {

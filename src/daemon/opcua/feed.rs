@@ -17,7 +17,6 @@ use super::events::{BlowCompletedEvent, ConditionPlace, ConditionState, as_dyn, 
 use super::model::Nodes;
 use crate::daemon::Control;
 use crate::daemon::live::LiveEvent;
-use crate::daemon::status::SharedStatus;
 use crate::estimate::BlowEstimate;
 use crate::estimate::result::AlertKind;
 
@@ -46,20 +45,25 @@ pub struct Feed {
 
 impl Feed {
     /// Follow the live feed until the service stops.
-    pub async fn run(self, mut live: broadcast::Receiver<LiveEvent>, status: SharedStatus) {
+    pub async fn run(self, mut live: broadcast::Receiver<LiveEvent>) {
+        // Fell behind the bus: the next status snapshot has the last blow.
+        let mut behind = false;
         loop {
             match live.recv().await {
                 Ok(LiveEvent::Blow(b)) => self.on_blow(&b),
                 Ok(LiveEvent::Acknowledged) => self.on_acknowledged(),
                 Ok(LiveEvent::Billet(_) | LiveEvent::NewBillet | LiveEvent::Advice(_) | LiveEvent::Alert { .. }) => {}
+                Ok(LiveEvent::Status(s)) => {
+                    if let Some(b) = s.last_blow.as_ref().filter(|_| std::mem::take(&mut behind)) {
+                        self.write_values(b);
+                    }
+                }
                 Ok(LiveEvent::Stopping) => break,
                 Err(broadcast::error::RecvError::Lagged(n)) => {
-                    // The events of the blows missed are lost; the values show the last blow.
+                    // The events of the blows missed are lost; the values show the last blow
+                    // from the next snapshot.
                     tracing::warn!(events = n, "OPC UA server fell behind the live feed");
-                    let last = status.lock().unwrap_or_else(|p| p.into_inner()).last_blow.clone();
-                    if let Some(b) = last {
-                        self.write_values(&b);
-                    }
+                    behind = true;
                 }
                 Err(broadcast::error::RecvError::Closed) => break,
             }

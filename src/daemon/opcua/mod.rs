@@ -22,7 +22,6 @@ use tokio::task::JoinHandle;
 
 use super::Control;
 use super::live::Live;
-use super::status::SharedStatus;
 use crate::config::opcua::{OpcuaAccess, OpcuaConfig};
 use crate::physics::machine::MachineKind;
 
@@ -130,8 +129,7 @@ pub fn face<'a>(
     ctx: &'a crate::daemon::faces::FaceContext<'a>,
 ) -> futures_util::future::BoxFuture<'a, anyhow::Result<Option<Box<dyn crate::daemon::faces::Face>>>> {
     Box::pin(async move {
-        let server =
-            start(ctx.config.opcua.as_ref(), ctx.machine.kind(), ctx.status.clone(), ctx.bus, ctx.control.clone());
+        let server = start(ctx.config.opcua.as_ref(), ctx.machine.kind(), ctx.bus, ctx.control.clone());
         Ok(crate::daemon::faces::boxed(server.await?))
     })
 }
@@ -141,7 +139,6 @@ pub fn face<'a>(
 pub async fn start(
     cfg: Option<&OpcuaConfig>,
     kind: MachineKind,
-    status: SharedStatus,
     live: &Live,
     control: mpsc::Sender<Control>,
 ) -> anyhow::Result<Option<OpcuaServer>> {
@@ -181,7 +178,7 @@ pub async fn start(
         .with_context(|| format!("opcua.listen {}: cannot listen", cfg.url))?;
     let addr = listener.local_addr().with_context(|| format!("opcua.listen {}", cfg.url))?;
     let feed = feed::Feed { manager, subscriptions: handle.subscriptions().clone(), nodes, conditions };
-    let updater = tokio::spawn(feed.run(live.subscribe(), status));
+    let updater = tokio::spawn(feed.run(live.subscribe()));
     let run = tokio::spawn(async move {
         if let Err(e) = server.run_with(listener).await {
             tracing::error!("OPC UA server stopped: {e}");
