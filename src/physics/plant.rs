@@ -87,6 +87,8 @@ enum Lower {
 #[derive(Debug, Clone)]
 pub struct Plant {
     m_upper_kg: f64,
+    /// `1 / m_upper` and, under a lower mass, `1 / m`, kg⁻¹ (0 for the press's chain).
+    inv_m: (f64, f64),
     /// Press ram: (mass, link stiffness, link damping).
     ram: Option<(f64, f64, f64)>,
     lower: Lower,
@@ -115,6 +117,32 @@ pub(super) struct Flow {
     pub contact_n: f64,
     pub frictionless_n: f64,
     pub p_rate_mps: f64,
+}
+
+impl Flow {
+    /// The rates of the plastic and the friction work: the frictionless part's load and
+    /// the rest, each times the compression rate.
+    pub(super) fn work_rates(&self) -> (f64, f64) {
+        (self.frictionless_n * self.p_rate_mps, (self.contact_n - self.frictionless_n) * self.p_rate_mps)
+    }
+}
+
+/// The accelerations of the bodies either side of the billet (`inv_m`: their reciprocal
+/// masses), from the forces on them: `upper_n` on the upper body besides the contact (the
+/// press's link; 0 on a hammer), the contact's `contact_n` between them and the support's
+/// `support_n` under the lower. Stuck bodies share one acceleration, bit for bit, so their
+/// relative velocity stays exactly zero and the guards that leave the phase see a clean
+/// start.
+pub(super) fn two_bodies(inv_m: (f64, f64), upper_n: f64, contact_n: f64, support_n: f64, stuck: bool) -> (f64, f64) {
+    let acc_upper = (upper_n - contact_n) * inv_m.0;
+    let acc_lower = if stuck { acc_upper } else { (contact_n - support_n) * inv_m.1 };
+    (acc_upper, acc_lower)
+}
+
+/// The force that keeps two stuck bodies together: the one that gives them one
+/// acceleration under `upper_n` on the upper and `support_n` under the lower.
+pub(super) fn stick_n(inv_m: (f64, f64), upper_n: f64, support_n: f64) -> f64 {
+    (upper_n * inv_m.0 + support_n * inv_m.1) / (inv_m.0 + inv_m.1)
 }
 
 /// The frictionless part's share of an upsetting load (1 where the load is not finite and
@@ -209,8 +237,13 @@ impl Plant {
             f2 = f2.max((f.k3_n_per_m + k_above) / f.m3_kg);
         }
         let f_max_hz = f2.sqrt() / (2.0 * std::f64::consts::PI);
+        let inv_m_lower = match lower {
+            Lower::Mass { m_kg, .. } => 1.0 / m_kg,
+            Lower::Chain { .. } => 0.0,
+        };
         Plant {
             m_upper_kg,
+            inv_m: (1.0 / m_upper_kg, inv_m_lower),
             ram,
             lower,
             k_contact_n_per_m: k_contact,
@@ -280,7 +313,7 @@ impl Plant {
         };
         e.h_m = self.h_start_m - y[P];
         match self.lower {
-            Lower::Mass { m_kg, k_n_per_m, c_ns_per_m } => {
+            Lower::Mass { k_n_per_m, c_ns_per_m, .. } => {
                 e.delta_m = y[XU] - y[XL];
                 e.ddelta_mps = y[VU] - y[VL];
                 e.support_n = if mode.engaged {
@@ -288,7 +321,7 @@ impl Plant {
                 } else {
                     0.0
                 };
-                e.stick_n = (e.link_n / self.m_upper_kg + e.support_n / m_kg) / (1.0 / self.m_upper_kg + 1.0 / m_kg);
+                e.stick_n = stick_n(self.inv_m, e.link_n, e.support_n);
             }
             Lower::Chain { .. } => e.delta_m = y[XU] - if self.node { y[XN] } else { x3 },
         }
@@ -338,15 +371,10 @@ impl Plant {
             e.frictionless_n = e.contact_n;
         }
         // Accelerations of the bodies either side of the billet.
-        e.acc_upper = (e.link_n - e.contact_n) / self.m_upper_kg;
-        e.acc_lower = match self.lower {
-            Lower::Mass { m_kg, .. } => (e.contact_n - e.support_n) / m_kg,
-            Lower::Chain { .. } => self.foundation_acc(y, e.contact_n),
-        };
-        if mode.contact == Contact::Stuck {
-            // Stuck bodies share one acceleration, bit for bit, so the relative velocity
-            // stays exactly zero and the guards that leave the phase see a clean start.
-            e.acc_lower = e.acc_upper;
+        let stuck = mode.contact == Contact::Stuck;
+        (e.acc_upper, e.acc_lower) = two_bodies(self.inv_m, e.link_n, e.contact_n, e.support_n, stuck);
+        if let (Lower::Chain { .. }, false) = (self.lower, stuck) {
+            e.acc_lower = self.foundation_acc(y, e.contact_n);
         }
         if !self.rigid() && mode.contact == Contact::Plastic {
             // The upsetting load is needed only while the billet flows.

@@ -112,9 +112,6 @@ pub struct BaseHammer<'a> {
     m2_kg: f64,
     k_n_per_m: f64,
     c_ns_per_m: f64,
-    /// `1 / m1` and `1 / m2`, kg⁻¹: the vector field multiplies by them.
-    inv_m1: f64,
-    inv_m2: f64,
     exact: Option<Exact>,
     /// The plastic flow's exponential steps (`etd`), with the exact phases on a
     /// rate-independent law, and the last one's stages.
@@ -142,8 +139,6 @@ impl<'a> BaseHammer<'a> {
             m2_kg: m_kg,
             k_n_per_m,
             c_ns_per_m,
-            inv_m1: 1.0 / plant.m_upper_kg,
-            inv_m2: 1.0 / m_kg,
             exact: None,
             etd: None,
             last_etd: Cell::new(None),
@@ -221,7 +216,7 @@ impl<'a> BaseHammer<'a> {
 
     /// The force that keeps the tools together while stuck (`Plant::kinematics`, no ram).
     fn stick_n(&self, support_n: f64) -> f64 {
-        support_n * self.inv_m2 / (self.inv_m1 + self.inv_m2)
+        stick_n(self.plant.inv_m, 0.0, support_n)
     }
 
     /// Sensor output (`Plant::sensor_at`).
@@ -268,7 +263,7 @@ impl<'a> BaseHammer<'a> {
         let (step, inv_m) = if mode.contact == Contact::Stuck {
             (&e.stuck_step, 1.0 / (self.m1_kg + self.m2_kg))
         } else {
-            (&e.free_step, self.inv_m2)
+            (&e.free_step, self.plant.inv_m.1)
         };
         let (mut x, mut v) = (y0[BL], y0[BVL]);
         let mut j = 1.0;
@@ -290,7 +285,7 @@ impl<'a> BaseHammer<'a> {
         let (Some(etd), Some(_), Some(s)) = (self.etd.as_ref(), self.exact.as_ref(), self.last_etd.get()) else {
             return false;
         };
-        let inv_m2 = self.inv_m2;
+        let inv_m2 = self.plant.inv_m.1;
         // The observer's step is `t1 - t0`, the span to roundoff.
         if !(s.t0_s == t0_s && (h_s - s.h_s).abs() <= 1e-9 * s.h_s) {
             return false;
@@ -347,23 +342,20 @@ impl<'a> BaseHammer<'a> {
 impl Hybrid<NB> for BaseHammer<'_> {
     type Mode = Mode;
 
-    /// `Plant::rhs` on the components this plant moves: the same contact law
-    /// (`Plant::rigid_flow`), the absent parts' zeros folded in, and the masses'
-    /// reciprocals where the general plant divides (within a few ulp of it per evaluation).
+    /// `Plant::rhs` on the components this plant moves, from the general plant's own terms:
+    /// its support force with the absent parts' zeros folded in, its contact law
+    /// (`Plant::rigid_flow`), its accelerations (`two_bodies`) and work rates
+    /// (`Flow::work_rates`).
     fn rhs(&self, y: &[f64; NB], mode: Mode, dy: &mut [f64; NB]) {
         let support_n = self.support_n(y);
-        let stick_n = if mode.contact == Contact::Stuck { self.stick_n(support_n) } else { 0.0 };
+        let stuck = mode.contact == Contact::Stuck;
+        let stick_n = if stuck { self.stick_n(support_n) } else { 0.0 };
         let f = Plant::rigid_flow(self.law, mode.contact, self.plant.h_start_m - y[BP], y[BVU] - y[BVL], stick_n);
-        let acc_upper = -f.contact_n * self.inv_m1;
-        let acc_lower =
-            if mode.contact == Contact::Stuck { acc_upper } else { (f.contact_n - support_n) * self.inv_m2 };
+        (dy[BVU], dy[BVL]) = two_bodies(self.plant.inv_m, 0.0, f.contact_n, support_n, stuck);
         dy[BU] = y[BVU];
-        dy[BVU] = acc_upper;
         dy[BL] = y[BVL];
-        dy[BVL] = acc_lower;
         dy[BP] = f.p_rate_mps;
-        dy[BWP] = f.frictionless_n * f.p_rate_mps;
-        dy[BWF] = (f.contact_n - f.frictionless_n) * f.p_rate_mps;
+        (dy[BWP], dy[BWF]) = f.work_rates();
         dy[BWD] = self.c_ns_per_m * y[BVL] * y[BVL];
     }
 

@@ -143,8 +143,8 @@ impl Hybrid<N> for Plant {
         }
         dy[P] = e.p_rate_mps;
         dy[Z] = if self.highpass_tau_s.is_finite() { (e.sensor_raw_n - y[Z]) / self.highpass_tau_s } else { 0.0 };
-        dy[WP] = e.frictionless_n * e.p_rate_mps;
-        dy[WF] = (e.contact_n - e.frictionless_n) * e.p_rate_mps;
+        let flow = Flow { contact_n: e.contact_n, frictionless_n: e.frictionless_n, p_rate_mps: e.p_rate_mps };
+        (dy[WP], dy[WF]) = flow.work_rates();
         dy[WD] = damped;
     }
 

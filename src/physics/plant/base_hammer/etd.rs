@@ -160,7 +160,7 @@ impl BaseHammer<'_> {
         rtol: f64,
     ) -> Option<([f64; NB], [f64; NB], f64)> {
         let etd = self.etd.as_ref()?;
-        let inv_m2 = self.inv_m2;
+        let inv_m2 = self.plant.inv_m.1;
         if h != etd.grid.span_s() {
             return None;
         }
