@@ -312,37 +312,6 @@ mod tests {
     }
 
     fn sample() -> BlowEstimate {
-        BlowEstimate {
-            judgement: None,
-            blow: 1,
-            t_contact_s: 0.5,
-            v_impact_mps: 3.9,
-            kinetic_in_j: None,
-            plastic_j: None,
-            friction_j: None,
-            damped_j: None,
-            elastic_j: None,
-            efficiency: None,
-            final_load_n: 0.0,
-            h_end_m: None,
-            class: crate::estimate::BlowClass::Incomplete,
-            alert: None,
-            t_end_s: 0.6,
-            peak_load_n: 0.0,
-            residual: None,
-            sensor_check: None,
-            method: None,
-            gap_s: 0.01,
-            h_start_m: None,
-            height_source: crate::estimate::HeightSource::Unknown,
-            implausible: None,
-            flow_stress_scale: None,
-            model_residual: None,
-            model_residual_by_phase: None,
-            scale_by_half: None,
-            at_bound: Default::default(),
-            height_check: None,
-            billet: Default::default(),
-        }
+        BlowEstimate { gap_s: 0.01, ..BlowEstimate::incomplete(1, 0.5, 3.9, 0.6) }
     }
 }

@@ -625,36 +625,12 @@ struct Placed {
 fn started(n: u32, blow: &Blow, contact: (f64, f64), gap_s: f64, placed: &Placed) -> BlowEstimate {
     let (t_contact_s, v_impact_mps) = contact;
     BlowEstimate {
-        judgement: None,
-        blow: n,
-        t_contact_s,
-        v_impact_mps,
-        kinetic_in_j: None,
-        plastic_j: None,
-        friction_j: None,
-        damped_j: None,
-        elastic_j: None,
-        efficiency: None,
-        final_load_n: 0.0,
-        h_end_m: None,
-        class: BlowClass::Incomplete,
-        alert: None,
-        t_end_s: blow.samples[blow.i_end].t_s,
-        peak_load_n: 0.0,
-        residual: None,
-        sensor_check: None,
-        method: None,
         gap_s,
         h_start_m: placed.h_start_m,
         height_source: placed.height_source,
         height_check: placed.height_check,
         billet: placed.billet,
-        implausible: None,
-        flow_stress_scale: None,
-        scale_by_half: None,
-        model_residual: None,
-        model_residual_by_phase: None,
-        at_bound: Default::default(),
+        ..BlowEstimate::incomplete(n, t_contact_s, v_impact_mps, blow.samples[blow.i_end].t_s)
     }
 }
 

@@ -239,6 +239,43 @@ fn reason_text<S: serde::Serializer>(i: &Option<Implausible>, s: S) -> Result<S:
 }
 
 impl BlowEstimate {
+    /// Blow `blow`, in contact from `t_contact_s` to `t_end_s` at `v_impact_mps`, with
+    /// nothing estimated yet: `Incomplete`, every energy and height unknown, no checks.
+    pub fn incomplete(blow: u32, t_contact_s: f64, v_impact_mps: f64, t_end_s: f64) -> BlowEstimate {
+        BlowEstimate {
+            judgement: None,
+            blow,
+            t_contact_s,
+            v_impact_mps,
+            kinetic_in_j: None,
+            plastic_j: None,
+            friction_j: None,
+            damped_j: None,
+            elastic_j: None,
+            efficiency: None,
+            final_load_n: 0.0,
+            h_end_m: None,
+            class: BlowClass::Incomplete,
+            alert: None,
+            t_end_s,
+            peak_load_n: 0.0,
+            residual: None,
+            sensor_check: None,
+            method: None,
+            gap_s: 0.0,
+            h_start_m: None,
+            height_source: HeightSource::Unknown,
+            height_check: None,
+            billet: BilletTag::default(),
+            implausible: None,
+            flow_stress_scale: None,
+            scale_by_half: None,
+            model_residual: None,
+            model_residual_by_phase: None,
+            at_bound: Default::default(),
+        }
+    }
+
     /// Whether the blow was estimated whole (not `incomplete`).
     pub fn is_complete(&self) -> bool {
         self.class != BlowClass::Incomplete
