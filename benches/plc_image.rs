@@ -13,10 +13,6 @@ use tokio_modbus::Request;
 
 fn blow() -> BlowEstimate {
     BlowEstimate {
-        judgement: None,
-        blow: 7,
-        t_contact_s: 1.0,
-        v_impact_mps: 5.3,
         kinetic_in_j: Some(10_548.0),
         plastic_j: Some(7_669.0),
         friction_j: Some(900.0),
@@ -26,23 +22,11 @@ fn blow() -> BlowEstimate {
         final_load_n: 1.0e6,
         h_end_m: Some(0.027),
         class: BlowClass::Intermediate,
-        alert: None,
-        t_end_s: 1.02,
         peak_load_n: 2.2e6,
         residual: Some(0.0),
         sensor_check: Some(0.01),
-        method: None,
-        gap_s: 0.0,
         h_start_m: Some(0.03),
-        height_source: forgemon::estimate::HeightSource::Unknown,
-        implausible: None,
-        flow_stress_scale: None,
-        scale_by_half: None,
-        model_residual: None,
-        model_residual_by_phase: None,
-        at_bound: Default::default(),
-        height_check: None,
-        billet: Default::default(),
+        ..BlowEstimate::incomplete(7, 1.0, 5.3, 1.02)
     }
 }
 

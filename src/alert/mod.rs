@@ -398,36 +398,17 @@ mod tests {
     fn blow(n: u32, efficiency: f64, residual: f64) -> BlowEstimate {
         let cfg = crate::estimate::EstimatorConfig::for_kind(crate::physics::MachineKind::Hammer);
         BlowEstimate {
-            judgement: None,
-            blow: n,
-            t_contact_s: n as f64,
-            v_impact_mps: 4.0,
             kinetic_in_j: Some(6000.0),
             plastic_j: Some(6000.0 * efficiency),
-            friction_j: None,
             damped_j: Some(100.0),
             elastic_j: Some(6000.0 * (1.0 - efficiency) - 100.0),
             efficiency: Some(efficiency),
             final_load_n: 1e6,
-            h_end_m: None,
             class: cfg.classify(efficiency),
-            alert: None,
-            t_end_s: n as f64 + 0.01,
             peak_load_n: 1e6,
             residual: Some(residual),
             sensor_check: Some(0.0),
-            method: None,
-            gap_s: 0.0,
-            h_start_m: None,
-            height_source: crate::estimate::HeightSource::Unknown,
-            implausible: None,
-            flow_stress_scale: None,
-            scale_by_half: None,
-            model_residual: None,
-            model_residual_by_phase: None,
-            at_bound: Default::default(),
-            height_check: None,
-            billet: Default::default(),
+            ..BlowEstimate::incomplete(n, n as f64, 4.0, n as f64 + 0.01)
         }
     }
 

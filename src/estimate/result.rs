@@ -362,10 +362,6 @@ pub(crate) mod examples {
     /// An intermediate blow whose figures each round differently in the PLC's units.
     pub(crate) fn intermediate() -> BlowEstimate {
         BlowEstimate {
-            judgement: None,
-            blow: 7,
-            t_contact_s: 1.0,
-            v_impact_mps: 5.2996,
             kinetic_in_j: Some(10_280.4),
             plastic_j: Some(7_195.6),
             friction_j: Some(900.0),
@@ -375,23 +371,10 @@ pub(crate) mod examples {
             final_load_n: 1.0e6,
             h_end_m: Some(0.040_123),
             class: BlowClass::Intermediate,
-            alert: None,
-            t_end_s: 1.02,
             peak_load_n: 1_234_567.0,
             residual: Some(0.0),
-            sensor_check: None,
-            method: None,
-            gap_s: 0.0,
-            h_start_m: None,
-            height_source: HeightSource::Unknown,
-            height_check: None,
-            implausible: None,
-            flow_stress_scale: None,
-            scale_by_half: None,
-            model_residual: None,
-            model_residual_by_phase: None,
             at_bound: AtBound::new(),
-            billet: Default::default(),
+            ..BlowEstimate::incomplete(7, 1.0, 5.2996, 1.02)
         }
     }
 

@@ -58,36 +58,13 @@ mod tests {
 
     fn blow(n: u32, billet: u32) -> BlowEstimate {
         BlowEstimate {
-            judgement: None,
-            blow: n,
-            t_contact_s: f64::from(n),
-            v_impact_mps: 5.3,
             kinetic_in_j: Some(10_000.0),
             plastic_j: Some(8_000.0),
-            friction_j: None,
-            damped_j: None,
-            elastic_j: None,
             efficiency: Some(0.8),
-            final_load_n: 0.0,
-            h_end_m: None,
             class: BlowClass::Soft,
-            alert: None,
-            t_end_s: f64::from(n) + 0.02,
             peak_load_n: 1e6,
-            residual: None,
-            sensor_check: None,
-            method: None,
-            gap_s: 0.0,
-            h_start_m: None,
-            height_source: crate::estimate::HeightSource::Unknown,
-            implausible: None,
-            flow_stress_scale: None,
-            model_residual: None,
-            model_residual_by_phase: None,
-            scale_by_half: None,
-            at_bound: Default::default(),
-            height_check: None,
             billet: BilletTag { billet, billet_blow: n, billet_check: None, h_start_off_sheet_m: None },
+            ..BlowEstimate::incomplete(n, f64::from(n), 5.3, f64::from(n) + 0.02)
         }
     }
 
