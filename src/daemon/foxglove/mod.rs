@@ -30,7 +30,6 @@ use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 use tokio_tungstenite::tungstenite::{Bytes, Message};
 
 use super::faces::{Face, FaceContext, boxed};
-use crate::record::RecordWriter;
 use crate::record::tap::Tap;
 use futures_util::future::BoxFuture;
 
@@ -64,23 +63,6 @@ pub fn face<'a>(ctx: &'a FaceContext<'a>) -> BoxFuture<'a, anyhow::Result<Option
 }
 
 impl Face for FoxgloveServer {}
-
-/// Listen on `addr` and feed the clients from `writer`'s tap, with the default outbox bound
-/// ([`CLIENT_QUEUE_BYTES`]).
-pub async fn start(addr: SocketAddr, writer: &mut RecordWriter) -> anyhow::Result<FoxgloveServer> {
-    start_with(addr, writer, CLIENT_QUEUE_BYTES).await
-}
-
-/// [`start`] with each client's outbox bound to `queue_bytes` of message data.
-pub async fn start_with(
-    addr: SocketAddr,
-    writer: &mut RecordWriter,
-    queue_bytes: usize,
-) -> anyhow::Result<FoxgloveServer> {
-    let (server, tap) = listen(addr, queue_bytes).await?;
-    writer.set_tap(tap);
-    Ok(server)
-}
 
 /// The server listening on `addr`, and the tap that feeds its clients.
 async fn listen(addr: SocketAddr, queue_bytes: usize) -> anyhow::Result<(FoxgloveServer, Tap)> {
