@@ -80,6 +80,8 @@ pub struct Session {
     /// A new billet announced for a device time the samples have not reached yet.
     pending_billet: Option<i64>,
     writer: Option<RecordWriter>,
+    /// The recording's state when it was finished (`recording_health` after `finish`).
+    finished_health: Option<crate::record::RecordingHealth>,
     stamp: Stamp,
     record_errors: Vec<(&'static str, RecordError)>,
 }
@@ -94,6 +96,7 @@ impl Session {
             events: Vec::new(),
             pending_billet: None,
             writer,
+            finished_health: None,
             stamp,
             record_errors: Vec::new(),
         }
@@ -167,6 +170,7 @@ impl Session {
         self.feeder.pipeline_mut().end_of_stream(&mut self.events);
         self.feeder.pipeline_mut().close_billet(&mut self.events);
         self.drain(log_ns, out);
+        self.finished_health = self.recording_health();
         self.writer.take().map_or(Ok(Vec::new()), RecordWriter::finish)
     }
 
@@ -195,6 +199,17 @@ impl Session {
     /// The file being recorded to.
     pub fn recording_path(&self) -> Option<std::path::PathBuf> {
         self.writer.as_ref().map(RecordWriter::current_path)
+    }
+
+    /// The recording's state (writing or suspended, space left, messages dropped), as it
+    /// was at the end once finished; `None` when nothing is recorded.
+    pub fn recording_health(&self) -> Option<crate::record::RecordingHealth> {
+        self.writer.as_ref().map(RecordWriter::health).or_else(|| self.finished_health.clone())
+    }
+
+    /// An alert the driver raised (not a blow's), recorded on `/alerts`.
+    pub fn alert(&mut self, log_ns: i64, alert: &crate::alert::Alert) {
+        self.record("an alert", |w| w.write_alert(log_ns, alert));
     }
 
     fn start_billet(&mut self, log_ns: i64, out: &mut Vec<Outcome>) {

@@ -210,6 +210,12 @@ async fn serve_demo(fast: bool, sim: SimMachine, parts: ServiceParts, hooks: Hoo
         summary.dropped_events,
         summary.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
     );
+    if summary.record_errors > 0 {
+        println!(
+            "forgemon demo: {} recording writes failed; {} blows were not recorded (the disk was full?)",
+            summary.record_errors, summary.dropped_blows
+        );
+    }
     Ok(())
 }
 

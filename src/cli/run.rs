@@ -173,6 +173,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             incomplete = summary.incomplete_blows,
             alerts = summary.alerts,
             dropped_events = summary.dropped_events,
+            record_errors = summary.record_errors,
+            blows_not_recorded = summary.dropped_blows,
             "stopped"
         );
         Ok::<_, anyhow::Error>(())

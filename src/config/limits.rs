@@ -85,6 +85,17 @@ pub const ROTATE_BYTES: WholeLimits = WholeLimits { min: 1 << 20, max: 1 << 40, 
 /// the age in nanoseconds far inside a u64.
 pub const ROTATE_SECONDS: WholeLimits = WholeLimits { min: 1, max: 366 * 86_400, unit: "s" };
 
+/// `[recording] keep_bytes`, bytes the recording's files may hold before the oldest go:
+/// from 16 MiB (a few rotated files) to 1 PiB.
+pub const KEEP_BYTES: WholeLimits = WholeLimits { min: 16 << 20, max: 1 << 50, unit: "bytes" };
+
+/// `[recording] keep_days`, days a recording file is kept: from an hour to ten years.
+pub const KEEP_DAYS: Limits = Limits { min: 1.0 / 24.0, max: 3660.0, unit: "days" };
+
+/// `[recording] min_free_bytes`, the free space under which a `storage` alert is raised:
+/// from none (no alert until a write fails) to 1 PiB.
+pub const MIN_FREE_BYTES: WholeLimits = WholeLimits { min: 0, max: 1 << 50, unit: "bytes" };
+
 /// Serial speed, baud: the standard rates from 300 up to the 12 Mbaud of fast USB bridges.
 pub const BAUD: WholeLimits = WholeLimits { min: 300, max: 12_000_000, unit: "baud" };
 

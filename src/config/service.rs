@@ -13,8 +13,8 @@ use serde::de::IgnoredAny;
 
 use super::document::Document;
 use super::limits::{
-    ALERT_WINDOW_BLOWS, BILLET_IDLE_S, DEBOUNCE_BLOWS, EFFICIENCY, ENCODER_AT_DIE_M, NEW_BILLET_RISE_M, RESIDUAL_LIMIT,
-    ROTATE_BYTES, ROTATE_SECONDS, SENSOR_LIMIT,
+    ALERT_WINDOW_BLOWS, BILLET_IDLE_S, DEBOUNCE_BLOWS, EFFICIENCY, ENCODER_AT_DIE_M, KEEP_BYTES, KEEP_DAYS,
+    MIN_FREE_BYTES, NEW_BILLET_RISE_M, RESIDUAL_LIMIT, ROTATE_BYTES, ROTATE_SECONDS, SENSOR_LIMIT,
 };
 use super::{ConfigError, source};
 use crate::acquire::ChannelSpec;
@@ -26,6 +26,9 @@ pub const DEFAULT_HTTP_LISTEN: &str = "127.0.0.1:9187";
 /// Default rotation: 512 MiB or one hour, whichever comes first.
 pub const DEFAULT_ROTATE_BYTES: u64 = 512 * 1024 * 1024;
 pub const DEFAULT_ROTATE_SECONDS: u64 = 3600;
+/// Default low-space watermark: 2 GiB, about 45 minutes of a hammer recorded at 100 kHz
+/// (some 70 GB a day): time to free space before the recording is suspended.
+pub const DEFAULT_MIN_FREE_BYTES: u64 = 2 << 30;
 /// Default serial speed.
 pub const DEFAULT_BAUD: u32 = 921_600;
 
@@ -80,6 +83,12 @@ pub struct ServiceConfig {
     pub recording_dir: PathBuf,
     pub rotate_bytes: u64,
     pub rotate_seconds: u64,
+    /// `[recording] keep_bytes`: delete the oldest files while the recording holds more.
+    pub keep_bytes: Option<u64>,
+    /// `[recording] keep_days`: delete files last written longer ago than this.
+    pub keep_days: Option<f64>,
+    /// `[recording] min_free_bytes`: raise a `storage` alert when less is free.
+    pub min_free_bytes: u64,
     pub http_listen: SocketAddr,
     /// `[http] token_file`: the file holding the bearer token every request needs when
     /// `listen` is not loopback (required then; read when the service starts).
@@ -124,6 +133,9 @@ impl ServiceConfig {
             recording_dir,
             rotate_bytes: DEFAULT_ROTATE_BYTES,
             rotate_seconds: DEFAULT_ROTATE_SECONDS,
+            keep_bytes: None,
+            keep_days: None,
+            min_free_bytes: DEFAULT_MIN_FREE_BYTES,
             http_listen: SocketAddr::from(([127, 0, 0, 1], 0)),
             http_token_file: None,
             plc_listen: None,
@@ -171,6 +183,9 @@ struct RawRecording {
     dir: String,
     rotate_bytes: Option<u64>,
     rotate_seconds: Option<u64>,
+    keep_bytes: Option<u64>,
+    keep_days: Option<f64>,
+    min_free_bytes: Option<u64>,
 }
 
 #[derive(Deserialize)]
@@ -254,6 +269,16 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         recording_dir: path(&raw.recording.dir),
         rotate_bytes,
         rotate_seconds,
+        keep_bytes: raw
+            .recording
+            .keep_bytes
+            .map(|b| doc.in_whole_range("recording.keep_bytes", b, &KEEP_BYTES))
+            .transpose()?,
+        keep_days: raw.recording.keep_days.map(|d| doc.in_range("recording.keep_days", d, &KEEP_DAYS)).transpose()?,
+        min_free_bytes: match raw.recording.min_free_bytes {
+            Some(b) => doc.in_whole_range("recording.min_free_bytes", b, &MIN_FREE_BYTES)?,
+            None => DEFAULT_MIN_FREE_BYTES,
+        },
         http_listen,
         http_token_file,
         plc_listen,

@@ -35,7 +35,7 @@ use crate::estimate::billet_book::BilletSummary;
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
 use crate::pipeline::{Pipeline, PipelineConfig};
-use crate::record::{RecordOptions, RecordWriter, Rotation};
+use crate::record::{RecordOptions, RecordWriter, Retention, Rotation};
 pub use crate::session::{
     CONTROL_SOURCE, MACHINE_CONFIG_NAME, NEW_BILLET_STATE, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, new_billet_marker,
 };
@@ -127,6 +127,8 @@ pub struct Summary {
     pub files: Vec<PathBuf>,
     /// Recording writes that failed (logged; the service went on).
     pub record_errors: u64,
+    /// Blow results not recorded (the recording was suspended or a write failed).
+    pub dropped_blows: u64,
 }
 
 /// Wall-clock time in ns since the epoch (the service is the one place that reads it).
@@ -184,7 +186,8 @@ pub async fn serve(
     }
     let pipeline = pipeline_with_recipe(&parts, &mut writer, &status)?;
     let session = Session::new(pipeline, Some(writer), Stamp::Arrival);
-    let service = service::Service::new(session, status, live.clone(), hooks, parts.config_path.clone());
+    let service =
+        service::Service::new(session, status, live.clone(), hooks, parts.config_path.clone(), cfg.min_free_bytes);
     let rx = queue::SourceQueue::new(rx, parts.backpressure);
     tracing::info!(listen = %cfg.http_listen, dir = %cfg.recording_dir.display(), "forgemon service ready");
     let summary = run_loop(service, rx, control_rx, recipe_rx, stop, &shutdown).await?;
@@ -196,7 +199,8 @@ pub async fn serve(
     Ok(summary)
 }
 
-/// The recording directory's writer, with the machine, process and service files recorded.
+/// The recording directory's writer, with the machine, process and service files recorded;
+/// on a disk with no room the recording starts suspended and keeps them for its first file.
 fn open_recording(parts: &ServiceParts) -> anyhow::Result<RecordWriter> {
     let cfg = &parts.config;
     std::fs::create_dir_all(&cfg.recording_dir)
@@ -206,12 +210,20 @@ fn open_recording(parts: &ServiceParts) -> anyhow::Result<RecordWriter> {
     let mut writer =
         RecordWriter::create_with(&cfg.recording_dir, RecordOptions { rotation, ..RecordOptions::default() })
             .with_context(|| format!("{}: cannot record", cfg.recording_dir.display()))?;
+    writer.set_retention(Retention { keep_bytes: cfg.keep_bytes, keep_days: cfg.keep_days });
     let t0 = host_now_ns();
-    writer.write_config(t0, MACHINE_CONFIG_NAME, &parts.machine_text)?;
-    if let Some(t) = &parts.process_text {
-        writer.write_config(t0, "process.toml", t)?;
+    let configs = [
+        (MACHINE_CONFIG_NAME, Some(&parts.machine_text)),
+        ("process.toml", parts.process_text.as_ref()),
+        (SERVICE_CONFIG_NAME, Some(&parts.config_text)),
+    ];
+    for (name, text) in configs {
+        if let Some(text) = text
+            && let Err(e) = writer.write_config(t0, name, text)
+        {
+            tracing::warn!("recording {name}: {e}");
+        }
     }
-    writer.write_config(t0, SERVICE_CONFIG_NAME, &parts.config_text)?;
     Ok(writer)
 }
 

@@ -4,7 +4,10 @@
 //! per event; everything it touches lives here.
 //!
 //! Nothing from outside stops the service: a recording write that fails is logged, counted
-//! (`record_errors` in `/status`, the metrics and the summary) and the service goes on.
+//! (`record_errors` in `/status`, the metrics and the summary) and the service goes on; the
+//! recorder suspends the recording and resumes it once the disk has room (`record::storage`).
+//! The disk is watched every second: a `storage` alert is raised when its free space falls
+//! under `[recording] min_free_bytes`, and again if the recording is suspended.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -12,12 +15,13 @@ use std::sync::Arc;
 use crate::acquire::SourceEvent;
 use crate::estimate::BlowEstimate;
 use crate::estimate::billet_book::BilletSummary;
+use crate::estimate::result::{Alert, AlertKind};
 use crate::record::Gap;
 use crate::session::{Outcome, Session};
 use crate::signal::sample::SampleBatch;
 
 use super::live::{Live, LiveEvent};
-use super::status::SharedStatus;
+use super::status::{SharedStatus, StorageStatus};
 use super::{Control, Hooks, Summary, host_now_ns, reload};
 
 /// The service between its start and its stop.
@@ -30,11 +34,45 @@ pub(super) struct Service {
     hooks: Hooks,
     summary: Summary,
     config_path: PathBuf,
+    /// `[recording] min_free_bytes`.
+    min_free_bytes: u64,
+    /// How bad the disk was at the last check (`StorageLevel`): an alert when it worsens.
+    storage_level: StorageLevel,
+    /// The number of the last blow reported, for alerts that are not a blow's.
+    last_blow: u32,
+}
+
+/// The recording's disk, from good to worst.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum StorageLevel {
+    Ok,
+    /// Free space under `[recording] min_free_bytes`.
+    Low,
+    /// A write failed: the recording is suspended.
+    Suspended,
 }
 
 impl Service {
-    pub fn new(session: Session, status: SharedStatus, live: Live, hooks: Hooks, config_path: PathBuf) -> Self {
-        Service { session, outcomes: Vec::new(), status, live, hooks, summary: Summary::default(), config_path }
+    pub fn new(
+        session: Session,
+        status: SharedStatus,
+        live: Live,
+        hooks: Hooks,
+        config_path: PathBuf,
+        min_free_bytes: u64,
+    ) -> Self {
+        Service {
+            session,
+            outcomes: Vec::new(),
+            status,
+            live,
+            hooks,
+            summary: Summary::default(),
+            config_path,
+            min_free_bytes,
+            storage_level: StorageLevel::Ok,
+            last_blow: 0,
+        }
     }
 
     pub fn on_source_event(&mut self, ev: SourceEvent) {
@@ -128,7 +166,64 @@ impl Service {
     pub fn on_tick(&mut self) {
         let path = self.session.recording_path().map(|p| p.display().to_string()).unwrap_or_default();
         self.status.lock().map(|mut s| s.recording = path).ok();
+        self.check_storage();
         self.publish_status();
+    }
+
+    /// The recording's disk into `/status`, and a `storage` alert each time it gets worse:
+    /// free space under `[recording] min_free_bytes`, then the recording suspended. A disk
+    /// that recovers re-arms the alert.
+    fn check_storage(&mut self) {
+        let Some(health) = self.session.recording_health() else { return };
+        let level = match (health.state, health.bytes_free) {
+            ("suspended", _) => StorageLevel::Suspended,
+            (_, Some(free)) if free < self.min_free_bytes => StorageLevel::Low,
+            _ => StorageLevel::Ok,
+        };
+        if level > self.storage_level {
+            let dir = health.path.as_ref().and_then(|p| p.parent()).map(|d| d.display().to_string());
+            let reason = match level {
+                StorageLevel::Suspended => format!(
+                    "recording suspended, blows are not recorded until the disk has room: {}",
+                    health.reason.as_deref().unwrap_or("a write failed")
+                ),
+                _ => format!(
+                    "{} MB free for the recording{}, under [recording] min_free_bytes = {} MB",
+                    health.bytes_free.unwrap_or(0) / 1_000_000,
+                    dir.map(|d| format!(" in {d}")).unwrap_or_default(),
+                    self.min_free_bytes / 1_000_000
+                ),
+            };
+            let figures = [
+                ("bytes_free", health.bytes_free.map_or(f64::NAN, |b| b as f64)),
+                ("min_free_bytes", self.min_free_bytes as f64),
+                ("dropped_blows", health.dropped_blows as f64),
+            ];
+            let figures = figures.into_iter().map(|(k, v)| (k.to_string(), v)).collect();
+            self.raise(Alert { kind: AlertKind::Storage, blow: self.last_blow, reason, figures });
+        }
+        self.storage_level = level;
+        let storage =
+            StorageStatus { recording: health, min_free_bytes: self.min_free_bytes, low: level != StorageLevel::Ok };
+        self.status.lock().map(|mut s| s.storage = storage).ok();
+    }
+
+    /// An alert of the service's own (not a blow's): logged, recorded, latched in `/status`
+    /// and handed to the faces.
+    fn raise(&mut self, alert: Alert) {
+        let now = host_now_ns();
+        self.summary.alerts += 1;
+        tracing::warn!(kind = alert.kind.as_str(), "{}", alert.reason);
+        self.session.alert(now, &alert);
+        self.counted();
+        self.status
+            .lock()
+            .map(|mut s| {
+                s.alerts += 1;
+                s.latched_alert = Some(alert.clone());
+            })
+            .ok();
+        self.live.publish(LiveEvent::Alert { alert: Arc::new(alert), arrived_ns: now });
     }
 
     /// The status snapshot on the bus.
@@ -145,7 +240,16 @@ impl Service {
         self.serve();
         self.summary.samples = self.session.feeder().samples();
         self.summary.billets = u64::from(self.session.pipeline_mut().billets());
-        self.summary.files = files?;
+        self.summary.dropped_blows = self.session.recording_health().map_or(0, |h| h.dropped_blows);
+        // A recording that cannot be finished (a full disk) is kept as `.part`, which
+        // `inspect` and `replay` read; the run's summary is not lost to it.
+        match files {
+            Ok(files) => self.summary.files = files,
+            Err(e) => {
+                self.summary.record_errors += 1;
+                tracing::error!("the recording could not be finished, its last file stays a .mcap.part: {e}");
+            }
+        }
         Ok(self.summary)
     }
 
@@ -175,6 +279,7 @@ impl Service {
 
     fn on_blow(&mut self, estimate: &BlowEstimate, log_time_ns: i64) {
         self.summary.blows += 1;
+        self.last_blow = estimate.blow;
         self.summary.incomplete_blows += u64::from(!estimate.is_complete());
         tracing::info!(blow = estimate.blow, efficiency = estimate.efficiency, class = estimate.class.as_str(), "blow");
         // From the host receiving the batch that ended the blow to its result.

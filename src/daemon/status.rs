@@ -48,6 +48,18 @@ pub struct SourceState {
     pub clock_offset_s: Option<f64>,
 }
 
+/// The recording's disk, as `/status` shows it (`storage`): the recorder's state, and the
+/// watermark under which a `storage` alert is raised.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct StorageStatus {
+    #[serde(flatten)]
+    pub recording: crate::record::RecordingHealth,
+    /// `[recording] min_free_bytes`.
+    pub min_free_bytes: u64,
+    /// Free space under the watermark, or the recording suspended: the alert's condition.
+    pub low: bool,
+}
+
 /// What `/status` returns.
 #[derive(Debug, Clone, Serialize)]
 pub struct StatusSnapshot {
@@ -96,6 +108,8 @@ pub struct StatusSnapshot {
     /// source carries all three.
     pub merge: MergeStats,
     pub recording: String,
+    /// The recording's state and its disk (filled every second).
+    pub storage: StorageStatus,
     /// What the dashboard shows beyond this (`GET /dashboard/state`), not in `/status`.
     #[serde(skip)]
     pub board: Board,
@@ -128,6 +142,7 @@ impl StatusSnapshot {
             sources: BTreeMap::new(),
             merge: MergeStats::default(),
             recording: String::new(),
+            storage: StorageStatus::default(),
             board: Board::default(),
         }
     }
@@ -268,7 +283,7 @@ enum Value {
 }
 
 /// `/metrics`, in order: name (after `forgemon_`), type, help, value.
-const METRICS: [(&str, &str, &str, Value); 23] = [
+const METRICS: [(&str, &str, &str, Value); 26] = [
     ("samples_total", "counter", "Samples received.", Value::Source(|s| s.samples as f64)),
     ("drops_total", "counter", "Events dropped at a full pipeline channel.", Value::Source(|s| s.drops as f64)),
     (
@@ -282,6 +297,24 @@ const METRICS: [(&str, &str, &str, Value); 23] = [
         "counter",
         "Recording writes that failed.",
         Value::Service(|s| Some(s.record_errors as f64)),
+    ),
+    (
+        "record_dropped_blows_total",
+        "counter",
+        "Blow results not recorded: the recording was suspended or the write failed.",
+        Value::Service(|s| Some(s.storage.recording.dropped_blows as f64)),
+    ),
+    (
+        "recording_suspended",
+        "gauge",
+        "1 while the recording is suspended after a failed write, else 0.",
+        Value::Service(|s| Some(f64::from(u8::from(s.storage.recording.state == "suspended")))),
+    ),
+    (
+        "storage_bytes_free",
+        "gauge",
+        "Bytes free for the recording in its directory.",
+        Value::Service(|s| s.storage.recording.bytes_free.map(|b| b as f64)),
     ),
     ("billets_total", "counter", "Billets started.", Value::Service(|s| Some(s.billets as f64))),
     (

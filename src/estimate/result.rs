@@ -21,6 +21,8 @@ pub enum AlertKind {
     Sensor,
     /// The blow left its recipe's windows or envelope (CONTRACTS §5 `judgement`).
     Nok,
+    /// From the service, not a blow: the recording's disk is low or a write failed.
+    Storage,
 }
 
 impl AlertKind {
@@ -30,6 +32,7 @@ impl AlertKind {
             AlertKind::ModelHealth => "model_health",
             AlertKind::Sensor => "sensor",
             AlertKind::Nok => "nok",
+            AlertKind::Storage => "storage",
         }
     }
 }

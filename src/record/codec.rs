@@ -206,22 +206,8 @@ fn boundary_to_pb(b: &BlowBoundary) -> pb::BlowBoundary {
     }
 }
 
-fn alert_kind_str(kind: AlertKind) -> &'static str {
-    match kind {
-        AlertKind::ElasticBlow => "elastic_blow",
-        AlertKind::ModelHealth => "model_health",
-        AlertKind::Sensor => "sensor",
-        AlertKind::Nok => "nok",
-    }
-}
-
 fn alert_to_pb(a: &Alert) -> pb::Alert {
-    pb::Alert {
-        kind: alert_kind_str(a.kind).to_string(),
-        blow: a.blow,
-        reason: a.reason.clone(),
-        figures: a.figures.clone(),
-    }
+    pb::Alert { kind: a.kind.as_str().to_string(), blow: a.blow, reason: a.reason.clone(), figures: a.figures.clone() }
 }
 
 fn alert_from_pb(a: pb::Alert) -> Result<Alert, DecodeError> {
@@ -230,6 +216,7 @@ fn alert_from_pb(a: pb::Alert) -> Result<Alert, DecodeError> {
         "model_health" => AlertKind::ModelHealth,
         "sensor" => AlertKind::Sensor,
         "nok" => AlertKind::Nok,
+        "storage" => AlertKind::Storage,
         _ => return Err(DecodeError::UnknownAlertKind { kind: a.kind }),
     };
     Ok(Alert { kind, blow: a.blow, reason: a.reason, figures: a.figures })

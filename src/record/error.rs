@@ -87,4 +87,8 @@ pub enum RecordError {
     BadBatch { path: PathBuf, source_name: String, reason: DecodeError },
     #[error("{path}: recording target must be a .mcap file or a directory", path = path.display())]
     BadTarget { path: PathBuf },
+    /// The recording is suspended after a failed write (`storage.rs`); the message was
+    /// dropped and counted.
+    #[error("{dir}: recording suspended, message dropped ({reason})", dir = dir.display())]
+    Suspended { dir: PathBuf, reason: String },
 }

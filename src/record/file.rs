@@ -69,12 +69,36 @@ pub(super) struct OpenFile {
     max_log_time: u64,
     pub(super) last_sync_log_time: u64,
     messages: u64,
+    /// Messages other than the configuration files every file starts with.
+    data_messages: u64,
+    /// Blow results among them.
+    results: u64,
     pub(super) last_sync: Option<SyncPoint>,
+    /// `(data_messages, results)` at the last sync: what a given-up file keeps.
+    synced: (u64, u64),
+}
+
+/// What giving a file up (`OpenFile::abandon`) kept and lost.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Abandoned {
+    /// The `.part` kept, cut at its last sync; `None` when it held no data then (removed).
+    pub(super) kept: Option<PathBuf>,
+    /// Messages (configuration files aside) and blow results written after the last sync.
+    pub(super) lost_messages: u64,
+    pub(super) lost_results: u64,
 }
 
 impl OpenFile {
+    /// The `.part` file of `final_path`, created with its header on disk; on failure nothing
+    /// is left behind (a full disk fails here, and must not leave an empty file per try).
     pub(super) fn create(final_path: PathBuf, options: &RecordOptions) -> Result<OpenFile, RecordError> {
         let part_path = part_path_of(&final_path);
+        OpenFile::create_at(final_path, part_path.clone(), options).inspect_err(|_| {
+            let _ = std::fs::remove_file(&part_path);
+        })
+    }
+
+    fn create_at(final_path: PathBuf, part_path: PathBuf, options: &RecordOptions) -> Result<OpenFile, RecordError> {
         let io_err = |action: &'static str| {
             let path = part_path.clone();
             move |source| RecordError::Io { path, action, source }
@@ -111,7 +135,10 @@ impl OpenFile {
             max_log_time: 0,
             last_sync_log_time: 0,
             messages: 0,
+            data_messages: 0,
+            results: 0,
             last_sync: None,
+            synced: (0, 0),
         };
         // Magic and header on disk from the start: a crash before the first sync leaves
         // an empty recording, not an empty file.
@@ -184,6 +211,10 @@ impl OpenFile {
         publish_time: u64,
         data: &[u8],
     ) -> Result<(), RecordError> {
+        // Counted before the write: a message whose write fails is among the unsynced ones
+        // `abandon` reports lost.
+        self.data_messages += u64::from(kind != MessageKind::Config);
+        self.results += u64::from(kind == MessageKind::Result);
         let (channel_id, sequence) = self.channel_id(kind, source)?;
         let header = MessageHeader { channel_id, sequence, log_time, publish_time };
         self.mcap.write_to_known_channel(&header, data).map_err(|e| self.mcap_err(e))?;
@@ -215,6 +246,7 @@ impl OpenFile {
             file_messages: self.messages,
             log_time_ns: log_time,
         });
+        self.synced = (self.data_messages, self.results);
         Ok(())
     }
 
@@ -239,6 +271,30 @@ impl OpenFile {
             sync_dir(dir);
         }
         Ok(final_path)
+    }
+}
+
+impl OpenFile {
+    /// Give the file up after a failed write. It is cut back to its last sync, which ends
+    /// at a whole chunk, so what it keeps is exactly what was synced and what it loses is
+    /// counted. It stays a `.part` (read like a crash's) when it keeps data, and is removed
+    /// when it does not.
+    pub(super) fn abandon(self) -> Abandoned {
+        let OpenFile { mcap, part_path, sync_handle, data_messages, results, last_sync, synced, .. } = self;
+        // The `mcap` writer tries to finish the file when dropped; after a failed write it
+        // refuses, and whatever it adds is cut off below.
+        drop(mcap);
+        let lost = Abandoned { kept: None, lost_messages: data_messages - synced.0, lost_results: results - synced.1 };
+        let cut = last_sync.map(|s| s.file_bytes).filter(|_| synced.0 > 0);
+        match cut.map(|len| sync_handle.set_len(len).and_then(|()| sync_handle.sync_data())) {
+            Some(Ok(())) => Abandoned { kept: Some(part_path), ..lost },
+            // Uncut, the reader still finds the synced chunks and skips a torn tail.
+            Some(Err(_)) => Abandoned { kept: Some(part_path), ..lost },
+            None => {
+                let _ = std::fs::remove_file(&part_path);
+                lost
+            }
+        }
     }
 }
 

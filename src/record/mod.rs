@@ -13,6 +13,8 @@
 //! - [`batch`]: joining/cutting sample batches to 10–100 ms (sans-IO).
 //! - [`writer`]: chunked zstd MCAP, `.part` then rename, sync every second of log time,
 //!   rotation.
+//! - [`storage`]: the disk under a recording: space left, retention, and the outage a
+//!   failed write starts (the recording is suspended, never ended).
 //! - [`tap`]: each message as the writer encoded it, handed to a live consumer too.
 //! - [`reader`]: indexed reading, and recovery of files cut off by a crash or damaged:
 //!   every chunk's CRC is checked (`chunk`), a corrupt chunk is skipped and named in the
@@ -36,6 +38,7 @@ pub mod reader;
 pub mod report;
 pub mod rotation;
 pub mod schema;
+pub mod storage;
 mod summary;
 pub mod tap;
 pub mod writer;
@@ -46,5 +49,6 @@ pub use message::{BlowBoundary, ConfigFile, Gap, Payload, Recorded, Status};
 pub use reader::{RecordReader, Recording, read_recording};
 pub use report::{CorruptChunk, ReadReport};
 pub use schema::MessageKind;
+pub use storage::{RecordingHealth, Retention};
 pub use tap::{Tap, TappedMessage};
 pub use writer::{ChunkCompression, RecordOptions, RecordWriter, Rotation, SyncPoint};

@@ -102,6 +102,10 @@ impl Naming {
         Ok(highest.saturating_add(1))
     }
 
+    pub(super) fn stem(&self) -> &str {
+        &self.stem
+    }
+
     pub(super) fn next_path(&mut self) -> Result<PathBuf, RecordError> {
         if !self.numbered {
             return Ok(self.dir.join(format!("{}.{FINISHED_EXTENSION}", self.stem)));

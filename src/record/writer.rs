@@ -8,6 +8,11 @@
 //!   second. [`RecordWriter::flush_and_sync`] does the same on demand.
 //! - Files rotate by size and/or log-time duration; each one is finished, renamed and
 //!   carries every configuration file written so far.
+//! - A failed write suspends the recording rather than ending it (`storage.rs`): the file
+//!   is given up (kept as `.part` when it holds data, removed when not), messages are
+//!   dropped and counted, and a new file is opened once a retry finds room. No retry
+//!   leaves an empty file.
+//! - A retention policy ([`Retention`]) deletes the oldest whole files as files finish.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -23,6 +28,7 @@ use super::message::{BlowBoundary, ConfigFile, Gap, Payload, Status};
 use super::rotation::Naming;
 pub use super::rotation::Rotation;
 use super::schema::{MessageKind, pb, samples_topic};
+use super::storage::{Outage, RecordingHealth, Retention, bytes_free, enforce, is_out_of_room};
 use super::tap::{Tap, TappedMessage};
 
 pub use super::options::{
@@ -47,6 +53,11 @@ pub struct RecordWriter {
     buf: Vec<u8>,
     /// A live consumer of every message encoded (`tap.rs`), if one was set.
     tap: Option<Tap>,
+    /// Set while the recording is suspended after a failed write.
+    outage: Option<Outage>,
+    retention: Retention,
+    /// Counters `health` reports.
+    health: RecordingHealth,
 }
 
 impl RecordWriter {
@@ -65,9 +76,34 @@ impl RecordWriter {
             configs: BTreeMap::new(),
             buf: Vec::new(),
             tap: None,
+            outage: None,
+            retention: Retention::default(),
+            health: RecordingHealth::default(),
         };
-        writer.open_next()?;
+        // A disk already full: the recording starts suspended, and begins once there is room.
+        match writer.open_next() {
+            Err(e) if is_out_of_room(&e) => writer.suspend(0, e.to_string()),
+            other => other?,
+        }
         Ok(writer)
+    }
+
+    /// Apply `retention` from now on: at once, and each time a file finishes or a retry
+    /// looks for room.
+    pub fn set_retention(&mut self, retention: Retention) {
+        self.retention = retention;
+        self.enforce_retention();
+    }
+
+    /// The recording's state: writing or suspended, the space left, what was dropped.
+    pub fn health(&self) -> RecordingHealth {
+        RecordingHealth {
+            state: if self.outage.is_some() { "suspended" } else { "recording" },
+            path: self.current.as_ref().map(|f| f.part_path.clone()),
+            reason: self.outage.as_ref().map(|o| o.reason.clone()),
+            bytes_free: bytes_free(&self.naming.dir),
+            ..self.health.clone()
+        }
     }
 
     /// Record a batch of samples on `/samples/<source>`. Log time is its `host_time_ns`,
@@ -198,7 +234,8 @@ impl RecordWriter {
         })
     }
 
-    /// Write `self.buf` as a message of `kind`, rotating first and syncing after as due.
+    /// Write `self.buf` as a message of `kind`: handed to the tap, then to the file unless
+    /// the recording is suspended and no retry is due. A failed write suspends it.
     fn write_encoded(
         &mut self,
         kind: MessageKind,
@@ -206,21 +243,51 @@ impl RecordWriter {
         log_time: u64,
         publish_time: u64,
     ) -> Result<(), RecordError> {
-        if let Some(tap) = self.tap.as_mut() {
-            let samples;
-            let topic = match (kind.fixed_topic(), source) {
-                (Some(t), _) => t,
-                (None, s) => {
-                    samples = samples_topic(s.unwrap_or_default());
-                    samples.as_str()
-                }
-            };
-            let data = &self.buf;
-            tap(&TappedMessage { topic, kind, data, log_time_ns: log_time, publish_time_ns: publish_time });
+        self.tap_message(kind, source, log_time, publish_time);
+        if self.outage.is_some() && !self.try_resume(log_time) {
+            self.count_dropped(kind);
+            let reason = self.outage.as_ref().map(|o| o.reason.clone()).unwrap_or_default();
+            return Err(RecordError::Suspended { dir: self.naming.dir.clone(), reason });
         }
+        let mut in_file = false;
+        self.write_to_file(kind, source, log_time, publish_time, &mut in_file).inspect_err(|e| {
+            // A message that reached the file is among those `abandon` counts lost.
+            if !in_file {
+                self.count_dropped(kind);
+            }
+            self.suspend(log_time, e.to_string());
+        })
+    }
+
+    fn tap_message(&mut self, kind: MessageKind, source: Option<&str>, log_time: u64, publish_time: u64) {
+        let Some(tap) = self.tap.as_mut() else { return };
+        let samples;
+        let topic = match (kind.fixed_topic(), source) {
+            (Some(t), _) => t,
+            (None, s) => {
+                samples = samples_topic(s.unwrap_or_default());
+                samples.as_str()
+            }
+        };
+        tap(&TappedMessage { topic, kind, data: &self.buf, log_time_ns: log_time, publish_time_ns: publish_time });
+    }
+
+    /// `self.buf` into the current file, rotating first and syncing after as due;
+    /// `in_file` turns true once the message is handed to the file.
+    fn write_to_file(
+        &mut self,
+        kind: MessageKind,
+        source: Option<&str>,
+        log_time: u64,
+        publish_time: u64,
+        in_file: &mut bool,
+    ) -> Result<(), RecordError> {
         if self.current.as_ref().is_some_and(|f| f.rotation_due(&self.options.rotation, log_time)) {
+            // Synced first, so that a finish that fails (a full disk) loses nothing.
+            self.flush_and_sync()?;
             if let Some(file) = self.current.take() {
                 self.finished.push(file.finish()?);
+                self.enforce_retention();
             }
             self.open_next()?;
             self.write_configs(log_time)?;
@@ -232,11 +299,69 @@ impl RecordWriter {
                 self.current.as_mut().ok_or_else(|| RecordError::BadTarget { path: self.naming.dir.clone() })?
             }
         };
+        *in_file = true;
         file.write(kind, source, log_time, publish_time, &self.buf)?;
         if log_time >= file.last_sync_log_time.saturating_add(self.options.sync_interval_ns) {
             file.flush_and_sync()?;
         }
         Ok(())
+    }
+
+    /// A write failed: give the file up (counting what it loses) and drop messages until
+    /// a retry finds room.
+    fn suspend(&mut self, log_time: u64, reason: String) {
+        self.abandon_current();
+        self.health.suspensions += 1;
+        self.outage = Some(Outage::new(log_time, reason));
+    }
+
+    /// A retry, if one is due: room for a chunk, then a new file with the configuration
+    /// files. Whether the recording is back.
+    fn try_resume(&mut self, log_time: u64) -> bool {
+        let Some(outage) = self.outage.as_mut() else { return true };
+        if !outage.retry_due(log_time) {
+            return false;
+        }
+        self.enforce_retention();
+        let room = 2 * self.options.chunk_size_bytes;
+        let free = bytes_free(&self.naming.dir);
+        let opened = if free.is_some_and(|b| b < room) {
+            Err(format!("{} bytes free in {}, waiting for {room}", free.unwrap_or(0), self.naming.dir.display()))
+        } else {
+            self.open_next().and_then(|()| self.write_configs(log_time)).map_err(|e| e.to_string())
+        };
+        match opened {
+            Ok(()) => {
+                self.outage = None;
+                true
+            }
+            Err(reason) => {
+                self.abandon_current();
+                if let Some(o) = self.outage.as_mut() {
+                    o.retry_failed(log_time, reason);
+                }
+                false
+            }
+        }
+    }
+
+    fn abandon_current(&mut self) {
+        if let Some(file) = self.current.take() {
+            let gone = file.abandon();
+            self.health.dropped_messages += gone.lost_messages;
+            self.health.dropped_blows += gone.lost_results;
+        }
+    }
+
+    fn count_dropped(&mut self, kind: MessageKind) {
+        self.health.dropped_messages += 1;
+        self.health.dropped_blows += u64::from(kind == MessageKind::Result);
+    }
+
+    fn enforce_retention(&mut self) {
+        let current = self.current.as_ref().map(|f| f.part_path.as_path());
+        self.health.deleted_files +=
+            enforce(&self.naming.dir, self.naming.stem(), current, self.retention, std::time::SystemTime::now());
     }
 
     /// Rewrite every stored configuration file into the (new) current file. Uses its own
