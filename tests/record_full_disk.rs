@@ -291,3 +291,40 @@ fn the_fast_demo_on_a_disk_that_stays_full_prints_its_summary_and_keeps_what_it_
     assert_eq!(blows, 24, "{text}");
     assert_eq!(blows_recorded(&out.path().join("rec")) + dropped, blows, "{text}");
 }
+
+#[test]
+fn export_and_inspect_of_a_directory_name_and_skip_empty_and_unreadable_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Two good recordings around an empty file (what a full disk used to leave) and one
+    // that is not MCAP at all.
+    for (name, blows) in [("forgemon-00001.mcap", 3u32), ("forgemon-00004.mcap", 2)] {
+        let mut w = RecordWriter::create(d.join(name), Rotation::NEVER).unwrap();
+        for b in 1..=blows {
+            let t = f64::from(b);
+            w.write_result(1_000_000_000 * i64::from(b), &BlowEstimate::incomplete(b, t, 4.0, t + 0.05)).unwrap();
+        }
+        w.finish().unwrap();
+    }
+    std::fs::write(d.join("forgemon-00002.mcap.part"), b"").unwrap();
+    std::fs::write(d.join("forgemon-00003.mcap"), b"not a recording at all").unwrap();
+    let csv = d.join("out.csv");
+    let out = Command::new(BIN).args(["export", "--csv"]).arg(&csv).arg(d).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    for bad in ["forgemon-00002.mcap.part", "forgemon-00003.mcap"] {
+        assert!(err.lines().any(|l| l.contains("skipped") && l.contains(bad)), "{bad} not named: {err}");
+    }
+    let rows = std::fs::read_to_string(&csv).unwrap().lines().count() - 1;
+    assert_eq!(rows, 5, "{err}");
+    let out = Command::new(BIN).args(["inspect", "--json"]).arg(d).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    let inspected: Vec<serde_json::Value> =
+        String::from_utf8_lossy(&out.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let names: Vec<&str> = inspected.iter().filter_map(|j| j["file"].as_str()).collect();
+    assert!(names.len() == 2 && names[0].ends_with("00001.mcap") && names[1].ends_with("00004.mcap"), "{names:?}");
+    for bad in ["forgemon-00002.mcap.part", "forgemon-00003.mcap"] {
+        assert!(err.lines().any(|l| l.contains("skipped") && l.contains(bad)), "{bad} not named: {err}");
+    }
+}

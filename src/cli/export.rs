@@ -127,16 +127,32 @@ fn rfc3339_ns(ns: i64) -> String {
 pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     let mut files = Vec::new();
     for input in &args.inputs {
-        files.extend(recordings(input)?);
+        files.extend(super::inspect::recordings(input)?);
     }
     let mut rows = Vec::new();
     let mut corrupt = false;
     for file in &files {
-        let mut reader = RecordReader::open(file).with_context(|| format!("{}: cannot export", file.display()))?;
+        // A file that cannot be read (empty, not MCAP, cut short) is named and skipped.
+        let mut reader = match RecordReader::open(file) {
+            Ok(r) => r,
+            Err(e) => {
+                eprintln!("forgemon: skipped {}: {e}", file.display());
+                corrupt = true;
+                continue;
+            }
+        };
         for m in reader.by_ref() {
-            let m = m.with_context(|| format!("{}: cannot export", file.display()))?;
-            if let Payload::Result(r) = &m.payload {
-                rows.push(ExportRow::new(file, m.log_time_ns, r));
+            match m {
+                Ok(m) => {
+                    if let Payload::Result(r) = &m.payload {
+                        rows.push(ExportRow::new(file, m.log_time_ns, r));
+                    }
+                }
+                Err(e) => {
+                    eprintln!("forgemon: {}: the rest of the file skipped: {e}", file.display());
+                    corrupt = true;
+                    break;
+                }
             }
         }
         corrupt |= input_status(reader.report()) != ExitCode::SUCCESS;
@@ -148,25 +164,6 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     }
     eprintln!("forgemon: exported {} blows from {} recordings", rows.len(), files.len());
     Ok(if corrupt { ExitCode::from(EXIT_CORRUPT_INPUT) } else { ExitCode::SUCCESS })
-}
-
-/// The recordings an input names: itself, or a directory's `*.mcap` and `*.mcap.part`
-/// files in name order.
-fn recordings(input: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    if !input.is_dir() {
-        return Ok(vec![input.to_path_buf()]);
-    }
-    let mut files: Vec<PathBuf> = std::fs::read_dir(input)
-        .with_context(|| format!("{}: cannot list", input.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file())
-        .filter(|p| p.to_str().is_some_and(|s| s.ends_with(".mcap") || s.ends_with(".mcap.part")))
-        .collect();
-    files.sort();
-    if files.is_empty() {
-        bail!("{}: a directory with no recordings (*.mcap, *.mcap.part)", input.display());
-    }
-    Ok(files)
 }
 
 fn write_csv(out: &Path, rows: &[ExportRow]) -> anyhow::Result<()> {

@@ -1,14 +1,17 @@
-//! `forgemon inspect FILE.mcap`: what a recording holds, in forging terms: sources with
+//! `forgemon inspect FILE.mcap|DIR`: what a recording holds, in forging terms: sources with
 //! their rates and durations, blows, results by class, billets with their statistics (blows,
 //! mean and spread of efficiency and plastic energy, the first hard blow), alerts, gaps and
 //! drops, the stored configuration, and whether the file was finished or had to be recovered. Corrupt chunks
-//! are named on stderr and the exit status is 3 ([`input_status`], shared with `replay`).
+//! are named on stderr and the exit status is 3 ([`input_status`], shared with `replay`). A
+//! directory's recordings are inspected one after the other, in name order; a file that
+//! cannot be read (empty, not MCAP) is named and skipped, and the status is 3.
 
 use std::collections::BTreeMap;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use anyhow::{Context as _, bail};
 use clap::Args;
 use serde_json::json;
 
@@ -32,7 +35,7 @@ pub(crate) fn input_status(report: &ReadReport) -> ExitCode {
 
 #[derive(Debug, Args)]
 pub struct InspectArgs {
-    /// The recording (.mcap or .mcap.part).
+    /// The recording (.mcap or .mcap.part), or a directory of them.
     pub file: PathBuf,
     /// Print one JSON object instead of text.
     #[arg(long)]
@@ -135,20 +138,59 @@ struct SourceSummary {
     channels: String,
 }
 
+/// The recordings an input names: itself, or a directory's `*.mcap` and `*.mcap.part`
+/// files in name order.
+pub fn recordings(input: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    if !input.is_dir() {
+        return Ok(vec![input.to_path_buf()]);
+    }
+    let mut files: Vec<PathBuf> = std::fs::read_dir(input)
+        .with_context(|| format!("{}: cannot list", input.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file())
+        .filter(|p| p.to_str().is_some_and(|s| s.ends_with(".mcap") || s.ends_with(".mcap.part")))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        bail!("{}: a directory with no recordings (*.mcap, *.mcap.part)", input.display());
+    }
+    Ok(files)
+}
+
 pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
-    let mut reader = RecordReader::open(&args.file)?;
+    let files = recordings(&args.file)?;
+    if !args.file.is_dir() {
+        return inspect(&args.file, args.json);
+    }
+    let mut status = ExitCode::SUCCESS;
+    for file in &files {
+        match inspect(file, args.json) {
+            Ok(s) if s == ExitCode::SUCCESS => {}
+            Ok(s) => status = s,
+            Err(e) => {
+                eprintln!("forgemon: skipped {}: {e:#}", file.display());
+                status = ExitCode::from(EXIT_CORRUPT_INPUT);
+            }
+        }
+    }
+    Ok(status)
+}
+
+/// One recording, as text or one JSON line.
+fn inspect(file: &Path, json: bool) -> anyhow::Result<ExitCode> {
+    let mut reader = RecordReader::open(file)?;
     let mut tally = Tally::default();
     for m in reader.by_ref() {
         tally.add(m?.payload);
     }
     let report = reader.report().clone();
-    let out = tally.json(&args.file.display().to_string(), &report);
+    let out = tally.json(&file.display().to_string(), &report);
     let stdout = std::io::stdout();
     let mut w = stdout.lock();
-    if args.json {
+    if json {
         writeln!(w, "{out}")?;
     } else {
-        writeln!(w, "{}", args.file.display())?;
+        writeln!(w, "{}", file.display())?;
         print_report(&mut w, &report)?;
         tally.print(&mut w, &out)?;
     }
