@@ -213,6 +213,17 @@ fn byte_counts_are_whole_and_durations_cannot_overflow() {
     assert!(e.starts_with("s.toml:6:1: key 'recording.rotate_seconds' must be within 1..=31622400 s"), "{e}");
     let c = parse_service("s.toml", Path::new("/"), &rec("rotate_seconds = 86400\nrotate_bytes = 1073741824")).unwrap();
     assert_eq!((c.rotate_seconds, c.rotate_bytes), (86_400, 1 << 30));
+    assert_eq!((c.keep_bytes, c.keep_days, c.min_free_bytes), (None, None, 2 << 30));
+    let e = error(&rec("keep_bytes = 1000"));
+    assert!(e.contains("key 'recording.keep_bytes' must be within 16777216..="), "{e}");
+    let e = error(&rec("keep_days = 0"));
+    assert!(e.contains("key 'recording.keep_days' must be finite and > 0, got 0"), "{e}");
+    let e = error(&rec("min_free_bytes = -5"));
+    assert!(e.contains("key 'recording.min_free_bytes' must be a whole number >= 0"), "{e}");
+    let c =
+        parse_service("s.toml", Path::new("/"), &rec("keep_bytes = 1073741824\nkeep_days = 30\nmin_free_bytes = 0"))
+            .unwrap();
+    assert_eq!((c.keep_bytes, c.keep_days, c.min_free_bytes), (Some(1 << 30), Some(30.0), 0));
     let e = error(&GOOD.replace("path = \"/dev/ttyUSB0\"", "path = \"/dev/ttyUSB0\"\nbaud = 1e20"));
     assert!(e.contains("key 'sources[1].baud' must be a whole number >= 0"), "{e}");
     let e = error(&GOOD.replace("path = \"/dev/ttyUSB0\"", "path = \"/dev/ttyUSB0\"\nbaud = 7"));
