@@ -16,6 +16,8 @@ use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use subtle::ConstantTimeEq as _;
 
+use crate::daemon::http_server::Admission;
+
 /// The query parameter that carries the token on a `GET`.
 pub const TOKEN_QUERY: &str = "token";
 
@@ -71,19 +73,26 @@ impl Token {
 }
 
 /// Middleware: pass every request when no token is configured, otherwise only those that
-/// present it (`Token::admits`); refuse the others with 401.
+/// present it (`Token::admits`), and mark their connection admitted (`http_server`: it is
+/// not shed for a newcomer); refuse the others with 401 and close their connection, so a
+/// client without the token holds a connection for one request at most.
 pub async fn require_token(State(token): State<Option<Token>>, req: Request, next: Next) -> Response {
     match &token {
         Some(t) if !t.admits(req.method(), req.headers(), req.uri().query()) => {
             tracing::debug!(path = %req.uri().path(), "HTTP request refused: no valid bearer token");
             (
                 StatusCode::UNAUTHORIZED,
-                [(header::WWW_AUTHENTICATE, "Bearer")],
+                [(header::WWW_AUTHENTICATE, "Bearer"), (header::CONNECTION, "close")],
                 "this forgemon needs its token: `Authorization: Bearer <token>` (or `?token=<token>` on a GET)\n",
             )
                 .into_response()
         }
-        _ => next.run(req).await,
+        _ => {
+            if let Some(admission) = req.extensions().get::<Admission>() {
+                admission.admit();
+            }
+            next.run(req).await
+        }
     }
 }
 
