@@ -92,7 +92,8 @@ fn silent_half_sent_and_trickling_clients_are_closed_by_the_header_timeout() {
     // A kept-alive client with the token is served, then closed too when it sends nothing.
     let mut kept = connect(http);
     assert!(status_on(&mut kept));
-    for (name, s) in [("silent", &mut silent), ("half-sent", &mut half), ("trickling", &mut trickle), ("kept", &mut kept)]
+    for (name, s) in
+        [("silent", &mut silent), ("half-sent", &mut half), ("trickling", &mut trickle), ("kept", &mut kept)]
     {
         assert_eq!(held(s, Duration::from_secs(20)), Held::Closed, "{name}: still open after 20 s");
     }

@@ -83,37 +83,43 @@ pub(super) struct RawLimits {
 
 /// `[http]`'s limits over the defaults, each within its range.
 pub(super) fn http_limits(doc: &Document<'_>, raw: &RawLimits) -> Result<HttpLimits, ConfigError> {
-    let (cap, first, idle) = checked(doc, "http", ["max_connections", "header_timeout_s", "idle_timeout_s"], raw)?;
+    let c = checked(doc, "http", ["max_connections", "header_timeout_s", "idle_timeout_s"], raw)?;
     let d = HttpLimits::default();
     Ok(HttpLimits {
-        max_connections: cap.map_or(d.max_connections, |c| c as usize),
-        header_timeout: first.unwrap_or(d.header_timeout),
-        idle_timeout: idle.unwrap_or(d.idle_timeout),
+        max_connections: c.cap.unwrap_or(d.max_connections),
+        header_timeout: c.first.unwrap_or(d.header_timeout),
+        idle_timeout: c.idle.unwrap_or(d.idle_timeout),
     })
 }
 
 /// `[foxglove]`'s limits over the defaults, each within its range.
 pub(super) fn foxglove_limits(doc: &Document<'_>, raw: &RawLimits) -> Result<FoxgloveLimits, ConfigError> {
     let keys = ["max_clients", "handshake_timeout_s", "idle_timeout_s"];
-    let (cap, first, idle) = checked(doc, "foxglove", keys, raw)?;
+    let c = checked(doc, "foxglove", keys, raw)?;
     let d = FoxgloveLimits::default();
     Ok(FoxgloveLimits {
-        max_clients: cap.map_or(d.max_clients, |c| c as usize),
-        handshake_timeout: first.unwrap_or(d.handshake_timeout),
-        idle_timeout: idle.unwrap_or(d.idle_timeout),
+        max_clients: c.cap.unwrap_or(d.max_clients),
+        handshake_timeout: c.first.unwrap_or(d.handshake_timeout),
+        idle_timeout: c.idle.unwrap_or(d.idle_timeout),
     })
 }
 
+/// The values a table gives, checked.
+struct Checked {
+    cap: Option<usize>,
+    first: Option<Duration>,
+    idle: Option<Duration>,
+}
+
 /// The values given, checked against their ranges; errors name `table.key`.
-fn checked(
-    doc: &Document<'_>,
-    table: &str,
-    keys: [&str; 3],
-    raw: &RawLimits,
-) -> Result<(Option<u64>, Option<Duration>, Option<Duration>), ConfigError> {
+fn checked(doc: &Document<'_>, table: &str, keys: [&str; 3], raw: &RawLimits) -> Result<Checked, ConfigError> {
     let key = |k: &str| format!("{table}.{k}");
     let cap = raw.cap.map(|c| doc.in_whole_range(&key(keys[0]), c, &SERVER_CONNECTIONS)).transpose()?;
     let first = raw.first_s.map(|s| doc.in_range(&key(keys[1]), s, &HANDSHAKE_TIMEOUT_S)).transpose()?;
     let idle = raw.idle_s.map(|s| doc.in_range(&key(keys[2]), s, &IDLE_TIMEOUT_S)).transpose()?;
-    Ok((cap, first.map(Duration::from_secs_f64), idle.map(Duration::from_secs_f64)))
+    Ok(Checked {
+        cap: cap.map(|c| c as usize),
+        first: first.map(Duration::from_secs_f64),
+        idle: idle.map(Duration::from_secs_f64),
+    })
 }
