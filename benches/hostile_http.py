@@ -201,6 +201,11 @@ def http_phase(port, proc, n, hold_s):
         time.sleep(0.1)
         left = h.reap(time.monotonic())
     all_closed = time.monotonic() - last_open
+    # Those still open count with their age so far.
+    now = time.monotonic()
+    for i, s in enumerate(h.socks):
+        if s is not None:
+            h.longest = max(h.longest, now - h.opened_at[i])
     return {"polls": polls[0], "answered": answered[0], "opened": h.opened, "longest_s": h.longest,
             "left": left, "all_closed_s": all_closed, "rss_kb": rss, "cpu": 100 * cpu / wall}
 
@@ -283,8 +288,11 @@ def main():
     held = f"{n} held {hold_s:.0f} s"
     polled = f"/status: {h['answered']}/{h['polls']} = {100 * h['answered'] / max(1, h['polls']):.1f} % answered"
     print(f"{'http: ' + held:<34} {polled:<52} {h['rss_kb'] / 1024:7.1f} {h['cpu']:6.1f}")
-    closed = (f"{h['opened']} opened in all; longest open {h['longest_s']:.1f} s; all closed "
-              f"{h['all_closed_s']:.1f} s after the last reopening" + (f" ({h['left']} left!)" if h['left'] else ""))
+    if h["left"]:
+        end = f"{h['left']} still open {h['all_closed_s']:.0f} s after the last reopening"
+    else:
+        end = f"all closed {h['all_closed_s']:.1f} s after the last reopening"
+    closed = f"{h['opened']} opened in all; longest open {h['longest_s']:.1f} s; {end}"
     print(f"{'':<34} {closed}")
     answers = ", ".join(f"{k}: {v}" for k, v in sorted(f["answers"].items()))
     answers += f" (RSS before {f['rss0_kb'] / 1024:.1f})"
