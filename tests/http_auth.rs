@@ -4,6 +4,10 @@
 //! dashboard alike, and serves them with it; a `GET` may carry the token as `?token=` (the
 //! page and its event stream, which a browser's EventSource opens without headers), a `POST`
 //! may not. A token file that cannot be read stops the service with an error naming it.
+//!
+//! Issue 39: the scheme is matched without regard to case (RFC 7235), and a token file that
+//! group or others may read, or a token shorter than 16 characters, stops the service with
+//! an error naming the file and the fix.
 
 mod common;
 
@@ -13,10 +17,9 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use common::{free_port, spawn_service};
+use common::{free_port, service_toml, spawn_service, write_private};
 
-const HAMMER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/hammer-lg1000.machine.toml");
-const TOKEN: &str = "9f2c-forge-7a1e";
+const TOKEN: &str = "9f2c-forge-7a1e-5b0d";
 
 /// The status code, headers and body of one request on loopback (`auth`: the Authorization
 /// header's value).
@@ -36,38 +39,13 @@ fn request(port: u16, method: &str, path: &str, auth: Option<&str>) -> (u16, Str
 }
 
 fn config(dir: &Path, http: u16) -> std::path::PathBuf {
-    let cfg = format!(
-        r#"machine = "{HAMMER}"
-[recording]
-dir = "rec"
-[http]
-listen = "127.0.0.1:{http}"
-token_file = "token"
-[[sources]]
-name = "daq"
-kind = "serial"
-path = "{}"
-[[sources.channels]]
-role = "load_N"
-gain = 1.0
-[[sources.channels]]
-role = "disp_m"
-gain = 1.0
-[[sources.channels]]
-role = "acc_mps2"
-gain = 1.0
-"#,
-        dir.join("no-such-tty").display()
-    );
-    let path = dir.join("service.toml");
-    std::fs::write(&path, cfg).unwrap();
-    path
+    service_toml(dir, http, "token_file = \"token\"", "")
 }
 
 #[test]
 fn every_endpoint_needs_the_token_and_serves_with_it() {
     let dir = tempfile::tempdir().unwrap();
-    std::fs::write(dir.path().join("token"), format!("{TOKEN}\n")).unwrap();
+    write_private(&dir.path().join("token"), &format!("{TOKEN}\n"));
     let http = free_port();
     let mut child = spawn_service(&config(dir.path(), http), http);
     let bearer = format!("Bearer {TOKEN}");
@@ -83,10 +61,15 @@ fn every_endpoint_needs_the_token_and_serves_with_it() {
         ("POST", "/ack"),
         ("POST", "/billet"),
     ] {
-        for wrong in [None, Some("Bearer 9f2c-forge-7a1f"), Some(TOKEN), Some("Basic OWYyYw==")] {
+        for wrong in [None, Some("Bearer 9f2c-forge-7a1e-5b0e"), Some(TOKEN), Some("Basic OWYyYw==")] {
             let (code, head, _) = request(http, method, path, wrong);
             assert_eq!(code, 401, "{method} {path} with {wrong:?}");
             assert!(head.contains("www-authenticate: bearer"), "{head}");
+        }
+        // RFC 7235 §2.1: the scheme is case-insensitive (the POSTs are sent with it below).
+        for scheme in ["bearer", "BEARER", "bEaReR"].iter().filter(|_| method == "GET") {
+            let (code, _, _) = request(http, method, path, Some(&format!("{scheme} {TOKEN}")));
+            assert_ne!(code, 401, "{method} {path} with the scheme {scheme}");
         }
     }
     // A POST cannot carry the token in its query: a link cannot acknowledge.
@@ -107,8 +90,8 @@ fn every_endpoint_needs_the_token_and_serves_with_it() {
     assert_eq!(code, 200);
     assert!(head.contains("content-type: text/event-stream"), "{head}");
     // Nothing latched yet: the acknowledgement is accepted and changes nothing.
-    assert_eq!(request(http, "POST", "/ack", ok).0, 202);
-    assert_eq!(request(http, "POST", "/billet", ok).0, 202);
+    assert_eq!(request(http, "POST", "/ack", Some(&format!("bearer {TOKEN}"))).0, 202);
+    assert_eq!(request(http, "POST", "/billet", Some(&format!("BEARER {TOKEN}"))).0, 202);
     // The accepted billet signal reached the service: a billet started.
     let deadline = std::time::Instant::now() + Duration::from_secs(5);
     loop {
@@ -131,7 +114,7 @@ fn an_unreadable_or_empty_token_file_stops_the_service_naming_it() {
     let token = dir.path().join("token");
     for content in [None, Some(" \n")] {
         if let Some(c) = content {
-            std::fs::write(&token, c).unwrap();
+            write_private(&token, c);
         }
         let out = Command::new(env!("CARGO_BIN_EXE_forgemon"))
             .args(["run", "--config", cfg.to_str().unwrap()])
@@ -142,4 +125,39 @@ fn an_unreadable_or_empty_token_file_stops_the_service_naming_it() {
         assert!(stderr.contains(&token.display().to_string()), "{stderr}");
         assert!(stderr.contains(if content.is_some() { "is empty" } else { "cannot read" }), "{stderr}");
     }
+}
+
+/// The stderr of `forgemon run` with `token_file` holding `text` with `mode`; it must fail.
+fn refused_start(text: &str, mode: u32) -> (String, std::path::PathBuf) {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let http = free_port();
+    let cfg = config(dir.path(), http);
+    let token = dir.path().join("token");
+    std::fs::write(&token, text).unwrap();
+    std::fs::set_permissions(&token, std::fs::Permissions::from_mode(mode)).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_forgemon"))
+        .args(["run", "--config", cfg.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .output()
+        .unwrap();
+    assert!(!out.status.success(), "the service started with a token file of mode {mode:o}");
+    (String::from_utf8_lossy(&out.stderr).to_string(), token)
+}
+
+/// Issue 39: a token file readable by group or others (0644, 0666) was taken with no word.
+#[test]
+fn a_token_file_group_or_others_may_read_stops_the_service_with_the_chmod_that_fixes_it() {
+    for mode in [0o644, 0o666, 0o640] {
+        let (stderr, token) = refused_start(&format!("{TOKEN}\n"), mode);
+        assert!(stderr.contains(&format!("chmod 600 {}", token.display())), "{mode:o}: {stderr}");
+    }
+}
+
+/// Issue 39: a 1-character token was taken with no word.
+#[test]
+fn a_short_token_stops_the_service_naming_the_minimum() {
+    let (stderr, token) = refused_start("x\n", 0o600);
+    assert!(stderr.contains(&token.display().to_string()), "{stderr}");
+    assert!(stderr.contains("1 characters, at least 16"), "{stderr}");
 }

@@ -102,6 +102,18 @@ pub const BAUD: WholeLimits = WholeLimits { min: 300, max: 12_000_000, unit: "ba
 /// Modbus poll interval and request timeout, ms: 1 ms to one hour.
 pub const MODBUS_MS: Limits = Limits { min: 1.0, max: 3.6e6, unit: "ms" };
 
+/// `[http] max_connections`, `[foxglove] max_clients`: connections a server holds at once,
+/// from 1 to 65 536 (the most one listening address can take from one client address).
+pub const SERVER_CONNECTIONS: WholeLimits = WholeLimits { min: 1, max: 65_536, unit: "connections" };
+
+/// A server's header or handshake timeout, s: from 0.1 s (loopback clients in tests) to
+/// 10 minutes (a client that needs longer to send a few hundred bytes is not there).
+pub const HANDSHAKE_TIMEOUT_S: Limits = Limits { min: 0.1, max: 600.0, unit: "s" };
+
+/// A server's idle timeout, s: from 1 s to a day. The dashboard's event stream sends a
+/// keep-alive every 15 s, so an HTTP idle timeout below that cuts it (it reconnects).
+pub const IDLE_TIMEOUT_S: Limits = Limits { min: 1.0, max: 86_400.0, unit: "s" };
+
 /// Alert window, blows.
 pub const ALERT_WINDOW_BLOWS: WholeLimits = WholeLimits { min: 1, max: 10_000, unit: "blows" };
 

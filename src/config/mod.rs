@@ -15,6 +15,7 @@ pub mod machine;
 pub mod opcua;
 pub mod process;
 pub mod recipe;
+pub mod server_limits;
 pub mod service;
 mod source;
 pub mod uplink;

@@ -16,6 +16,7 @@ use super::limits::{
     ALERT_WINDOW_BLOWS, BILLET_IDLE_S, DEBOUNCE_BLOWS, EFFICIENCY, ENCODER_AT_DIE_M, KEEP_BYTES, KEEP_DAYS,
     MIN_FREE_BYTES, NEW_BILLET_RISE_M, RESIDUAL_LIMIT, ROTATE_BYTES, ROTATE_SECONDS, SENSOR_LIMIT,
 };
+use super::server_limits::{FoxgloveLimits, HttpLimits, RawLimits, foxglove_limits, http_limits};
 use super::{ConfigError, source};
 use crate::acquire::ChannelSpec;
 use crate::alert::AlertConfig;
@@ -93,10 +94,14 @@ pub struct ServiceConfig {
     /// `[http] token_file`: the file holding the bearer token every request needs when
     /// `listen` is not loopback (required then; read when the service starts).
     pub http_token_file: Option<PathBuf>,
+    /// `[http] max_connections`, `header_timeout_s`, `idle_timeout_s` (`server_limits.rs`).
+    pub http_limits: HttpLimits,
     /// `[plc_server] listen`: serve the PLC result image (CONTRACTS §8) here.
     pub plc_listen: Option<SocketAddr>,
     /// `[foxglove] listen`: serve the Foxglove WebSocket protocol here.
     pub foxglove_listen: Option<SocketAddr>,
+    /// `[foxglove] max_clients`, `handshake_timeout_s`, `idle_timeout_s`.
+    pub foxglove_limits: FoxgloveLimits,
     /// `[opcua]`: the OPC UA Metal Forming server (`config/opcua.rs`).
     pub opcua: Option<super::opcua::OpcuaConfig>,
     pub alerts: AlertConfig,
@@ -138,8 +143,10 @@ impl ServiceConfig {
             min_free_bytes: DEFAULT_MIN_FREE_BYTES,
             http_listen: SocketAddr::from(([127, 0, 0, 1], 0)),
             http_token_file: None,
+            http_limits: HttpLimits::default(),
             plc_listen: None,
             foxglove_listen: None,
+            foxglove_limits: FoxgloveLimits::default(),
             opcua: None,
             alerts: AlertConfig::default(),
             webhook: None,
@@ -164,7 +171,7 @@ struct RawService {
     recording: RawRecording,
     http: Option<RawHttp>,
     plc_server: Option<RawListen>,
-    foxglove: Option<RawListen>,
+    foxglove: Option<RawFoxglove>,
     opcua: Option<super::opcua::RawOpcua>,
     alerts: Option<RawAlerts>,
     billets: Option<RawBillets>,
@@ -193,9 +200,22 @@ struct RawRecording {
 struct RawHttp {
     listen: String,
     token_file: Option<String>,
+    max_connections: Option<u64>,
+    header_timeout_s: Option<f64>,
+    idle_timeout_s: Option<f64>,
 }
 
-/// A server's table with only its address (`[plc_server]`, `[foxglove]`).
+/// `[foxglove]`: the address and the limits.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFoxglove {
+    listen: String,
+    max_clients: Option<u64>,
+    handshake_timeout_s: Option<f64>,
+    idle_timeout_s: Option<f64>,
+}
+
+/// A server's table with only its address (`[plc_server]`).
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawListen {
@@ -254,6 +274,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
     let (http_listen, http_token_file) = parse_http(&doc, raw.http.as_ref(), base)?;
     let plc_listen = raw.plc_server.as_ref().map(|r| address(&doc, "plc_server.listen", &r.listen)).transpose()?;
     let foxglove_listen = raw.foxglove.as_ref().map(|r| address(&doc, "foxglove.listen", &r.listen)).transpose()?;
+    let (http_limits, foxglove_limits) = parse_server_limits(&doc, &raw)?;
     let (alerts, webhook, plc_coil) = match &raw.alerts {
         Some(a) => parse_alerts(&doc, a)?,
         None => (AlertConfig::default(), None, None),
@@ -281,8 +302,10 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         },
         http_listen,
         http_token_file,
+        http_limits,
         plc_listen,
         foxglove_listen,
+        foxglove_limits,
         opcua: super::opcua::parse_opcua(&doc, raw.opcua.as_ref(), base)?,
         alerts,
         webhook,
@@ -314,6 +337,25 @@ fn parse_rotation(doc: &Document<'_>, rec: &RawRecording) -> Result<(u64, u64), 
         None => DEFAULT_ROTATE_SECONDS,
     };
     Ok((rotate_bytes, rotate_seconds))
+}
+
+/// `[http]`'s and `[foxglove]`'s connection caps and timeouts, each over its default.
+fn parse_server_limits(doc: &Document<'_>, raw: &RawService) -> Result<(HttpLimits, FoxgloveLimits), ConfigError> {
+    let http = match &raw.http {
+        Some(h) => {
+            let raw = RawLimits { cap: h.max_connections, first_s: h.header_timeout_s, idle_s: h.idle_timeout_s };
+            http_limits(doc, &raw)?
+        }
+        None => HttpLimits::default(),
+    };
+    let foxglove = match &raw.foxglove {
+        Some(f) => {
+            let raw = RawLimits { cap: f.max_clients, first_s: f.handshake_timeout_s, idle_s: f.idle_timeout_s };
+            foxglove_limits(doc, &raw)?
+        }
+        None => FoxgloveLimits::default(),
+    };
+    Ok((http, foxglove))
 }
 
 /// `[http] listen`, or the loopback default, and the token file, which an address other

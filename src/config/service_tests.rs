@@ -159,6 +159,45 @@ fn the_front_ends_read_their_addresses_and_a_wide_listen_needs_a_token() {
     assert_eq!(c.recipe_path, Some(PathBuf::from("/etc/forgemon/flange.recipe.toml")));
 }
 
+/// Issue 39: each server's cap and timeouts are keys of its table, with defaults, checked.
+#[test]
+fn the_servers_limits_are_keys_of_their_tables_with_defaults() {
+    use crate::config::server_limits::{FoxgloveLimits, HttpLimits};
+    use std::time::Duration;
+    let ok = |text: &str| parse_service("s.toml", Path::new("/"), text).unwrap();
+    let e = |text: &str| parse_service("s.toml", Path::new("/"), text).unwrap_err().to_string();
+    let c = ok(GOOD);
+    assert_eq!((c.http_limits, c.foxglove_limits), (HttpLimits::default(), FoxgloveLimits::default()));
+    assert_eq!(HttpLimits::default().header_timeout, Duration::from_secs(10));
+    let http = "[http]\nlisten = \"127.0.0.1:9187\"\n";
+    let set = format!("{GOOD}{http}max_connections = 64\nheader_timeout_s = 2.5\nidle_timeout_s = 30\n");
+    let c = ok(&set);
+    assert_eq!(c.http_limits.max_connections, 64);
+    assert_eq!(
+        (c.http_limits.header_timeout, c.http_limits.idle_timeout),
+        (Duration::from_millis(2500), Duration::from_secs(30))
+    );
+    let fox = "[foxglove]\nlisten = \"127.0.0.1:8765\"\n";
+    let c = ok(&format!("{GOOD}{fox}max_clients = 4\nhandshake_timeout_s = 1\nidle_timeout_s = 5\n"));
+    let f = c.foxglove_limits;
+    assert_eq!(
+        (f.max_clients, f.handshake_timeout, f.idle_timeout),
+        (4, Duration::from_secs(1), Duration::from_secs(5))
+    );
+    for (text, key) in [
+        (format!("{GOOD}{http}max_connections = 0\n"), "http.max_connections"),
+        (format!("{GOOD}{http}header_timeout_s = -1.0\n"), "http.header_timeout_s"),
+        (format!("{GOOD}{http}idle_timeout_s = 1e9\n"), "http.idle_timeout_s"),
+        (format!("{GOOD}{fox}max_clients = 100000\n"), "foxglove.max_clients"),
+        (format!("{GOOD}{fox}handshake_timeout_s = nan\n"), "foxglove.handshake_timeout_s"),
+        (format!("{GOOD}{fox}idle_timeout_s = 0\n"), "foxglove.idle_timeout_s"),
+    ] {
+        let why = e(&text);
+        assert!(why.contains(&format!("key '{key}'")), "{key}: {why}");
+    }
+    assert!(e(&format!("{GOOD}{http}max_conections = 5\n")).contains("did you mean"));
+}
+
 #[test]
 fn errors_name_the_key() {
     let e = |text: &str| parse_service("s.toml", Path::new("/"), text).unwrap_err().to_string();

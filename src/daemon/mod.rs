@@ -11,6 +11,8 @@ pub mod advisor;
 pub mod dashboard;
 pub mod faces;
 pub mod foxglove;
+pub mod http_server;
+pub mod idle;
 pub mod live;
 pub mod opcua;
 pub mod plc_server;
@@ -179,7 +181,8 @@ pub async fn serve(
         .unwrap_or_default()
         .into_iter()
         .fold(recipe_switch::routes(recipe_tx, parts.machine.kind().as_str()), axum::Router::merge);
-    let http = tokio::spawn(status::serve_http(listener, status.clone(), control_tx.clone(), token, pages));
+    let routes = status::routes(status.clone(), control_tx.clone(), token, pages);
+    let http = tokio::spawn(http_server::serve(listener, routes, cfg.http_limits));
     let mut taps = recorded.into_inner().unwrap_or_default();
     if !taps.is_empty() {
         writer.set_tap(Box::new(move |m| taps.iter_mut().for_each(|tap| tap(m))));

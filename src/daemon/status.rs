@@ -254,26 +254,22 @@ async fn new_billet(State(tx): State<tokio::sync::mpsc::Sender<super::Control>>)
     }
 }
 
-/// Serve `GET /status`, `GET /metrics`, `POST /billet` and `more` (the dashboard's `GET /`,
-/// its state and events, `POST /ack`; `POST /recipe`) on an already bound listener; with a
-/// token, only to requests that present it.
-pub async fn serve_http(
-    listener: tokio::net::TcpListener,
+/// `GET /status`, `GET /metrics`, `POST /billet` and `more` (the dashboard's `GET /`, its
+/// state and events, `POST /ack`; `POST /recipe`), with a token only to requests that
+/// present it: what the service's HTTP server (`http_server`) serves.
+pub fn routes(
     status: SharedStatus,
     control: tokio::sync::mpsc::Sender<super::Control>,
     token: Option<Token>,
     more: Router,
-) {
-    let app = Router::new()
+) -> Router {
+    Router::new()
         .route("/status", get(status_json))
         .route("/metrics", get(metrics_text))
-        .with_state(status.clone())
+        .with_state(status)
         .merge(Router::new().route("/billet", post(new_billet)).with_state(control))
         .merge(more)
-        .layer(axum::middleware::from_fn_with_state(token, require_token));
-    if let Err(e) = axum::serve(listener, app).await {
-        tracing::error!("status endpoint stopped: {e}");
-    }
+        .layer(axum::middleware::from_fn_with_state(token, require_token))
 }
 
 /// Where a metric's value comes from: the service's state, or each source's (labelled).

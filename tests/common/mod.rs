@@ -211,3 +211,74 @@ pub fn out_of_range(blows: &[serde_json::Value]) -> Vec<String> {
     }
     bad
 }
+
+/// A `service.toml` in `dir` for `forgemon run`: the example hammer, recording to `dir/rec`,
+/// the HTTP server on loopback port `http` with the lines `http_extra` in its table, then
+/// the tables `extra`, and one serial source on a tty that does not exist (the service waits
+/// for it and serves meanwhile).
+pub fn service_toml(dir: &std::path::Path, http: u16, http_extra: &str, extra: &str) -> std::path::PathBuf {
+    let machine = root().join("config/hammer-lg1000.machine.toml");
+    let cfg = format!(
+        r#"machine = "{}"
+[recording]
+dir = "rec"
+[http]
+listen = "127.0.0.1:{http}"
+{http_extra}
+{extra}
+[[sources]]
+name = "daq"
+kind = "serial"
+path = "{}"
+[[sources.channels]]
+role = "load_N"
+gain = 1.0
+[[sources.channels]]
+role = "disp_m"
+gain = 1.0
+[[sources.channels]]
+role = "acc_mps2"
+gain = 1.0
+"#,
+        machine.display(),
+        dir.join("no-such-tty").display()
+    );
+    let path = dir.join("service.toml");
+    std::fs::write(&path, cfg).unwrap();
+    path
+}
+
+/// `text` written to `path` readable by its owner only (mode 0600), as a token file must be.
+pub fn write_private(path: &std::path::Path, text: &str) {
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::write(path, text).unwrap();
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600)).unwrap();
+}
+
+/// What a held client connection shows: closed by the server, or still open.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Held {
+    /// The server closed it (end of stream or reset).
+    Closed,
+    Open,
+}
+
+/// Whether the server closed `s`, reading (and discarding) what it sent for up to `wait`.
+pub fn held(s: &mut std::net::TcpStream, wait: std::time::Duration) -> Held {
+    use std::io::{ErrorKind, Read};
+    let deadline = std::time::Instant::now() + wait;
+    let mut buf = [0u8; 4096];
+    loop {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        if left.is_zero() {
+            return Held::Open;
+        }
+        s.set_read_timeout(Some(left.max(std::time::Duration::from_millis(1)))).unwrap();
+        match s.read(&mut buf) {
+            Ok(0) => return Held::Closed,
+            Ok(_) => {}
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted) => {}
+            Err(_) => return Held::Closed,
+        }
+    }
+}

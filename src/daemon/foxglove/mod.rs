@@ -13,33 +13,45 @@
 //! A slow or stuck client costs the service one copy of each message it subscribed to and
 //! nothing else: the service's thread only queues (`Hub::publish`), the connection's task
 //! waits on the socket. A client that sends garbage is answered with an error `status` and
-//! counted; one that does not complete the handshake in time is dropped.
+//! counted.
+//!
+//! Limits (`[foxglove]`, issue 39): a connection takes one of `max_clients` permits when it
+//! is accepted, before its handshake, and keeps it until it closes, so clients that
+//! handshake together cannot outnumber the cap; one accepted past the cap is answered 503 (a
+//! few at a time, briefly) or closed. A connection has `handshake_timeout` to complete its
+//! handshake; the server pings every third of `idle_timeout` and closes a client from which
+//! no frame, a pong included, came for `idle_timeout` (one that vanished or hangs).
 
 pub mod hub;
 pub mod protocol;
 
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Context;
 use futures_util::{SinkExt, StreamExt};
 use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::{OwnedSemaphorePermit, Semaphore};
+use tokio_tungstenite::WebSocketStream;
 use tokio_tungstenite::tungstenite::handshake::server::{ErrorResponse, Request, Response};
 use tokio_tungstenite::tungstenite::http::{HeaderValue, StatusCode};
 use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 use tokio_tungstenite::tungstenite::{Bytes, Message};
 
 use super::faces::{Face, FaceContext, boxed};
+use super::idle::IdleClock;
+use crate::config::server_limits::FoxgloveLimits;
 use crate::record::tap::Tap;
 use futures_util::future::BoxFuture;
 
 use hub::{CLIENT_QUEUE_BYTES, Hub, HubStats, Outgoing};
 use protocol::{SUBPROTOCOL, ServerMessage};
 
-/// Clients served at once; more are refused at the handshake.
-pub const MAX_CLIENTS: u64 = 16;
-/// Time a connection has to complete the WebSocket handshake.
-pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
+/// Connections past the cap answered 503 at once; more are closed without a word.
+pub const REFUSALS_AT_ONCE: usize = 4;
+/// How long a connection past the cap has to send its handshake for the 503 answer.
+pub const REFUSAL_TIMEOUT: Duration = Duration::from_secs(2);
 /// Largest frame a client may send (its subscriptions are a few hundred bytes).
 pub const MAX_CLIENT_FRAME_BYTES: usize = 1 << 20;
 /// How often the drop count is logged while it grows.
@@ -56,7 +68,7 @@ pub struct FoxgloveServer {
 pub fn face<'a>(ctx: &'a FaceContext<'a>) -> BoxFuture<'a, anyhow::Result<Option<Box<dyn Face>>>> {
     Box::pin(async move {
         let Some(addr) = ctx.config.foxglove_listen else { return Ok(None) };
-        let (server, tap) = listen(addr, CLIENT_QUEUE_BYTES).await?;
+        let (server, tap) = listen(addr, CLIENT_QUEUE_BYTES, ctx.config.foxglove_limits).await?;
         ctx.tap_recording(tap);
         Ok(boxed(Some(server)))
     })
@@ -65,13 +77,13 @@ pub fn face<'a>(ctx: &'a FaceContext<'a>) -> BoxFuture<'a, anyhow::Result<Option
 impl Face for FoxgloveServer {}
 
 /// The server listening on `addr`, and the tap that feeds its clients.
-async fn listen(addr: SocketAddr, queue_bytes: usize) -> anyhow::Result<(FoxgloveServer, Tap)> {
+async fn listen(addr: SocketAddr, queue_bytes: usize, limits: FoxgloveLimits) -> anyhow::Result<(FoxgloveServer, Tap)> {
     let listener = TcpListener::bind(addr).await.with_context(|| format!("foxglove.listen {addr}: cannot listen"))?;
     let local_addr = listener.local_addr().with_context(|| format!("foxglove.listen {addr}"))?;
     let hub = Hub::new(queue_bytes);
     let tap = hub.clone();
     let session_id = format!("forgemon-{}", super::host_now_ns());
-    let accept = tokio::spawn(accept_loop(listener, hub.clone(), session_id));
+    let accept = tokio::spawn(accept_loop(listener, hub.clone(), session_id, limits));
     tracing::info!(listen = %local_addr, "foxglove live view listening");
     Ok((FoxgloveServer { hub, local_addr, accept }, Box::new(move |m| tap.publish(m))))
 }
@@ -101,15 +113,26 @@ impl Drop for FoxgloveServer {
     }
 }
 
-async fn accept_loop(listener: TcpListener, hub: Hub, session_id: String) {
+/// Accept connections, each with a permit or refused, and log the drops while they grow.
+async fn accept_loop(listener: TcpListener, hub: Hub, session_id: String, limits: FoxgloveLimits) {
+    let permits = Arc::new(Semaphore::new(limits.max_clients));
+    let refusals = Arc::new(Semaphore::new(REFUSALS_AT_ONCE));
     let mut tick = tokio::time::interval(DROP_LOG_INTERVAL);
     let mut logged_drops = 0;
     loop {
         tokio::select! {
             accepted = listener.accept() => match accepted {
-                Ok((stream, peer)) => {
-                    tokio::spawn(connection(stream, peer, hub.clone(), session_id.clone()));
-                }
+                Ok((stream, peer)) => match permits.clone().try_acquire_owned() {
+                    Ok(permit) => {
+                        tokio::spawn(connection(stream, peer, hub.clone(), session_id.clone(), limits, permit));
+                    }
+                    // Past the cap: a 503 saying why while few are refused, else closed here.
+                    Err(_) => {
+                        if let Ok(permit) = refusals.clone().try_acquire_owned() {
+                            tokio::spawn(refuse(stream, peer, limits, permit));
+                        }
+                    }
+                },
                 // Out of descriptors and the like: wait a little rather than spin.
                 Err(e) => {
                     tracing::warn!(error = %e, "foxglove: accept failed");
@@ -127,9 +150,10 @@ async fn accept_loop(listener: TcpListener, hub: Hub, session_id: String) {
     }
 }
 
-/// The handshake's answer: the subprotocol echoed, or a refusal saying what is spoken here.
+/// The handshake's answer: the subprotocol echoed, or a refusal saying what is spoken here
+/// (or, with `full` the cap, that the cap is reached).
 #[allow(clippy::result_large_err, reason = "the type of tungstenite's handshake callback")]
-fn negotiate(req: &Request, mut resp: Response, full: bool) -> Result<Response, ErrorResponse> {
+fn negotiate(req: &Request, mut resp: Response, full: Option<usize>) -> Result<Response, ErrorResponse> {
     let offered = req
         .headers()
         .get_all("sec-websocket-protocol")
@@ -144,25 +168,48 @@ fn negotiate(req: &Request, mut resp: Response, full: bool) -> Result<Response, 
     if !offered {
         return Err(refuse(StatusCode::BAD_REQUEST, format!("this server speaks the {SUBPROTOCOL} subprotocol only")));
     }
-    if full {
-        return Err(refuse(StatusCode::SERVICE_UNAVAILABLE, format!("{MAX_CLIENTS} clients are connected already")));
+    if let Some(cap) = full {
+        return Err(refuse(StatusCode::SERVICE_UNAVAILABLE, format!("{cap} clients are connected already")));
     }
     resp.headers_mut().insert("sec-websocket-protocol", HeaderValue::from_static(SUBPROTOCOL));
     Ok(resp)
 }
 
-#[allow(clippy::result_large_err, reason = "the type of tungstenite's handshake callback")]
-async fn connection(stream: TcpStream, peer: SocketAddr, hub: Hub, session_id: String) {
-    let full = hub.stats().clients_now >= MAX_CLIENTS;
-    let config = WebSocketConfig::default()
+fn ws_config() -> WebSocketConfig {
+    WebSocketConfig::default()
         .max_message_size(Some(MAX_CLIENT_FRAME_BYTES))
-        .max_frame_size(Some(MAX_CLIENT_FRAME_BYTES));
+        .max_frame_size(Some(MAX_CLIENT_FRAME_BYTES))
+}
+
+/// A connection past the cap: its handshake read (briefly) and answered 503.
+#[allow(clippy::result_large_err, reason = "the type of tungstenite's handshake callback")]
+async fn refuse(stream: TcpStream, peer: SocketAddr, limits: FoxgloveLimits, _permit: OwnedSemaphorePermit) {
+    let cap = limits.max_clients;
     let handshake = tokio_tungstenite::accept_hdr_async_with_config(
         stream,
-        |req: &Request, resp| negotiate(req, resp, full),
-        Some(config),
+        |req: &Request, resp| negotiate(req, resp, Some(cap)),
+        Some(ws_config()),
     );
-    let ws = match tokio::time::timeout(HANDSHAKE_TIMEOUT, handshake).await {
+    let _ = tokio::time::timeout(REFUSAL_TIMEOUT.min(limits.handshake_timeout), handshake).await;
+    tracing::debug!(%peer, cap, "foxglove: a client was refused, the cap is reached");
+}
+
+/// One client, holding its permit until it leaves: the handshake, then its session.
+#[allow(clippy::result_large_err, reason = "the type of tungstenite's handshake callback")]
+async fn connection(
+    stream: TcpStream,
+    peer: SocketAddr,
+    hub: Hub,
+    session_id: String,
+    limits: FoxgloveLimits,
+    _permit: OwnedSemaphorePermit,
+) {
+    let handshake = tokio_tungstenite::accept_hdr_async_with_config(
+        stream,
+        |req: &Request, resp| negotiate(req, resp, None),
+        Some(ws_config()),
+    );
+    let ws = match tokio::time::timeout(limits.handshake_timeout, handshake).await {
         Ok(Ok(ws)) => ws,
         Ok(Err(e)) => {
             tracing::info!(%peer, error = %e, "foxglove: handshake refused");
@@ -182,44 +229,67 @@ async fn connection(stream: TcpStream, peer: SocketAddr, hub: Hub, session_id: S
     };
     let (client, outbox) = hub.connect(&info);
     tracing::info!(%peer, client, "foxglove client connected");
+    let why = session(ws, &hub, client, &outbox, limits.idle_timeout).await;
+    let dropped = hub.disconnect(client);
+    tracing::info!(%peer, client, dropped, %why, "foxglove client disconnected");
+}
+
+/// A connected client's session: its frames read, its outbox written with a ping every
+/// third of `idle`, until it leaves, goes quiet for `idle`, or the service stops; why it
+/// ended.
+async fn session(
+    ws: WebSocketStream<TcpStream>,
+    hub: &Hub,
+    client: u64,
+    outbox: &hub::Outbox,
+    idle: Duration,
+) -> String {
+    let heard = IdleClock::new();
     let (mut sink, mut incoming) = ws.split();
     let reader = async {
         while let Some(frame) = incoming.next().await {
+            heard.touch();
             match frame {
                 Ok(Message::Text(t)) => hub.on_text(client, t.as_str()),
                 Ok(Message::Binary(_)) => hub.on_unexpected(client, "binary"),
                 Ok(Message::Close(_)) => break,
                 Ok(_) => {} // ping/pong: tungstenite answers pings itself
-                Err(e) => {
-                    tracing::info!(%peer, client, error = %e, "foxglove: client read failed");
-                    break;
-                }
+                Err(e) => return format!("read failed: {e}"),
             }
         }
+        "the client closed".to_string()
     };
     let writer = async {
-        while let Some(out) = outbox.next().await {
-            sink.feed(frame(out)).await?;
-            // Send what is queued in one write, then flush.
-            while let Some(Some(out)) = outbox.try_next() {
-                sink.feed(frame(out)).await?;
+        let every = (idle / 3).max(Duration::from_millis(10));
+        let mut ping = tokio::time::interval_at(tokio::time::Instant::now() + every, every);
+        ping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        loop {
+            tokio::select! {
+                out = outbox.next() => {
+                    let Some(out) = out else { break };
+                    sink.feed(frame(out)).await?;
+                    // Send what is queued in one write, then flush.
+                    while let Some(Some(out)) = outbox.try_next() {
+                        sink.feed(frame(out)).await?;
+                    }
+                    sink.flush().await?;
+                }
+                _ = ping.tick() => sink.send(Message::Ping(Bytes::new())).await?,
             }
-            sink.flush().await?;
         }
         let _ = sink.send(Message::Close(None)).await;
         Ok::<_, tokio_tungstenite::tungstenite::Error>(())
     };
-    let why = tokio::select! {
-        _ = reader => "the client closed".to_string(),
+    tokio::select! {
+        why = reader => why,
         // Also ends a connection whose writer is stuck on a client that does not read.
         _ = hub.stopped() => "the service stopped".to_string(),
+        () = heard.idle_for(idle) => format!("no frame from the client in {} s", idle.as_secs_f64()),
         r = writer => match r {
             Ok(()) => "the server closed it (stopping, or the client left its messages unread)".to_string(),
             Err(e) => format!("write failed: {e}"),
         },
-    };
-    let dropped = hub.disconnect(client);
-    tracing::info!(%peer, client, dropped, %why, "foxglove client disconnected");
+    }
 }
 
 fn frame(out: Outgoing) -> Message {
@@ -245,14 +315,14 @@ mod tests {
 
     #[test]
     fn the_handshake_echoes_the_subprotocol_or_refuses_saying_why() {
-        let ok = negotiate(&request(Some("other, foxglove.websocket.v1")), Response::new(()), false).expect("accepted");
+        let ok = negotiate(&request(Some("other, foxglove.websocket.v1")), Response::new(()), None).expect("accepted");
         assert_eq!(ok.headers().get("sec-websocket-protocol").map(|v| v.as_bytes()), Some(SUBPROTOCOL.as_bytes()));
         let refused = |protocols, full| negotiate(&request(protocols), Response::new(()), full).expect_err("refused");
-        for r in [refused(None, false), refused(Some("foxglove.websocket.v2"), false)] {
+        for r in [refused(None, None), refused(Some("foxglove.websocket.v2"), None)] {
             assert_eq!(r.status(), StatusCode::BAD_REQUEST);
             assert!(r.body().as_deref().is_some_and(|b| b.contains(SUBPROTOCOL)));
         }
-        let r = refused(Some(SUBPROTOCOL), true);
+        let r = refused(Some(SUBPROTOCOL), Some(16));
         assert_eq!(r.status(), StatusCode::SERVICE_UNAVAILABLE);
         assert!(r.body().as_deref().is_some_and(|b| b.contains("16 clients")));
     }
