@@ -150,6 +150,14 @@ impl Pipeline {
         self.estimator.stream_break();
     }
 
+    /// The source was stopped (`Segmenter::stop`): a blow in progress after its contact is
+    /// reported `incomplete`, whatever its last samples show.
+    pub fn stop(&mut self, out: &mut Vec<PipelineEvent>) {
+        self.segmenter.stop(&mut self.cut);
+        self.drain(out);
+        self.estimator.stream_break();
+    }
+
     /// A new billet is in the dies (a signal): the height tracking and the alert memory
     /// start over, and the billet before is finished (its summary goes to `out`). Without a
     /// signal the estimator finds new billets from the encoder.

@@ -71,6 +71,16 @@ pub enum Outcome {
     NewBillet,
 }
 
+/// How a session's stream ended (`Session::finish`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum End {
+    /// The source was stopped while it could still send: the service's stop, and the end
+    /// of a recording, which is where a service stopped.
+    Stopped,
+    /// The input had nothing more: a capture file's end, after its blow.
+    InputEnded,
+}
+
 /// The session: the input merge, the pipeline and the recording.
 pub struct Session {
     feeder: Feeder,
@@ -166,8 +176,18 @@ impl Session {
 
     /// The end of the stream: the blow in progress and the billet in the dies closed and
     /// recorded, and the recording finished; its files back. Nothing is recorded after.
-    pub fn finish(&mut self, log_ns: i64, out: &mut Vec<Outcome>) -> Result<Vec<std::path::PathBuf>, RecordError> {
-        self.feeder.pipeline_mut().end_of_stream(&mut self.events);
+    /// `End::Stopped` (the service's stop, a recording's end) reports a blow in progress
+    /// `incomplete`; `End::InputEnded` (capture files) keeps one whose spring-back is seen.
+    pub fn finish(
+        &mut self,
+        end: End,
+        log_ns: i64,
+        out: &mut Vec<Outcome>,
+    ) -> Result<Vec<std::path::PathBuf>, RecordError> {
+        match end {
+            End::Stopped => self.feeder.pipeline_mut().stop(&mut self.events),
+            End::InputEnded => self.feeder.pipeline_mut().end_of_stream(&mut self.events),
+        }
         self.feeder.pipeline_mut().close_billet(&mut self.events);
         self.drain(log_ns, out);
         self.finished_health = self.recording_health();

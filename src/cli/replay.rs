@@ -19,7 +19,7 @@ use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline};
 use crate::record::{Payload, RecordReader, RecordWriter, Rotation};
 use crate::session::{
-    MACHINE_CONFIG_NAME, Outcome, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, Session, Stamp, is_new_billet_marker,
+    End, MACHINE_CONFIG_NAME, Outcome, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, Session, Stamp, is_new_billet_marker,
 };
 use crate::signal::sample::SampleBatch;
 
@@ -135,6 +135,7 @@ pub(crate) fn replay_into<W: Write>(
         json: args.json,
         blows: 0,
         rejected: 0,
+        end: End::InputEnded,
     };
     if !args.json {
         writeln!(replay.out, "{TABLE_HEADER}")?;
@@ -220,6 +221,9 @@ struct Replay<W: Write> {
     json: bool,
     blows: u64,
     rejected: u64,
+    /// How the input ends: a recording where its service stopped, capture files after their
+    /// blows (`Session::finish`).
+    end: End,
 }
 
 impl<W: Write> Replay<W> {
@@ -228,11 +232,13 @@ impl<W: Write> Replay<W> {
         let mut status = ExitCode::SUCCESS;
         match input {
             Input::Files(files) => {
+                self.end = End::InputEnded;
                 for path in files {
                     super::for_each_capture_batch(&path, |batch| self.batch(&batch))?;
                 }
             }
             Input::Recording { mut reader, ahead } => {
+                self.end = End::Stopped;
                 for batch in &ahead {
                     self.batch(batch)?;
                 }
@@ -332,7 +338,7 @@ impl<W: Write> Replay<W> {
 
     /// The end of the input: the last blow and billet closed, the recording finished.
     fn finish(mut self) -> anyhow::Result<Feeder> {
-        let files = self.session.finish(0, &mut self.outcomes);
+        let files = self.session.finish(self.end, 0, &mut self.outcomes);
         self.handle()?;
         self.out.flush()?;
         for f in files? {

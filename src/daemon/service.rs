@@ -17,7 +17,7 @@ use crate::estimate::BlowEstimate;
 use crate::estimate::billet_book::BilletSummary;
 use crate::estimate::result::{Alert, AlertKind};
 use crate::record::Gap;
-use crate::session::{Outcome, Session};
+use crate::session::{End, Outcome, Session};
 use crate::signal::sample::SampleBatch;
 
 use super::live::{Live, LiveEvent};
@@ -236,7 +236,7 @@ impl Service {
     /// The stream ends: the blow in progress and the billet in the dies are closed and
     /// recorded, and the recording finished.
     pub fn finish(mut self) -> anyhow::Result<Summary> {
-        let files = self.session.finish(host_now_ns(), &mut self.outcomes);
+        let files = self.session.finish(End::Stopped, host_now_ns(), &mut self.outcomes);
         self.serve();
         self.summary.samples = self.session.feeder().samples();
         self.summary.billets = u64::from(self.session.pipeline_mut().billets());

@@ -197,7 +197,7 @@ impl Segmenter {
         if self.last.is_some() && self.period_s > 0.0 && hole_s <= self.cfg.max_blow_s {
             self.pending_fill += missing;
         } else {
-            self.finish_losing(hole_s, out);
+            self.finish_losing(hole_s, false, out);
         }
     }
 
@@ -287,14 +287,22 @@ impl Segmenter {
     /// still loaded at the last sample (the load above the end level), the blow is cut short
     /// by an unknown time: it is marked with the time left to the longest blow.
     pub fn finish(&mut self, out: &mut Vec<Blow>) {
-        self.finish_losing(f64::INFINITY, out);
+        self.finish_losing(f64::INFINITY, false, out);
     }
 
-    /// End of the stream after a hole of `hole_s`.
-    fn finish_losing(&mut self, hole_s: f64, out: &mut Vec<Blow>) {
+    /// The source stopped (the service's stop, the end of a recording it made): a blow in
+    /// progress after its contact is cut short, however quiet its last samples were. Its
+    /// ring-down was not seen through, so a dip of the load under the end level (the lower
+    /// tool's ring at impact carries it below zero) is no evidence that the blow ended.
+    pub fn stop(&mut self, out: &mut Vec<Blow>) {
+        self.finish_losing(f64::INFINITY, true, out);
+    }
+
+    /// End of the stream after a hole of `hole_s`; `stopped`: cut short whenever in contact.
+    fn finish_losing(&mut self, hole_s: f64, stopped: bool, out: &mut Vec<Blow>) {
         if let State::InBlow { i_trigger, zero, contact, quiet } = self.state {
             let n = self.blow.len();
-            let loaded = contact.is_some() && quiet == 0;
+            let loaded = contact.is_some() && (quiet == 0 || stopped);
             let lost_s = if loaded {
                 self.stats.blows_cut_short += 1;
                 let left_s = self.cfg.max_blow_s - (self.blow[n - 1].t_s - self.blow[i_trigger].t_s);
