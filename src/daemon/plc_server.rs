@@ -12,8 +12,9 @@
 //! Every connection passes the frame gate (`gate.rs`, `conn.rs`): a malformed request is
 //! answered with exception 0x03 and the connection goes on; bytes that are not Modbus TCP
 //! close it; so does a connection that completes no request within `[plc_server]
-//! idle_timeout_s`. At most `max_connections` are open, counted when accepted: one more is
-//! closed at once. Each of these is counted in [`PlcStats`]; the service and the other
+//! idle_timeout_s`. At most `max_connections` are open, counted when accepted: one more
+//! takes the place of the oldest connection that has made no request yet, or is closed at
+//! once when every open one has. Each of these is counted in [`PlcStats`]; the service and the other
 //! clients go on.
 
 pub mod conn;
@@ -200,8 +201,11 @@ pub struct PlcStats {
     pub exceptions: AtomicU64,
     /// Connections that ended on an error: a reset, a failed write.
     pub connection_errors: AtomicU64,
-    /// Connections closed at accept because `max_connections` were open.
+    /// Connections closed at accept because `max_connections` were open and every one had
+    /// made a request.
     pub refused: AtomicU64,
+    /// Connections closed for a newer one: at the cap, without a request made.
+    pub evicted: AtomicU64,
     /// Connections closed after `idle_timeout_s` without a request.
     pub idle_closed: AtomicU64,
     /// Connections closed because their bytes were not Modbus TCP.
@@ -376,6 +380,10 @@ async fn serve(server: Server, service: ImageService, limits: PlcLimits) {
     let on_error = move |e: std::io::Error| match e.kind() {
         std::io::ErrorKind::TimedOut => {
             stats.idle_closed.fetch_add(1, Ordering::Relaxed);
+            tracing::debug!("PLC client closed: {e}");
+        }
+        std::io::ErrorKind::ConnectionAborted => {
+            stats.evicted.fetch_add(1, Ordering::Relaxed);
             tracing::debug!("PLC client closed: {e}");
         }
         std::io::ErrorKind::InvalidData => {

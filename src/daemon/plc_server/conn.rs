@@ -6,58 +6,112 @@
 //! answers are written here, between requests, so responses stay in request order. A
 //! connection that completes no request within the idle timeout (counted from the accept
 //! and from each request; bytes trickled in do not count) ends with `TimedOut`, and bytes
-//! that are not Modbus TCP end it with `InvalidData`: tokio-modbus then drops the socket.
+//! that are not Modbus TCP end it with `InvalidData`, and a connection whose place under
+//! the cap went to a newer one (`Slots`) with `ConnectionAborted`: tokio-modbus then drops
+//! the socket.
 
+use std::collections::VecDeque;
 use std::io;
 use std::pin::Pin;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, Weak};
 use std::task::{Context, Poll, ready};
 use std::time::Duration;
 
+use futures_util::task::AtomicWaker;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::time::{Instant, Sleep};
 
 use super::gate::{self, Judged, MAX_ADU};
 
-/// The open connections, counted when accepted (`[plc_server] max_connections`).
-#[derive(Debug)]
+/// The open connections, counted when accepted (`[plc_server] max_connections`). At the
+/// cap, a new connection takes the place of the oldest one that has not completed a
+/// request yet (a client that connects and waits cannot keep a PLC out); when every open
+/// connection has completed one, the new connection is refused.
+#[derive(Debug, Clone)]
 pub struct Slots {
-    open: Arc<AtomicUsize>,
+    registry: Arc<Mutex<Registry>>,
     max: usize,
+}
+
+#[derive(Debug, Default)]
+struct Registry {
+    open: usize,
+    /// Connections without a completed request yet, oldest first (dropped and proven ones
+    /// are skipped and pruned as they are met).
+    unproven: VecDeque<Weak<SlotState>>,
+}
+
+#[derive(Debug, Default)]
+struct SlotState {
+    /// A request completed on this connection.
+    proven: AtomicBool,
+    /// Its place was given to a newer connection: it is to close.
+    evicted: AtomicBool,
+    waker: AtomicWaker,
 }
 
 /// A connection's place under the cap, given back when it is dropped.
 #[derive(Debug)]
-pub struct Slot(Arc<AtomicUsize>);
+pub struct Slot {
+    state: Arc<SlotState>,
+    registry: Arc<Mutex<Registry>>,
+}
+
+impl Slot {
+    /// A request completed: the connection keeps its place until it closes.
+    fn proven(&self) {
+        self.state.proven.store(true, Ordering::Release);
+    }
+
+    /// Whether the place was given to a newer connection; wakes `cx` when it is.
+    fn evicted(&self, cx: &Context<'_>) -> bool {
+        self.state.waker.register(cx.waker());
+        self.state.evicted.load(Ordering::Acquire)
+    }
+}
 
 impl Drop for Slot {
     fn drop(&mut self) {
-        self.0.fetch_sub(1, Ordering::AcqRel);
+        let mut r = self.registry.lock().unwrap_or_else(|p| p.into_inner());
+        // An evicted connection's place is already the newer one's.
+        if !self.state.evicted.load(Ordering::Acquire) {
+            r.open = r.open.saturating_sub(1);
+        }
     }
 }
 
 impl Slots {
     pub fn new(max: usize) -> Self {
-        Slots { open: Arc::new(AtomicUsize::new(0)), max }
+        Slots { registry: Arc::default(), max }
     }
 
-    /// A place for one more connection, `None` when `max` are open.
+    /// A place for one more connection: a free one, or the place of the oldest connection
+    /// without a completed request, which is told to close; `None` when there is neither.
     pub fn take(&self) -> Option<Slot> {
-        let mut n = self.open.load(Ordering::Acquire);
-        loop {
-            if n >= self.max {
-                return None;
-            }
-            match self.open.compare_exchange_weak(n, n + 1, Ordering::AcqRel, Ordering::Acquire) {
-                Ok(_) => return Some(Slot(self.open.clone())),
-                Err(now) => n = now,
-            }
+        let mut r = self.registry.lock().unwrap_or_else(|p| p.into_inner());
+        if r.open >= self.max {
+            let victim = loop {
+                let oldest = r.unproven.pop_front()?;
+                match oldest.upgrade() {
+                    Some(v) if !v.proven.load(Ordering::Acquire) && !v.evicted.load(Ordering::Acquire) => break v,
+                    _ => continue,
+                }
+            };
+            victim.evicted.store(true, Ordering::Release);
+            victim.waker.wake();
+        } else {
+            r.open += 1;
         }
+        let state = Arc::new(SlotState::default());
+        r.unproven.retain(|w| w.upgrade().is_some_and(|s| !s.proven.load(Ordering::Acquire)));
+        r.unproven.push_back(Arc::downgrade(&state));
+        Some(Slot { state, registry: self.registry.clone() })
     }
 
+    /// Connections holding a place.
     pub fn open(&self) -> usize {
-        self.open.load(Ordering::Acquire)
+        self.registry.lock().unwrap_or_else(|p| p.into_inner()).open
     }
 }
 
@@ -76,7 +130,7 @@ pub struct Gated<S> {
     idle_timeout: Duration,
     /// Requests the gate answered itself.
     malformed: Arc<AtomicU64>,
-    _slot: Slot,
+    slot: Slot,
 }
 
 impl<S> Gated<S> {
@@ -91,13 +145,15 @@ impl<S> Gated<S> {
             idle: Box::pin(tokio::time::sleep(idle_timeout)),
             idle_timeout,
             malformed,
-            _slot: slot,
+            slot,
         }
     }
 
-    /// A request completed: the idle time counts again from now.
+    /// A request completed: the idle time counts again from now, and the connection keeps
+    /// its place.
     fn active(&mut self) {
         self.idle.as_mut().reset(Instant::now() + self.idle_timeout);
+        self.slot.proven();
     }
 
     /// Judge the first unjudged request: `true` when there was one to hand on or answer.
@@ -127,6 +183,10 @@ impl<S> Gated<S> {
 impl<S: AsyncRead + AsyncWrite + Unpin> AsyncRead for Gated<S> {
     fn poll_read(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
         let this = &mut *self;
+        if this.slot.evicted(cx) {
+            let why = "closed for a newer connection: max_connections are open and this one made no request";
+            return Poll::Ready(Err(io::Error::new(io::ErrorKind::ConnectionAborted, why)));
+        }
         loop {
             // The gate's answer goes out before the next request is read.
             while this.replied < this.reply.len() {
@@ -186,15 +246,28 @@ mod tests {
         Gated::new(s, idle, slots.take().expect("a slot"), Arc::new(AtomicU64::new(0)))
     }
 
+    fn cx() -> Context<'static> {
+        Context::from_waker(std::task::Waker::noop())
+    }
+
     #[test]
-    fn the_cap_counts_open_connections() {
+    fn the_cap_counts_open_connections_and_evicts_the_oldest_that_made_no_request() {
         let slots = Slots::new(2);
-        let (a, b) = (slots.take(), slots.take());
-        assert!(a.is_some() && b.is_some());
-        assert!(slots.take().is_none(), "a third is refused");
+        let (a, b) = (slots.take().expect("a"), slots.take().expect("b"));
+        a.proven();
+        // At the cap: c takes b's place (b made no request), a keeps its own.
+        let c = slots.take().expect("c");
+        assert!(b.evicted(&cx()) && !a.evicted(&cx()) && !c.evicted(&cx()));
+        assert_eq!(slots.open(), 2);
+        drop(b);
+        assert_eq!(slots.open(), 2, "the evicted one's place is c's");
+        c.proven();
+        assert!(slots.take().is_none(), "every open connection made a request: refused");
         drop(a);
         assert_eq!(slots.open(), 1);
-        assert!(slots.take().is_some(), "a closed connection frees its place");
+        let d = slots.take().expect("a closed connection frees its place");
+        drop((c, d));
+        assert_eq!(slots.open(), 0);
     }
 
     #[tokio::test]
