@@ -3,8 +3,9 @@
 //! [`Authenticator`] wraps async-opcua's `DefaultAuthenticator` (which checks the user and
 //! password and offers the token policies) with a [`LoginThrottle`]: after
 //! [`FREE_FAILURES`] wrong passwords in a row, logins are checked one at a time, at most one
-//! every [`SPACING`] (2 a second); a try waits for its turn, and when [`MAX_WAITING`] tries
-//! already wait, it is refused unchecked. A right password ends the throttling.
+//! every [`SPACING`] (2 a second); a try waits for its turn, and one that would wait
+//! [`MAX_WAITING`] turns or more (4 s) is refused unchecked. A right password ends the
+//! throttling.
 //!
 //! The throttle is the server's, not a peer's: async-opcua 0.19 tells an `AuthManager`
 //! the endpoint, user and password of a login but not the client's address or certificate,
@@ -23,7 +24,7 @@ use tokio::time::Instant;
 pub const FREE_FAILURES: u32 = 10;
 /// Then one login checked per this time: 2 a second.
 pub const SPACING: Duration = Duration::from_millis(500);
-/// Logins waiting for their turn at most; more are refused unchecked.
+/// Turns a login may wait at most; one that would wait longer is refused unchecked.
 pub const MAX_WAITING: u32 = 8;
 
 /// When a login may be checked.
