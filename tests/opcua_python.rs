@@ -13,6 +13,7 @@
 
 mod common;
 
+use std::os::unix::fs::PermissionsExt;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
@@ -22,7 +23,6 @@ use forgemon::record::{Payload, read_recording};
 use serde_json::Value;
 
 const INSTALL: &str = "python3 -m pip install asyncua";
-const HAMMER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/hammer-lg1000.machine.toml");
 
 fn client(args: &[&str]) -> Command {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/opcua_client.py");
@@ -177,40 +177,56 @@ fn an_asyncua_client_browses_reads_and_receives_every_blow_of_the_demo() {
     );
 }
 
-/// A service file with one serial source that never opens (the service runs on without
-/// it) and `opcua`'s table.
+/// A service file (`common::service_file`) with `opcua`'s table.
 fn service_file(dir: &Path, http: u16, opcua: &str) -> std::path::PathBuf {
-    let cfg = format!(
-        r#"machine = "{HAMMER}"
-[recording]
-dir = "rec"
-[http]
-listen = "127.0.0.1:{http}"
-[opcua]
-{opcua}
-[[sources]]
-name = "daq"
-kind = "serial"
-path = "{}"
-[[sources.channels]]
-role = "load_N"
-gain = 1.0
-[[sources.channels]]
-role = "disp_m"
-gain = 1.0
-[[sources.channels]]
-role = "acc_mps2"
-gain = 1.0
-"#,
-        dir.join("no-such-tty").display()
-    );
-    let path = dir.join("service.toml");
-    std::fs::write(&path, cfg).expect("write the service file");
-    path
+    common::service_file(dir, http, &format!("[opcua]\n{opcua}"))
+}
+
+/// `forgemon run` with `[opcua] user = "mes"` and a private password file on a free
+/// loopback port (`extra`: more keys of `[opcua]`): the service, the URL and the PKI dir.
+fn user_service(dir: &Path, password: &str, extra: &str) -> (std::process::Child, String, std::path::PathBuf) {
+    let pass = dir.join("opcua.pass");
+    std::fs::write(&pass, format!("{password}\n")).expect("write the password");
+    std::fs::set_permissions(&pass, std::fs::Permissions::from_mode(0o600)).expect("chmod 600");
+    let (http, port) = (free_port(), free_port());
+    let table =
+        format!("listen = \"opc.tcp://127.0.0.1:{port}\"\nuser = \"mes\"\npassword_file = \"opcua.pass\"\n{extra}");
+    let service = common::spawn_service(&service_file(dir, http, &table), http);
+    (service, format!("opc.tcp://127.0.0.1:{port}"), dir.join("opcua-pki"))
+}
+
+/// The python client's `verb` against the user service: `auth` or `throttle N`.
+fn user_client(verb: &[&str], url: &str, pki: &Path, password: &str, work: &Path) -> Output {
+    let cert = pki.join("own/cert.der");
+    let (cert, work) = (cert.to_str().expect("utf-8 path"), work.to_str().expect("utf-8 path"));
+    let mut args = vec![verb[0], url, cert, "mes", password, work];
+    args.extend(&verb[1..]);
+    client(&args).output().unwrap_or_else(|e| panic!("cannot run python3 ({e}): {INSTALL}"))
+}
+
+/// The certificates (`*.der`) directly in `dir`.
+fn certs_in(dir: &Path) -> Vec<std::path::PathBuf> {
+    std::fs::read_dir(dir)
+        .map(|d| {
+            d.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "der")).collect()
+        })
+        .unwrap_or_default()
+}
+
+/// What an operator does to trust a client: its certificate moved from rejected to trusted.
+fn trust_rejected(pki: &Path) {
+    for cert in certs_in(&pki.join("rejected")) {
+        let to = pki.join("trusted").join(cert.file_name().expect("a file name"));
+        std::fs::rename(&cert, to).expect("move the certificate to trusted");
+    }
+}
+
+fn mode(p: &Path) -> u32 {
+    std::fs::metadata(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())).permissions().mode() & 0o777
 }
 
 #[test]
-fn anonymous_sessions_are_loopback_only_and_a_user_needs_the_password() {
+fn anonymous_sessions_are_loopback_only_and_a_user_needs_the_password_and_a_trusted_certificate() {
     let dir = tempfile::tempdir().expect("temp dir");
     // Off loopback without a user: the service does not start, and says which key.
     let cfg = service_file(dir.path(), free_port(), "listen = \"opc.tcp://0.0.0.0:4840\"");
@@ -219,29 +235,103 @@ fn anonymous_sessions_are_loopback_only_and_a_user_needs_the_password() {
     assert!(!out.status.success(), "a non-loopback anonymous server was started");
     assert!(stderr.contains("opcua.user") && stderr.contains("not loopback"), "{stderr}");
 
-    // A user on loopback: only the encrypted endpoint, only with the password.
+    // A user on loopback: only the encrypted endpoint, only with the password, and only
+    // for a client whose certificate an operator trusted.
     let password = "hammer-7c1f";
-    std::fs::write(dir.path().join("opcua.pass"), format!("{password}\n")).expect("write the password");
-    let (http, port) = (free_port(), free_port());
-    let table = format!("listen = \"opc.tcp://127.0.0.1:{port}\"\nuser = \"mes\"\npassword_file = \"opcua.pass\"");
-    let mut service = common::spawn_service(&service_file(dir.path(), http, &table), http);
-    let cert = dir.path().join("opcua-pki/own/cert.der");
-    let url = format!("opc.tcp://127.0.0.1:{port}");
-    let out = client(&[
-        "auth",
-        &url,
-        cert.to_str().expect("utf-8 path"),
-        "mes",
-        password,
-        dir.path().to_str().expect("utf-8 path"),
-    ])
-    .output()
-    .unwrap_or_else(|e| panic!("cannot run python3 ({e}): {INSTALL}"));
+    let (mut service, url, pki) = user_service(dir.path(), password, "");
+    let refused = client_json(user_client(&["auth"], &url, &pki, password, dir.path()));
+    let (rejected, trusted) = (certs_in(&pki.join("rejected")), certs_in(&pki.join("trusted")));
+    trust_rejected(&pki);
+    let seen = client_json(user_client(&["auth"], &url, &pki, password, dir.path()));
     let _ = service.kill();
     let _ = service.wait();
-    let seen = client_json(out);
+    // Before it was trusted, even the right password was refused, and the certificate of
+    // the refused client was kept in rejected, never in trusted (issue 39: 40 refused
+    // attempts left 40 certificates in trusted).
+    assert!(refused["right_password"].get("error").is_some(), "an unknown certificate was served: {refused}");
+    assert_eq!(rejected.len(), 1, "the refused client's certificate in rejected: {rejected:?}");
+    assert!(trusted.is_empty(), "a refused client's certificate in trusted: {trusted:?}");
     for refused in ["anonymous_none", "anonymous_encrypted", "wrong_password"] {
         assert!(seen[refused].get("error").is_some(), "{refused} was served: {seen}");
     }
     assert_eq!(seen["right_password"]["ok"], 0, "the right password reads the counter (no blow yet): {seen}");
+    // The wrong password left the trusted certificate where the operator put it.
+    assert!(certs_in(&pki.join("rejected")).is_empty() && certs_in(&pki.join("trusted")).len() == 1);
+    // The server's private key (issue 39: written 0644) and its directory are private.
+    assert_eq!(mode(&pki.join("private/private.pem")), 0o600, "private.pem");
+    assert_eq!(mode(&pki.join("private")), 0o700, "the private directory");
+}
+
+#[test]
+fn a_password_file_open_to_others_stops_the_service_with_the_fix() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let pass = dir.path().join("opcua.pass");
+    std::fs::write(&pass, "hammer-7c1f\n").expect("write the password");
+    std::fs::set_permissions(&pass, std::fs::Permissions::from_mode(0o644)).expect("chmod 644");
+    let table =
+        format!("listen = \"opc.tcp://127.0.0.1:{}\"\nuser = \"mes\"\npassword_file = \"opcua.pass\"", free_port());
+    let cfg = service_file(dir.path(), free_port(), &table);
+    let out = Command::new(env!("CARGO_BIN_EXE_forgemon")).args(["run", "--config"]).arg(&cfg).output().expect("run");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "a password file readable by others was taken");
+    assert!(stderr.contains(&format!("chmod 600 {}", pass.display())), "{stderr}");
+}
+
+#[test]
+fn wrong_passwords_from_one_client_are_throttled_to_two_a_second_after_ten() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let password = "hammer-7c1f";
+    // Sessions of refused logins may stay until they time out: room for every try.
+    let (mut service, url, pki) = user_service(dir.path(), password, "max_sessions = 100");
+    let _ = user_client(&["auth"], &url, &pki, password, dir.path());
+    trust_rejected(&pki);
+    let seen = client_json(user_client(&["throttle", "16"], &url, &pki, password, dir.path()));
+    let _ = service.kill();
+    let _ = service.wait();
+    let wrong = seen["wrong"].as_array().expect("tries");
+    assert_eq!(wrong.len(), 16);
+    assert!(wrong.iter().all(|t| t.get("error").is_some()), "a wrong password was served: {seen}");
+    // The 11th to the 16th try: the server checks at most one per 0.5 s after ten wrong
+    // passwords, so the six took at least five intervals (issue 39: 20 tries in 1.8 s).
+    let at = |k: usize, what: &str| wrong[k][what].as_f64().expect("a time");
+    let six_s = at(15, "end") - at(10, "start");
+    assert!(six_s >= 2.5 - 0.05, "tries 11 to 16 took {six_s:.2} s: more than 2 a second were served");
+    assert_eq!(seen["right"]["ok"], 0, "the right password is still served: {seen}");
+}
+
+#[test]
+fn a_connection_that_never_sends_hel_is_closed_after_the_hello_timeout() {
+    use std::io::Read;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (http, port) = (free_port(), free_port());
+    let table = format!("listen = \"opc.tcp://127.0.0.1:{port}\"\nhello_timeout_s = 1");
+    let mut service = common::spawn_service(&service_file(dir.path(), http, &table), http);
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    let mut s = loop {
+        match std::net::TcpStream::connect(("127.0.0.1", port)) {
+            Ok(s) => break s,
+            Err(e) => assert!(std::time::Instant::now() < deadline, "the OPC UA server did not come up: {e}"),
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    let opened = std::time::Instant::now();
+    // Nothing is sent. The server may say why (an ERR message) before it closes.
+    s.set_read_timeout(Some(std::time::Duration::from_secs(10))).expect("read timeout");
+    let mut buf = [0u8; 256];
+    let closed = loop {
+        match s.read(&mut buf) {
+            Ok(0) => break Ok(opened.elapsed()),
+            Ok(_) => continue,
+            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
+                break Err(e);
+            }
+            Err(_) => break Ok(opened.elapsed()),
+        }
+    };
+    let _ = service.kill();
+    let _ = service.wait();
+    let t = closed.unwrap_or_else(|e| panic!("a connection without HEL was open after 10 s: {e}"));
+    // hello_timeout_s = 1: closed after about a second, with 3 s of slack for a loaded
+    // machine, and well before async-opcua's default of 5 s.
+    assert!(t < std::time::Duration::from_secs(4), "closed after {t:?}");
 }

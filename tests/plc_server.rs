@@ -7,22 +7,29 @@
 //! other addresses and another unit id are refused with Modbus exceptions, and a client that
 //! sent garbage does not stop the server. CI installs pymodbus (`.ci/run`); elsewhere the
 //! test fails saying how.
+//!
+//! The server's limits (issue 39), with raw TCP clients against `forgemon run`: an idle
+//! connection is closed after `[plc_server] idle_timeout_s`; a connection past
+//! `max_connections` takes the place of the oldest that has made no request, or is closed
+//! when accepted if every open one has; a malformed request is answered with
+//! exception 0x03 on a connection that goes on, and bytes that are not Modbus TCP close
+//! the connection at once.
 
-use std::io::{BufRead, BufReader};
-use std::net::TcpListener;
+mod common;
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::free_port;
 
 use forgemon::estimate::{BlowClass, BlowEstimate};
 use forgemon::record::{Payload, read_recording};
 use serde_json::Value;
 
 const INSTALL: &str = "python3 -m pip install pymodbus";
-
-/// A free loopback port (closed again, for the demo to take).
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).expect("a free port").port()
-}
 
 fn words(v: &Value) -> Vec<u32> {
     v.as_array().expect("registers").iter().map(|w| w.as_u64().expect("a word") as u32).collect()
@@ -197,4 +204,166 @@ fn a_pymodbus_client_reads_the_demo_results_and_its_coils_act() {
     let counted = f64::from((last[1].as_u64().unwrap_or(0) as u16).wrapping_sub(first[1].as_u64().unwrap_or(0) as u16));
     assert!(elapsed_s >= 2.0, "the client read for {elapsed_s} s");
     assert!((counted - elapsed_s).abs() <= 1.5, "heartbeat +{counted} over {elapsed_s:.2} s");
+}
+
+/// `forgemon run` serving the image on a free port with `limits` (TOML lines of
+/// `[plc_server]`): the service and the image's address.
+fn plc_service(dir: &Path, limits: &str) -> (Child, String) {
+    let (http, plc) = (free_port(), free_port());
+    let addr = format!("127.0.0.1:{plc}");
+    let cfg = common::service_file(dir, http, &format!("[plc_server]\nlisten = \"{addr}\"\n{limits}"));
+    let service = common::spawn_service(&cfg, http);
+    // The image is a face started beside the status endpoint: wait until it accepts.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while TcpStream::connect(&addr).is_err() {
+        assert!(Instant::now() < deadline, "the PLC image did not come up on {addr}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    (service, addr)
+}
+
+/// A connection to `addr` whose reads give up after `timeout`.
+fn connect(addr: &str, timeout: Duration) -> TcpStream {
+    let s = TcpStream::connect(addr).expect("connect");
+    s.set_read_timeout(Some(timeout)).expect("read timeout");
+    s
+}
+
+/// How a connection answered a read within its timeout.
+#[derive(Debug, PartialEq)]
+enum Seen {
+    Bytes(Vec<u8>),
+    /// End of stream or a reset: the server closed it.
+    Closed,
+    /// Nothing within the timeout: still open.
+    Open,
+}
+
+fn wait_read(s: &mut TcpStream) -> Seen {
+    let mut buf = [0u8; 300];
+    match s.read(&mut buf) {
+        Ok(0) => Seen::Closed,
+        Ok(n) => Seen::Bytes(buf[..n].to_vec()),
+        Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => Seen::Open,
+        Err(_) => Seen::Closed,
+    }
+}
+
+/// A request ADU: transaction `tid`, unit 1, `pdu`.
+fn adu(tid: u16, pdu: &[u8]) -> Vec<u8> {
+    let mut v = tid.to_be_bytes().to_vec();
+    v.extend([0, 0]); // protocol 0
+    v.extend(((pdu.len() + 1) as u16).to_be_bytes()); // length: unit + PDU
+    v.push(1); // unit 1
+    v.extend(pdu);
+    v
+}
+
+/// Read holding registers 0..20, as the PLC does.
+const READ_IMAGE: [u8; 5] = [0x03, 0x00, 0x00, 0x00, 0x14];
+
+fn stop(mut service: Child) {
+    let _ = service.kill();
+    let _ = service.wait();
+}
+
+/// Send the image read on `s` and wait for its answer: what came back.
+fn poll(s: &mut TcpStream, tid: u16) -> Seen {
+    s.write_all(&adu(tid, &READ_IMAGE)).expect("send");
+    wait_read(s)
+}
+
+#[test]
+fn idle_plc_connections_are_closed_after_the_idle_timeout_and_the_cap_is_counted_at_accept() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (service, addr) = plc_service(dir.path(), "idle_timeout_s = 3.0\nmax_connections = 3\n");
+    let timeout = Duration::from_millis(1500);
+    // A PLC polls; two clients connect and say nothing.
+    let mut plc = connect(&addr, timeout);
+    let plc_first = poll(&mut plc, 1);
+    let (mut quiet_1, mut quiet_2) = (connect(&addr, timeout), connect(&addr, timeout));
+    // A fourth, at the cap: it takes the place of the oldest that made no request, which
+    // is closed at once (well before the 3 s idle timeout), and is served.
+    let mut fourth = connect(&addr, timeout);
+    let evicted = wait_read(&mut quiet_1);
+    let (fourth_served, quiet_2_polled) = (poll(&mut fourth, 2), poll(&mut quiet_2, 3));
+    // Now every open connection has made a request: a fifth is closed when accepted.
+    let mut fifth = connect(&addr, timeout);
+    let fifth_seen = wait_read(&mut fifth);
+    // Then nobody asks anything: each is closed 3 s after its last request, not before.
+    let last_request = Instant::now();
+    let mut closed_after = Vec::new();
+    for s in [&mut plc, &mut fourth, &mut quiet_2] {
+        s.set_read_timeout(Some(Duration::from_secs(8))).expect("read timeout");
+        closed_after.push((wait_read(s), last_request.elapsed()));
+    }
+    // Their places are free again: a new client is served.
+    let mut after = connect(&addr, Duration::from_secs(3));
+    let served = poll(&mut after, 9);
+    stop(service);
+    for (what, seen) in [("the PLC", &plc_first), ("the fourth", &fourth_served), ("the second quiet", &quiet_2_polled)]
+    {
+        assert!(matches!(seen, Seen::Bytes(r) if r.len() == 49 && r[7] == 0x03), "{what}: {seen:?}");
+    }
+    assert_eq!(evicted, Seen::Closed, "the oldest quiet connection kept its place past max_connections = 3");
+    assert_eq!(fifth_seen, Seen::Closed, "the connection past max_connections = 3 was not closed");
+    for (seen, t) in &closed_after {
+        assert_eq!(*seen, Seen::Closed, "an idle connection was not closed after {t:?}");
+        assert!(*t >= Duration::from_millis(2900), "closed after {t:?}, before the 3 s idle timeout");
+    }
+    let Seen::Bytes(reply) = served else { panic!("a client after the idle ones was not served: {served:?}") };
+    // transaction 9, protocol 0, length 43, unit 1, function 3, 40 bytes
+    assert_eq!(reply[..9], [0, 9, 0, 0, 0, 43, 1, 0x03, 40], "{reply:02x?}");
+}
+
+#[test]
+fn a_malformed_pdu_is_answered_with_exception_3_and_the_connection_stays_usable() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (service, addr) = plc_service(dir.path(), "");
+    let mut s = connect(&addr, Duration::from_secs(3));
+    let mut ask = |tid: u16, pdu: &[u8]| {
+        s.write_all(&adu(tid, pdu)).expect("send");
+        wait_read(&mut s)
+    };
+    let answers = [
+        ask(1, &[0x03, 0x00, 0x00, 0x00, 0x00]),                // a read of 0 registers
+        ask(2, &[0x03, 0x00, 0x00, 0x00, 0x7E]),                // a read of 126 (max 125)
+        ask(3, &[0x03, 0x00, 0x00, 0x00]),                      // truncated: no quantity's low byte
+        ask(4, &[0x10, 0x00, 0x00, 0x00, 0x02, 0x03, 0, 1, 0]), // 2 registers, 3 bytes
+        ask(5, &[0x05, 0x00, 0x00, 0x12, 0x34]),                // a coil value other than on or off
+    ];
+    let read = ask(6, &READ_IMAGE);
+    stop(service);
+    for (k, (seen, function)) in answers.iter().zip([0x83u8, 0x83, 0x83, 0x90, 0x85]).enumerate() {
+        let tid = k as u8 + 1;
+        // transaction, protocol 0, length 3, unit 1, function | 0x80, 0x03 illegal data value
+        assert_eq!(*seen, Seen::Bytes(vec![0, tid, 0, 0, 0, 3, 1, function, 0x03]), "request {tid}");
+    }
+    let Seen::Bytes(reply) = read else { panic!("the connection did not go on: {read:?}") };
+    assert_eq!(reply[..9], [0, 6, 0, 0, 0, 43, 1, 0x03, 40], "{reply:02x?}");
+}
+
+#[test]
+fn random_bytes_get_the_connection_closed_at_once() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    // An idle timeout far longer than the test waits: the close is the gate's.
+    let (service, addr) = plc_service(dir.path(), "idle_timeout_s = 60.0\n");
+    let garbage: [&[u8]; 3] = [
+        b"GET / HTTP/1.1\r\nhost: plc\r\n\r\n",
+        &[0x16, 0x03, 0x01, 0x02, 0x00, 0x01, 0x00, 0x01, 0xfc, 0x03, 0x03], // a TLS hello
+        &[0x00, 0x01, 0x00, 0x00, 0xff, 0xff, 0x01, 0x03],                   // protocol 0, length 65535
+    ];
+    let seen: Vec<Seen> = garbage
+        .iter()
+        .map(|g| {
+            let mut s = connect(&addr, Duration::from_secs(5));
+            s.write_all(g).expect("send");
+            wait_read(&mut s)
+        })
+        .collect();
+    // The server still serves a PLC.
+    let served = poll(&mut connect(&addr, Duration::from_secs(3)), 7);
+    stop(service);
+    assert_eq!(seen, [Seen::Closed, Seen::Closed, Seen::Closed]);
+    assert!(matches!(served, Seen::Bytes(ref r) if r[7] == 0x03), "{served:?}");
 }

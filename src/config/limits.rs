@@ -139,6 +139,13 @@ pub const RESIDUAL_LIMIT: Limits = Limits { min: 1e-4, max: 10.0, unit: "" };
 /// (the two sensors disagree by the whole blow).
 pub const SENSOR_LIMIT: Limits = Limits { min: 1e-3, max: 1.0, unit: "" };
 
+/// `[plc_server] idle_timeout_s`, s: from 0.1 s (a few PLC cycles) to a day.
+pub const PLC_IDLE_TIMEOUT_S: Limits = Limits { min: 0.1, max: 86_400.0, unit: "s" };
+
+/// `[plc_server] max_connections`: from one client to 10 000, far below the descriptors
+/// a service may hold (set `LimitNOFILE` above the sum of every face's cap).
+pub const PLC_MAX_CONNECTIONS: WholeLimits = WholeLimits { min: 1, max: 10_000, unit: "connections" };
+
 impl Limits {
     /// `x` if it is finite and in the range; otherwise why not, in words.
     pub fn check(&self, x: f64) -> Result<f64, String> {

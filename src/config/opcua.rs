@@ -3,7 +3,8 @@
 //! loopback address only; any other address needs `user` and `password_file`, and then
 //! the server offers only a signed and encrypted endpoint (Basic256Sha256) whose self-signed
 //! certificate it keeps under `pki_dir`. The password itself is read when the service
-//! starts, not here (this module does no IO).
+//! starts, not here (this module does no IO). `hello_timeout_s` and `max_sessions` bound
+//! what unauthenticated clients can hold.
 
 use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};
@@ -12,12 +13,24 @@ use serde::Deserialize;
 
 use super::ConfigError;
 use super::document::Document;
+use super::limits::WholeLimits;
 
 /// The URL scheme of OPC UA over TCP (OPC 10000-6 §7.2).
 pub const OPC_TCP_SCHEME: &str = "opc.tcp://";
 /// Default PKI directory (the server's own certificate and key, relative to the
 /// configuration file's directory), used only when sessions need a user.
 pub const DEFAULT_PKI_DIR: &str = "opcua-pki";
+/// `hello_timeout_s`: a connection that has not sent its HEL message after this long is
+/// closed (async-opcua's `tcp_config.hello_timeout`; it also bounds the time to open the
+/// secure channel after HEL).
+pub const DEFAULT_HELLO_TIMEOUT_S: u64 = 5;
+/// `max_sessions`: sessions open at once (async-opcua's `limits.max_sessions`); a plant
+/// has a few clients (an MES, a SCADA, an engineer's browser).
+pub const DEFAULT_MAX_SESSIONS: u64 = 10;
+/// `hello_timeout_s` from 1 s to 10 min.
+pub const HELLO_TIMEOUT_S: WholeLimits = WholeLimits { min: 1, max: 600, unit: "s" };
+/// `max_sessions` from 1 to 1000.
+pub const MAX_SESSIONS: WholeLimits = WholeLimits { min: 1, max: 1000, unit: "sessions" };
 
 /// `[opcua]` as written.
 #[derive(Deserialize)]
@@ -27,6 +40,8 @@ pub(super) struct RawOpcua {
     user: Option<String>,
     password_file: Option<String>,
     pki_dir: Option<String>,
+    hello_timeout_s: Option<u64>,
+    max_sessions: Option<u64>,
 }
 
 /// Who may open a session.
@@ -47,6 +62,10 @@ pub struct OpcuaConfig {
     /// The address it names.
     pub listen: SocketAddr,
     pub access: OpcuaAccess,
+    /// `hello_timeout_s`: a connection without HEL is closed after this long.
+    pub hello_timeout_s: u64,
+    /// `max_sessions`: sessions open at once.
+    pub max_sessions: u64,
 }
 
 impl OpcuaConfig {
@@ -56,7 +75,13 @@ impl OpcuaConfig {
         if !listen.ip().is_loopback() {
             return Err(format!("{url}: anonymous OPC UA sessions are served on loopback only"));
         }
-        Ok(OpcuaConfig { url: url.to_string(), listen, access: OpcuaAccess::Anonymous })
+        Ok(OpcuaConfig {
+            url: url.to_string(),
+            listen,
+            access: OpcuaAccess::Anonymous,
+            hello_timeout_s: DEFAULT_HELLO_TIMEOUT_S,
+            max_sessions: DEFAULT_MAX_SESSIONS,
+        })
     }
 }
 
@@ -118,7 +143,15 @@ pub(super) fn parse_opcua(
     if raw.pki_dir.is_some() && access == OpcuaAccess::Anonymous {
         return Err(doc.invalid("opcua.pki_dir", "is used only with user and password_file"));
     }
-    Ok(Some(OpcuaConfig { url: raw.listen.clone(), listen, access }))
+    let hello_timeout_s = match raw.hello_timeout_s {
+        Some(s) => doc.in_whole_range("opcua.hello_timeout_s", s, &HELLO_TIMEOUT_S)?,
+        None => DEFAULT_HELLO_TIMEOUT_S,
+    };
+    let max_sessions = match raw.max_sessions {
+        Some(n) => doc.in_whole_range("opcua.max_sessions", n, &MAX_SESSIONS)?,
+        None => DEFAULT_MAX_SESSIONS,
+    };
+    Ok(Some(OpcuaConfig { url: raw.listen.clone(), listen, access, hello_timeout_s, max_sessions }))
 }
 
 #[cfg(test)]
@@ -186,6 +219,20 @@ mod tests {
         assert!(e.contains("missing key 'opcua.user'"), "{e}");
         let e = err("[opcua]\nlisten = \"opc.tcp://127.0.0.1:4840\"\npki_dir = \"p\"\n");
         assert!(e.contains("'opcua.pki_dir'"), "{e}");
+    }
+
+    #[test]
+    fn the_limits_have_defaults_and_ranges() {
+        let c = parse("[opcua]\nlisten = \"opc.tcp://127.0.0.1:4840\"\n").unwrap().unwrap();
+        assert_eq!((c.hello_timeout_s, c.max_sessions), (5, 10));
+        let c = parse("[opcua]\nlisten = \"opc.tcp://127.0.0.1:4840\"\nhello_timeout_s = 2\nmax_sessions = 3\n")
+            .unwrap()
+            .unwrap();
+        assert_eq!((c.hello_timeout_s, c.max_sessions), (2, 3));
+        let e = err("[opcua]\nlisten = \"opc.tcp://127.0.0.1:4840\"\nhello_timeout_s = 0\n");
+        assert!(e.contains("'opcua.hello_timeout_s'"), "{e}");
+        let e = err("[opcua]\nlisten = \"opc.tcp://127.0.0.1:4840\"\nmax_sessions = 0\n");
+        assert!(e.contains("'opcua.max_sessions'"), "{e}");
     }
 
     #[test]

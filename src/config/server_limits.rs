@@ -27,8 +27,11 @@ pub const DEFAULT_FOXGLOVE_IDLE_TIMEOUT_S: f64 = 60.0;
 
 /// Each server's connection cap at its default, by its key: what the descriptor limit of
 /// the systemd unit must hold beside the service's own files.
-pub const DEFAULT_CONNECTION_CAPS: [(&str, u64); 2] =
-    [("http.max_connections", DEFAULT_HTTP_MAX_CONNECTIONS), ("foxglove.max_clients", DEFAULT_FOXGLOVE_MAX_CLIENTS)];
+pub const DEFAULT_CONNECTION_CAPS: [(&str, u64); 3] = [
+    ("http.max_connections", DEFAULT_HTTP_MAX_CONNECTIONS),
+    ("foxglove.max_clients", DEFAULT_FOXGLOVE_MAX_CLIENTS),
+    ("plc_server.max_connections", super::service::DEFAULT_PLC_MAX_CONNECTIONS),
+];
 
 /// The HTTP server's limits (`[http]`).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -14,7 +14,8 @@ use serde::de::IgnoredAny;
 use super::document::Document;
 use super::limits::{
     ALERT_WINDOW_BLOWS, BILLET_IDLE_S, DEBOUNCE_BLOWS, EFFICIENCY, ENCODER_AT_DIE_M, KEEP_BYTES, KEEP_DAYS,
-    MIN_FREE_BYTES, NEW_BILLET_RISE_M, RESIDUAL_LIMIT, ROTATE_BYTES, ROTATE_SECONDS, SENSOR_LIMIT,
+    MIN_FREE_BYTES, NEW_BILLET_RISE_M, PLC_IDLE_TIMEOUT_S, PLC_MAX_CONNECTIONS, RESIDUAL_LIMIT, ROTATE_BYTES,
+    ROTATE_SECONDS, SENSOR_LIMIT,
 };
 use super::server_limits::{FoxgloveLimits, HttpLimits, RawLimits, foxglove_limits, http_limits};
 use super::{ConfigError, source};
@@ -32,6 +33,11 @@ pub const DEFAULT_ROTATE_SECONDS: u64 = 3600;
 pub const DEFAULT_MIN_FREE_BYTES: u64 = 2 << 30;
 /// Default serial speed.
 pub const DEFAULT_BAUD: u32 = 921_600;
+/// `[plc_server] idle_timeout_s`: a PLC polls every cycle (tens to hundreds of ms), so a
+/// connection without a request for 30 s is gone or hostile.
+pub const DEFAULT_PLC_IDLE_TIMEOUT_S: f64 = 30.0;
+/// `[plc_server] max_connections`: a press has one PLC, a line a few HMIs beside it.
+pub const DEFAULT_PLC_MAX_CONNECTIONS: u64 = 16;
 
 /// Serial line format (CONTRACTS.md §7).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -74,6 +80,21 @@ pub struct PlcCoil {
     pub coil: u16,
 }
 
+/// `[plc_server]`'s limits on its clients.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlcLimits {
+    /// `idle_timeout_s`: a connection that completes no request for this long is closed.
+    pub idle_timeout_s: f64,
+    /// `max_connections`: connections open at once; more are closed when accepted.
+    pub max_connections: u64,
+}
+
+impl Default for PlcLimits {
+    fn default() -> Self {
+        PlcLimits { idle_timeout_s: DEFAULT_PLC_IDLE_TIMEOUT_S, max_connections: DEFAULT_PLC_MAX_CONNECTIONS }
+    }
+}
+
 /// The validated service configuration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ServiceConfig {
@@ -98,6 +119,8 @@ pub struct ServiceConfig {
     pub http_limits: HttpLimits,
     /// `[plc_server] listen`: serve the PLC result image (CONTRACTS §8) here.
     pub plc_listen: Option<SocketAddr>,
+    /// `[plc_server] idle_timeout_s`, `max_connections`.
+    pub plc_limits: PlcLimits,
     /// `[foxglove] listen`: serve the Foxglove WebSocket protocol here.
     pub foxglove_listen: Option<SocketAddr>,
     /// `[foxglove] max_clients`, `handshake_timeout_s`, `idle_timeout_s`.
@@ -145,6 +168,7 @@ impl ServiceConfig {
             http_token_file: None,
             http_limits: HttpLimits::default(),
             plc_listen: None,
+            plc_limits: PlcLimits::default(),
             foxglove_listen: None,
             foxglove_limits: FoxgloveLimits::default(),
             opcua: None,
@@ -170,7 +194,7 @@ struct RawService {
     recipe: Option<String>,
     recording: RawRecording,
     http: Option<RawHttp>,
-    plc_server: Option<RawListen>,
+    plc_server: Option<RawPlcServer>,
     foxglove: Option<RawFoxglove>,
     opcua: Option<super::opcua::RawOpcua>,
     alerts: Option<RawAlerts>,
@@ -215,11 +239,13 @@ struct RawFoxglove {
     idle_timeout_s: Option<f64>,
 }
 
-/// A server's table with only its address (`[plc_server]`).
+/// `[plc_server]`: the PLC image's address and its limits on clients.
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawListen {
+struct RawPlcServer {
     listen: String,
+    idle_timeout_s: Option<f64>,
+    max_connections: Option<u64>,
 }
 
 #[derive(Deserialize)]
@@ -273,6 +299,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
     let (rotate_bytes, rotate_seconds) = parse_rotation(&doc, &raw.recording)?;
     let (http_listen, http_token_file) = parse_http(&doc, raw.http.as_ref(), base)?;
     let plc_listen = raw.plc_server.as_ref().map(|r| address(&doc, "plc_server.listen", &r.listen)).transpose()?;
+    let plc_limits = parse_plc_limits(&doc, raw.plc_server.as_ref())?;
     let foxglove_listen = raw.foxglove.as_ref().map(|r| address(&doc, "foxglove.listen", &r.listen)).transpose()?;
     let (http_limits, foxglove_limits) = parse_server_limits(&doc, &raw)?;
     let (alerts, webhook, plc_coil) = match &raw.alerts {
@@ -304,6 +331,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         http_token_file,
         http_limits,
         plc_listen,
+        plc_limits,
         foxglove_listen,
         foxglove_limits,
         opcua: super::opcua::parse_opcua(&doc, raw.opcua.as_ref(), base)?,
@@ -356,6 +384,22 @@ fn parse_server_limits(doc: &Document<'_>, raw: &RawService) -> Result<(HttpLimi
         None => FoxgloveLimits::default(),
     };
     Ok((http, foxglove))
+}
+
+/// `[plc_server]`'s idle timeout and connection cap, each within its range or the default.
+fn parse_plc_limits(doc: &Document<'_>, plc: Option<&RawPlcServer>) -> Result<PlcLimits, ConfigError> {
+    let d = PlcLimits::default();
+    let Some(plc) = plc else { return Ok(d) };
+    Ok(PlcLimits {
+        idle_timeout_s: match plc.idle_timeout_s {
+            Some(s) => doc.in_range("plc_server.idle_timeout_s", s, &PLC_IDLE_TIMEOUT_S)?,
+            None => d.idle_timeout_s,
+        },
+        max_connections: match plc.max_connections {
+            Some(n) => doc.in_whole_range("plc_server.max_connections", n, &PLC_MAX_CONNECTIONS)?,
+            None => d.max_connections,
+        },
+    })
 }
 
 /// `[http] listen`, or the loopback default, and the token file, which an address other

@@ -373,3 +373,25 @@ fn the_encoders_direction_is_set_in_its_table() {
     let e = parse_service("s.toml", Path::new("/"), &bad).unwrap_err().to_string();
     assert!(e.contains("key 'encoder.direction' must be") && e.contains("did you mean \"down\"?"), "{e}");
 }
+
+#[test]
+fn the_plc_servers_limits_have_defaults_and_ranges_that_name_their_key() {
+    let parse = |extra: &str| {
+        parse_service("s.toml", Path::new("/"), &format!("{GOOD}[plc_server]\nlisten = \"127.0.0.1:5020\"\n{extra}"))
+    };
+    let c = parse("").unwrap();
+    assert_eq!(c.plc_limits, PlcLimits::default());
+    assert_eq!((c.plc_limits.idle_timeout_s, c.plc_limits.max_connections), (30.0, 16));
+    let c = parse("idle_timeout_s = 1.5\nmax_connections = 3\n").unwrap();
+    assert_eq!((c.plc_limits.idle_timeout_s, c.plc_limits.max_connections), (1.5, 3));
+    for (bad, key) in [
+        ("idle_timeout_s = 0.0\n", "plc_server.idle_timeout_s"),
+        ("idle_timeout_s = inf\n", "plc_server.idle_timeout_s"),
+        ("max_connections = 0\n", "plc_server.max_connections"),
+    ] {
+        let e = parse(bad).unwrap_err().to_string();
+        assert!(e.contains("s.toml:") && e.contains(key), "{bad}: {e}");
+    }
+    let e = parse("idle_timeout = 3.0\n").unwrap_err().to_string();
+    assert!(e.contains("did you mean 'idle_timeout_s'"), "{e}");
+}

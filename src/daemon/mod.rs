@@ -18,6 +18,7 @@ pub mod opcua;
 pub mod plc_server;
 pub mod queue;
 pub mod recipe_switch;
+pub mod secret;
 mod service;
 pub mod sinks;
 pub mod sparkplug;

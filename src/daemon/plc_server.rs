@@ -7,9 +7,18 @@
 //! pipeline produced it) and the status snapshot (counters, sources, the latched alert) on
 //! every event and on the 1 s heartbeat; nothing is computed a second time. [`encode`] is
 //! the pure register encoding (scales, saturation, big-endian u32), [`answer`] one request
-//! against an image; the IO around them is the rest. A client that disconnects or sends
-//! garbage loses its connection, is counted in [`PlcStats`] and logged; the service and
-//! the other clients go on.
+//! against an image; the IO around them is the rest.
+//!
+//! Every connection passes the frame gate (`gate.rs`, `conn.rs`): a malformed request is
+//! answered with exception 0x03 and the connection goes on; bytes that are not Modbus TCP
+//! close it; so does a connection that completes no request within `[plc_server]
+//! idle_timeout_s`. At most `max_connections` are open, counted when accepted: one more
+//! takes the place of the oldest connection that has made no request yet, or is closed at
+//! once when every open one has. Each of these is counted in [`PlcStats`]; the service and the other
+//! clients go on.
+
+pub mod conn;
+pub mod gate;
 
 use std::future::{Ready, ready};
 use std::net::SocketAddr;
@@ -22,13 +31,14 @@ use futures_util::future::BoxFuture;
 use tokio::sync::{broadcast, mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio_modbus::server::Service;
-use tokio_modbus::server::tcp::{Server, accept_tcp_connection};
+use tokio_modbus::server::tcp::Server;
 use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
 
 use super::Control;
 use super::faces::{FaceContext, boxed};
 use super::live::{Live, LiveEvent};
 use super::status::{SharedStatus, StatusSnapshot};
+use crate::config::service::PlcLimits;
 use crate::estimate::result::AlertKind;
 use crate::estimate::{BlowClass, BlowEstimate};
 
@@ -189,16 +199,29 @@ pub struct PlcStats {
     pub requests: AtomicU64,
     /// Requests answered with a Modbus exception.
     pub exceptions: AtomicU64,
-    /// Connections that ended on an error: garbage that did not decode, a reset.
+    /// Connections that ended on an error: a reset, a failed write.
     pub connection_errors: AtomicU64,
+    /// Connections closed at accept because `max_connections` were open and every one had
+    /// made a request.
+    pub refused: AtomicU64,
+    /// Connections closed for a newer one: at the cap, without a request made.
+    pub evicted: AtomicU64,
+    /// Connections closed after `idle_timeout_s` without a request.
+    pub idle_closed: AtomicU64,
+    /// Connections closed because their bytes were not Modbus TCP.
+    pub framing_closed: AtomicU64,
+    /// Malformed requests the frame gate answered with exception 0x03 (or 0x01).
+    pub malformed: Arc<AtomicU64>,
     /// Coil writes that reached the service.
     pub commands: AtomicU64,
 }
 
 /// One request against `image` (Modbus Application Protocol v1.1b3 §6): holding registers
 /// 0–19 are read; coils 0 and 1 are written, and each coil written `true` sends its command
-/// through `command`. Every other function or address is refused with an exception; a
-/// command the service cannot take now is "server device busy".
+/// through `command`. A quantity outside the function's range is an illegal data value
+/// (§6.3: 1..=125 registers), checked before the address; every other function or address
+/// is refused with an exception; a command the service cannot take now is "server device
+/// busy".
 pub fn answer(
     image: &[u16; IMAGE_WORDS],
     request: Request<'_>,
@@ -207,7 +230,10 @@ pub fn answer(
     match request {
         Request::ReadHoldingRegisters(addr, n) => {
             let (start, end) = (usize::from(addr), usize::from(addr) + usize::from(n));
-            if n == 0 || end > IMAGE_WORDS {
+            if !(1..=125).contains(&n) {
+                return Err(ExceptionCode::IllegalDataValue);
+            }
+            if end > IMAGE_WORDS {
                 return Err(ExceptionCode::IllegalDataAddress);
             }
             Ok(Response::ReadHoldingRegisters(image[start..end].to_vec()))
@@ -300,15 +326,17 @@ impl super::faces::Face for PlcServer {}
 
 /// The image as a face (`faces::FACES`): `[plc_server] listen`.
 pub fn face<'a>(ctx: &'a FaceContext<'a>) -> BoxFuture<'a, anyhow::Result<Option<Box<dyn super::faces::Face>>>> {
-    Box::pin(
-        async move { Ok(boxed(start(ctx.config.plc_listen, ctx.status.clone(), ctx.bus, ctx.control.clone()).await?)) },
-    )
+    Box::pin(async move {
+        let (listen, limits) = (ctx.config.plc_listen, ctx.config.plc_limits);
+        Ok(boxed(start(listen, limits, ctx.status.clone(), ctx.bus, ctx.control.clone()).await?))
+    })
 }
 
-/// Serve the image on `listen` when it is set (`[plc_server] listen`); `None` otherwise.
-/// Fails only when the address cannot be listened on.
+/// Serve the image on `listen` when it is set (`[plc_server] listen`) with `limits` on its
+/// clients; `None` otherwise. Fails only when the address cannot be listened on.
 pub async fn start(
     listen: Option<SocketAddr>,
+    limits: PlcLimits,
     status: SharedStatus,
     live: &Live,
     control: mpsc::Sender<Control>,
@@ -323,26 +351,49 @@ pub async fn start(
     let stats = Arc::new(PlcStats::default());
     let updater = tokio::spawn(update(live.subscribe(), status, image_tx));
     let service = ImageService { image: image_rx, control, stats: stats.clone() };
-    let server = tokio::spawn(serve(Server::new(listener), service));
+    let server = tokio::spawn(serve(Server::new(listener), service, limits));
     tracing::info!(%addr, "PLC result image (Modbus TCP, unit {PLC_UNIT_ID}) listening");
     Ok(Some(PlcServer { addr, stats, tasks: [updater, server] }))
 }
 
-/// Accept clients until aborted; a failed accept (out of file descriptors) is logged and
-/// retried after a pause.
-async fn serve(server: Server, service: ImageService) {
+/// Accept clients until aborted, each behind the frame gate and under the cap (module
+/// doc); a failed accept (out of file descriptors) is logged and retried after a pause.
+async fn serve(server: Server, service: ImageService, limits: PlcLimits) {
     let stats = service.stats.clone();
+    let slots = conn::Slots::new(usize::try_from(limits.max_connections).unwrap_or(usize::MAX));
+    let idle = Duration::from_secs_f64(limits.idle_timeout_s);
     let on_connected = |stream, peer: SocketAddr| {
         let service = service.clone();
+        let slot = slots.take();
         async move {
+            let Some(slot) = slot else {
+                service.stats.refused.fetch_add(1, Ordering::Relaxed);
+                tracing::debug!(%peer, "PLC client refused: {} connections open", limits.max_connections);
+                return Ok(None);
+            };
             service.stats.connections.fetch_add(1, Ordering::Relaxed);
             tracing::info!(%peer, "PLC client connected");
-            accept_tcp_connection(stream, peer, move |_| Ok(Some(service.clone())))
+            let malformed = service.stats.malformed.clone();
+            Ok(Some((service, conn::Gated::new(stream, idle, slot, malformed))))
         }
     };
-    let on_error = move |e: std::io::Error| {
-        stats.connection_errors.fetch_add(1, Ordering::Relaxed);
-        tracing::warn!("PLC client connection ended: {e}");
+    let on_error = move |e: std::io::Error| match e.kind() {
+        std::io::ErrorKind::TimedOut => {
+            stats.idle_closed.fetch_add(1, Ordering::Relaxed);
+            tracing::debug!("PLC client closed: {e}");
+        }
+        std::io::ErrorKind::ConnectionAborted => {
+            stats.evicted.fetch_add(1, Ordering::Relaxed);
+            tracing::debug!("PLC client closed: {e}");
+        }
+        std::io::ErrorKind::InvalidData => {
+            stats.framing_closed.fetch_add(1, Ordering::Relaxed);
+            tracing::info!("PLC client closed, not Modbus TCP: {e}");
+        }
+        _ => {
+            stats.connection_errors.fetch_add(1, Ordering::Relaxed);
+            tracing::warn!("PLC client connection ended: {e}");
+        }
     };
     loop {
         if let Err(e) = server.serve(&on_connected, on_error.clone()).await {
@@ -547,7 +598,10 @@ pub(crate) mod tests {
         );
         let refused = |r| answer(&image, r, |_| true);
         assert_eq!(refused(Request::ReadHoldingRegisters(19, 2)), Err(ExceptionCode::IllegalDataAddress));
-        assert_eq!(refused(Request::ReadHoldingRegisters(0, 0)), Err(ExceptionCode::IllegalDataAddress));
+        // A quantity outside 1..=125 is a value error, before any address is looked at.
+        assert_eq!(refused(Request::ReadHoldingRegisters(0, 0)), Err(ExceptionCode::IllegalDataValue));
+        assert_eq!(refused(Request::ReadHoldingRegisters(0, 126)), Err(ExceptionCode::IllegalDataValue));
+        assert_eq!(refused(Request::ReadHoldingRegisters(0, 21)), Err(ExceptionCode::IllegalDataAddress));
         assert_eq!(refused(Request::WriteSingleRegister(0, 1)), Err(ExceptionCode::IllegalFunction));
         assert_eq!(refused(Request::WriteMultipleRegisters(0, vec![1].into())), Err(ExceptionCode::IllegalFunction));
         assert_eq!(refused(Request::ReadCoils(0, 2)), Err(ExceptionCode::IllegalFunction));

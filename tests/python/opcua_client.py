@@ -14,6 +14,9 @@ The client of issue 21 §2, for tests/opcua_python.rs. It decodes nothing with f
       Tries an anonymous session, a wrong password and the right password (over
       Basic256Sha256 SignAndEncrypt with a self-signed client certificate made in WORKDIR);
       reads the CycleCounter with the right one.
+  throttle URL SERVER_CERT_DER USER PASSWORD WORKDIR N
+      N wrong passwords in a row, one session each (as `auth` makes them), then the right
+      one; prints when each try started and ended (monotonic seconds) and how it ended.
 
 Prints one JSON object. Exit codes: 0 ok, 2 usage, 3 asyncua missing, 1 anything else.
 """
@@ -36,6 +39,7 @@ except ImportError as err:  # pragma: no cover - depends on the machine
 
 MODEL_NS = "urn:forgemon:UA:MetalForming"
 FORGEMON_NS = "urn:forgemon:UA"
+APP_URI = "urn:forgemon:test:opcua_client"
 VALUES = ["CycleCounter", "BilletCounter", "PeakLoad", "BilletHeight", "ImpactEnergy", "PlasticEnergy", "Efficiency"]
 
 
@@ -188,43 +192,65 @@ async def try_session(client):
         await client.disconnect()
 
 
-async def auth(url, server_cert, user, password, workdir):
-    deadline = time.monotonic() + 20
+async def client_cert(workdir):
+    """The test client's key and self-signed certificate in `workdir` (made once, kept)."""
     work = Path(workdir)
     key, cert = work / "client-key.pem", work / "client-cert.der"
-    app_uri = "urn:forgemon:test:opcua_client"
     await setup_self_signed_certificate(
-        key, cert, app_uri, "localhost", [ExtendedKeyUsageOID.CLIENT_AUTH], {"commonName": "forgemon test client"}
+        key, cert, APP_URI, "localhost", [ExtendedKeyUsageOID.CLIENT_AUTH], {"commonName": "forgemon test client"}
     )
+    return key, cert
 
-    async def secure(name, pw):
-        c = Client(url, timeout=4)
-        c.application_uri = app_uri
-        if name is not None:
-            c.set_user(name)
-            c.set_password(pw)
-        await c.set_security(
-            security_policies.SecurityPolicyBasic256Sha256, str(cert), str(key),
-            server_certificate=server_cert, mode=ua.MessageSecurityMode.SignAndEncrypt,
-        )
-        return c
 
-    # Wait for the server: a TCP connection is enough.
+async def secure(url, server_cert, key, cert, name, pw):
+    """A client for the Basic256Sha256 SignAndEncrypt endpoint, as `name` (None: anonymous)."""
+    c = Client(url, timeout=4)
+    c.application_uri = APP_URI
+    if name is not None:
+        c.set_user(name)
+        c.set_password(pw)
+    await c.set_security(
+        security_policies.SecurityPolicyBasic256Sha256, str(cert), str(key),
+        server_certificate=server_cert, mode=ua.MessageSecurityMode.SignAndEncrypt,
+    )
+    return c
+
+
+async def wait_for_server(url, deadline):
+    """Until a TCP connection to the server opens."""
     while True:
         try:
             _, w = await asyncio.open_connection(*url.removeprefix("opc.tcp://").rstrip("/").rsplit(":", 1))
             w.close()
-            break
+            return
         except OSError:
             if time.monotonic() > deadline:
                 raise
             await asyncio.sleep(0.05)
+
+
+async def auth(url, server_cert, user, password, workdir):
+    key, cert = await client_cert(workdir)
+    await wait_for_server(url, time.monotonic() + 20)
     return {
         "anonymous_none": await try_session(Client(url, timeout=4)),
-        "anonymous_encrypted": await try_session(await secure(None, None)),
-        "wrong_password": await try_session(await secure(user, password + "x")),
-        "right_password": await try_session(await secure(user, password)),
+        "anonymous_encrypted": await try_session(await secure(url, server_cert, key, cert, None, None)),
+        "wrong_password": await try_session(await secure(url, server_cert, key, cert, user, password + "x")),
+        "right_password": await try_session(await secure(url, server_cert, key, cert, user, password)),
     }
+
+
+async def throttle(url, server_cert, user, password, workdir, n):
+    key, cert = await client_cert(workdir)
+    await wait_for_server(url, time.monotonic() + 20)
+    tries = []
+    for _ in range(n):
+        started = time.monotonic()
+        r = await try_session(await secure(url, server_cert, key, cert, user, password + "x"))
+        tries.append({"start": started, "end": time.monotonic(), **r})
+    started = time.monotonic()
+    right = await try_session(await secure(url, server_cert, key, cert, user, password))
+    return {"wrong": tries, "right": {"start": started, "end": time.monotonic(), **right}}
 
 
 def main():
@@ -233,6 +259,8 @@ def main():
         out = asyncio.run(demo(args[1], float(args[2])))
     elif len(args) == 6 and args[0] == "auth":
         out = asyncio.run(auth(*args[1:]))
+    elif len(args) == 7 and args[0] == "throttle":
+        out = asyncio.run(throttle(*args[1:6], int(args[6])))
     else:
         print(__doc__, file=sys.stderr)
         sys.exit(2)

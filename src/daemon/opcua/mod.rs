@@ -5,12 +5,21 @@
 //! loopback address only; elsewhere one user with a password, over a signed and encrypted
 //! channel (Basic256Sha256) with a self-signed server certificate kept under `pki_dir`.
 //! README "OPC UA server" documents the node layout for a plant's clients.
+//!
+//! Limits: a connection without HEL is closed after `hello_timeout_s`; at most
+//! `max_sessions` sessions; a client certificate the server does not know yet is refused
+//! and stored under `pki_dir/rejected` (an operator trusts it by moving it to
+//! `pki_dir/trusted`); wrong passwords are throttled (`auth.rs`); the server's key is
+//! private (`pki.rs`), and the password file must be (`daemon::secret`).
 
+pub mod auth;
 pub mod events;
 pub mod feed;
 pub mod model;
+pub mod pki;
 
 use std::net::SocketAddr;
+use std::sync::Arc;
 
 use anyhow::Context;
 use opcua::nodes::{ImportedItem, NodeSetImport, NodeSetNamespaceMapper};
@@ -82,6 +91,8 @@ fn builder(cfg: &OpcuaConfig) -> anyhow::Result<ServerBuilder> {
         .host(cfg.listen.ip().to_string())
         .port(cfg.listen.port())
         .discovery_urls(vec![ENDPOINT_PATH.to_string()])
+        .hello_timeout(u32::try_from(cfg.hello_timeout_s).unwrap_or(u32::MAX))
+        .max_sessions(usize::try_from(cfg.max_sessions).unwrap_or(usize::MAX))
         .with_node_manager(simple_node_manager_imports(
             vec![Box::new(Namespaces) as Box<dyn NodeSetImport>],
             "forgemon",
@@ -94,15 +105,11 @@ fn builder(cfg: &OpcuaConfig) -> anyhow::Result<ServerBuilder> {
             // (by default in the working directory): keep them out of the way.
             .pki_dir(std::env::temp_dir().join("forgemon-opcua-pki")),
         OpcuaAccess::User { name, password_file, pki_dir } => {
-            let password = std::fs::read_to_string(password_file).with_context(|| {
-                format!("{}: cannot read the OPC UA password ([opcua] password_file)", password_file.display())
-            })?;
-            let password = password.trim_end_matches(['\r', '\n']);
-            if password.is_empty() {
-                anyhow::bail!("{}: the OPC UA password file ([opcua] password_file) is empty", password_file.display());
-            }
-            let token = ServerUserToken::user_pass(name.as_str(), password);
+            let password = super::secret::read(password_file, "the OPC UA password ([opcua] password_file)")?;
+            let token = ServerUserToken::user_pass(name.as_str(), password.as_str());
+            let users = std::collections::BTreeMap::from([(USER_TOKEN_ID.to_string(), token.clone())]);
             b.add_user_token(USER_TOKEN_ID, token)
+                .with_authenticator(Arc::new(auth::Authenticator::new(users)))
                 .add_endpoint(
                     "basic256sha256_sign_encrypt",
                     ServerEndpoint::new(
@@ -115,9 +122,10 @@ fn builder(cfg: &OpcuaConfig) -> anyhow::Result<ServerBuilder> {
                 .pki_dir(pki_dir.clone())
                 .create_sample_keypair(true)
                 .certificate_path("own/cert.der")
-                .private_key_path("private/private.pem")
-                // The channel is encrypted for any client; the session needs the password.
-                .trust_client_certs(true)
+                .private_key_path(pki::PRIVATE_KEY)
+                // A client's certificate is trusted only once an operator has moved it from
+                // pki_dir/rejected to pki_dir/trusted; an unknown one is refused.
+                .trust_client_certs(false)
         }
     })
 }
@@ -143,6 +151,9 @@ pub async fn start(
     control: mpsc::Sender<Control>,
 ) -> anyhow::Result<Option<OpcuaServer>> {
     let Some(cfg) = cfg else { return Ok(None) };
+    if let OpcuaAccess::User { pki_dir, .. } = &cfg.access {
+        pki::prepare(pki_dir)?;
+    }
     let (server, handle) =
         builder(cfg)?.build().map_err(|e| anyhow::anyhow!("opcua: the server's configuration is not valid: {e}"))?;
     if let OpcuaAccess::User { pki_dir, .. } = &cfg.access {
@@ -155,6 +166,7 @@ pub async fn start(
                 cert.display()
             );
         }
+        pki::secure_key(pki_dir)?;
     }
     let manager = handle
         .node_managers()
@@ -214,6 +226,8 @@ mod tests {
         let dir = tempfile::tempdir().expect("temp dir");
         let pass = dir.path().join("pass");
         std::fs::write(&pass, "s3cret\n").expect("write");
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&pass, std::fs::Permissions::from_mode(0o600)).expect("chmod");
         let cfg = OpcuaConfig {
             url: "opc.tcp://0.0.0.0:4840".into(),
             listen: "0.0.0.0:4840".parse().expect("address"),
@@ -222,6 +236,8 @@ mod tests {
                 password_file: pass.clone(),
                 pki_dir: dir.path().join("pki"),
             },
+            hello_timeout_s: 2,
+            max_sessions: 3,
         };
         let b = builder(&cfg).expect("builds");
         let eps = &b.config().endpoints;
@@ -232,8 +248,15 @@ mod tests {
         let u = users(&b);
         assert_eq!(u[USER_TOKEN_ID].user, "mes");
         assert_eq!(u[USER_TOKEN_ID].pass.as_deref(), Some("s3cret"), "the newline is not part of the password");
+        let c = b.config();
+        assert_eq!((c.tcp_config.hello_timeout, c.limits.max_sessions), (2, 3));
+        assert!(!c.certificate_validation.trust_client_certs, "an unknown client certificate is refused");
         std::fs::write(&pass, "\n").expect("write");
         let e = builder(&cfg).err().expect("an empty password is refused").to_string();
         assert!(e.contains("password_file") && e.contains("empty"), "{e}");
+        std::fs::write(&pass, "s3cret\n").expect("write");
+        std::fs::set_permissions(&pass, std::fs::Permissions::from_mode(0o644)).expect("chmod");
+        let e = builder(&cfg).err().expect("a password others can read is refused").to_string();
+        assert!(e.contains("password_file") && e.contains("chmod 600"), "{e}");
     }
 }
