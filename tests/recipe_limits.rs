@@ -11,8 +11,9 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
-use common::{free_port, http_get, http_send, spawn_service};
+use common::{KillOnDrop, free_port, http_get, http_send, spawn_service};
 use forgemon::config::recipe::write_recipe;
 use forgemon::recipe::{BlowWindows, Recipe, Tolerances, Window};
 use forgemon::record::{Payload, RecordReader};
@@ -98,7 +99,7 @@ fn post_recipe_refuses_what_teach_never_writes_and_keeps_the_recipe_in_force() {
     let good = recipe_text("good");
     std::fs::write(dir.path().join("good.recipe.toml"), &good).expect("write");
     let http = free_port();
-    let mut child = spawn_service(&service_file(dir.path(), http, "good.recipe.toml"), http);
+    let mut child = KillOnDrop(spawn_service(&service_file(dir.path(), http, "good.recipe.toml"), http));
     assert_eq!(status(http)["recipe"], "good");
     let bad: [(&str, String, &[&str]); 6] = [
         (
@@ -142,13 +143,13 @@ fn post_recipe_refuses_what_teach_never_writes_and_keeps_the_recipe_in_force() {
     // A good one still switches (the route works), and its text is what the recording keeps.
     let (code, answer) = http_send(http, "POST", "/recipe", recipe_text("other").as_bytes());
     assert_eq!(code, 202, "{answer}");
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    let deadline = Instant::now() + Duration::from_secs(10);
     while status(http)["recipe"] != "other" {
-        assert!(std::time::Instant::now() < deadline, "the good recipe was not taken");
-        std::thread::sleep(std::time::Duration::from_millis(20));
+        assert!(Instant::now() < deadline, "the good recipe was not taken");
+        std::thread::sleep(Duration::from_millis(20));
     }
-    assert!(Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill").success());
-    assert!(child.wait().expect("wait").success());
+    assert!(Command::new("kill").args(["-TERM", &child.0.id().to_string()]).status().expect("kill").success());
+    assert!(child.0.wait().expect("wait").success());
     let rec = common::files_in(&dir.path().join("rec"));
     let recorded: Vec<String> = rec
         .iter()
@@ -172,14 +173,26 @@ fn a_recipe_file_out_of_range_stops_the_start_naming_the_file_and_key() {
     ];
     for (from, to, key) in cases {
         std::fs::write(dir.path().join("bad.recipe.toml"), recipe_text("good").replace(from, to)).expect("write");
-        let out = Command::new(env!("CARGO_BIN_EXE_forgemon"))
-            .args(["run", "--config"])
-            .arg(service_file(dir.path(), free_port(), "bad.recipe.toml"))
-            .stdout(Stdio::null())
-            .output()
-            .expect("run runs");
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{to}: {err}");
+        let log = dir.path().join("run.log");
+        let mut child = KillOnDrop(
+            Command::new(env!("CARGO_BIN_EXE_forgemon"))
+                .args(["run", "--config"])
+                .arg(service_file(dir.path(), free_port(), "bad.recipe.toml"))
+                .stdout(Stdio::null())
+                .stderr(std::fs::File::create(&log).expect("log"))
+                .spawn()
+                .expect("run runs"),
+        );
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let status = loop {
+            if let Some(s) = child.0.try_wait().expect("wait") {
+                break s;
+            }
+            assert!(Instant::now() < deadline, "{to}: the service started with the bad recipe");
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        let err = std::fs::read_to_string(&log).expect("the log");
+        assert_eq!(status.code(), Some(1), "{to}: {err}");
         assert!(err.contains("bad.recipe.toml:") && err.contains(key), "{to}: names the file and {key}: {err}");
         assert!(!dir.path().join("rec").exists(), "{to}: refused before anything opened");
     }

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{free_port, http_get, spawn_service_logging};
+use common::{KillOnDrop, free_port, http_get, spawn_service_logging};
 use forgemon::record::{Payload, RecordReader};
 
 const HAMMER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/hammer-lg1000.machine.toml");
@@ -90,14 +90,15 @@ fn a_reload_with_a_missing_machine_file_takes_nothing_and_a_new_listen_address_n
     let http = free_port();
     std::fs::write(&cfg, service_text(dir.path(), HAMMER, http, 0.5)).expect("write");
     let log = dir.path().join("service.log");
-    let mut child = spawn_service_logging(&cfg, http, Stdio::from(std::fs::File::create(&log).expect("log")));
+    let mut child =
+        KillOnDrop(spawn_service_logging(&cfg, http, Stdio::from(std::fs::File::create(&log).expect("log"))));
     // The event loop (and its SIGHUP handler) runs once the recording is named.
     wait_status(http, "the loop", |s| s["recording"].as_str().is_some_and(|r| !r.is_empty()));
     assert!(status(http)["reload"].is_null(), "no reload yet");
 
     let missing = dir.path().join("adopted.machine.toml");
     std::fs::write(&cfg, service_text(dir.path(), &missing.display().to_string(), http, 0.6)).expect("write");
-    let r = sighup(child.id(), http);
+    let r = sighup(child.0.id(), http);
     let error = r["error"].as_str().unwrap_or_default();
     assert!(error.contains("adopted.machine.toml") && error.contains("key 'machine'"), "{r}");
     assert_eq!(
@@ -107,15 +108,15 @@ fn a_reload_with_a_missing_machine_file_takes_nothing_and_a_new_listen_address_n
 
     let other = free_port();
     std::fs::write(&cfg, service_text(dir.path(), HAMMER, other, 0.6)).expect("write");
-    let r = sighup(child.id(), http);
+    let r = sighup(child.0.id(), http);
     assert_eq!(r["error"], serde_json::Value::Null, "{r}");
     assert_eq!(r["applied"], serde_json::json!(["alerts"]), "{r}");
     assert_eq!(r["needs_restart"], serde_json::json!(["http.listen"]), "{r}");
     assert!(http_get(other, "/status").is_none(), "the new address is not listened on before a restart");
     assert_eq!(status(http)["machine"], "hammer", "the old address still answers");
 
-    assert!(Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill").success());
-    assert!(child.wait().expect("wait").success());
+    assert!(Command::new("kill").args(["-TERM", &child.0.id().to_string()]).status().expect("kill").success());
+    assert!(child.0.wait().expect("wait").success());
     let log = std::fs::read_to_string(&log).expect("the log");
     assert!(log.contains("nothing reloaded") && log.contains("adopted.machine.toml"), "{log}");
     assert!(log.contains("taken only at a restart: http.listen"), "{log}");

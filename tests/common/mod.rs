@@ -84,6 +84,17 @@ pub fn http_send(port: u16, method: &str, path: &str, body: &[u8]) -> (u16, Stri
     (code, out.split_once("\r\n\r\n").map(|(_, b)| b.to_string()).unwrap_or_default())
 }
 
+/// A child process killed and reaped when dropped, so that a test that fails leaves no
+/// service running behind it.
+pub struct KillOnDrop(pub std::process::Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// `forgemon run --config CONFIG`, once its status endpoint on `http` answers (10 s at most).
 pub fn spawn_service(config: &std::path::Path, http: u16) -> std::process::Child {
     spawn_service_logging(config, http, std::process::Stdio::null())
