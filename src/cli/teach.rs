@@ -1,7 +1,9 @@
 //! `forgemon teach` (CONTRACTS §9, issue 20): learn a part's recipe from good billets, given
 //! as capture directories or recordings. Each runs through the very pipeline `replay` runs
 //! (`replay::replay_into`), which keeps every complete blow's signature; the blows are
-//! grouped by billet and each blow index learnt (`recipe::teach`).
+//! grouped by billet and each blow index learnt (`recipe::teach`). Its windows are cut to
+//! their physical ranges and the file is checked as the service checks a recipe before it
+//! is written, so every taught recipe is one the service takes.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -104,9 +106,15 @@ pub fn run(args: TeachArgs) -> anyhow::Result<ExitCode> {
         let file = args.out.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
         file.trim_end_matches(".toml").trim_end_matches(".recipe").to_string()
     });
+    crate::config::recipe::check_name(&name)
+        .map_err(|why| anyhow::anyhow!("--name (or the output file's name) {why}"))?;
     let taught_from = args.references.iter().map(|p| p.display().to_string()).collect();
-    let recipe = teach(&name, machine.machine.kind().as_str(), &billets, tol, taught_from)?;
+    let mut recipe = teach(&name, machine.machine.kind().as_str(), &billets, tol, taught_from)?;
+    crate::config::recipe::within_limits(&mut recipe);
     let text = crate::config::recipe::write_recipe(&recipe)?;
+    // What teach writes passes the check every recipe gets (the service's, `POST /recipe`).
+    crate::config::recipe::parse_recipe(&args.out.display().to_string(), &text)
+        .context("the taught recipe fails the recipe check")?;
     std::fs::write(&args.out, text).with_context(|| format!("{}: cannot write", args.out.display()))?;
     println!(
         "recipe '{}' for {} blows from {} billets written to {}",

@@ -69,6 +69,28 @@ pub const IMPACT_SPEED_MPS: Limits = Limits { min: 1e-3, max: 30.0, unit: "m/s" 
 /// An efficiency (plastic work over kinetic energy at impact): a fraction in [0, 1].
 pub const EFFICIENCY: Limits = Limits { min: 0.0, max: 1.0, unit: "" };
 
+/// Energies, J (a recipe's plastic energy): from none to 4.5e9 J, the kinetic energy of the
+/// heaviest moving mass of `MASS_KG` at the fastest impact of `IMPACT_SPEED_MPS`
+/// (0.5 · 1e7 kg · (30 m/s)²). No blow of any machine these ranges admit carries more.
+pub const ENERGY_J: Limits =
+    Limits { min: 0.0, max: 0.5 * MASS_KG.max * IMPACT_SPEED_MPS.max * IMPACT_SPEED_MPS.max, unit: "J" };
+
+/// A peak load, N (compression positive, CONTRACTS conventions): from none to 1e11 N, three
+/// times the largest flow stress of `FLOW_STRESS_PA` over the largest billet's cross-section
+/// of `BILLET_DIMENSION_M` (π · (1 m)² · 1e10 Pa = 3.1e10 N); the largest forging presses
+/// built make under 1e9 N.
+pub const PEAK_LOAD_N: Limits = Limits { min: 0.0, max: 1e11, unit: "N" };
+
+/// A load anywhere on a blow's curve, N: as a peak load, and as far below zero (a sensor
+/// rings through zero after the blow and reads its offset before it, so an envelope's lower
+/// bound may be negative).
+pub const LOAD_N: Limits = Limits { min: -PEAK_LOAD_N.max, max: PEAK_LOAD_N.max, unit: "N" };
+
+/// The ram's travel from first contact, m (a recipe's travel window and its envelope's
+/// compression points): from none to the tallest billet of `BILLET_DIMENSION_M`, which no
+/// blow compresses further.
+pub const TRAVEL_M: Limits = Limits { min: 0.0, max: BILLET_DIMENSION_M.max, unit: "m" };
+
 /// A whole-number range (byte counts, durations, counters).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct WholeLimits {
@@ -114,6 +136,25 @@ pub const HANDSHAKE_TIMEOUT_S: Limits = Limits { min: 0.1, max: 600.0, unit: "s"
 /// keep-alive every 15 s, so an HTTP idle timeout below that cuts it (it reconnects).
 pub const IDLE_TIMEOUT_S: Limits = Limits { min: 1.0, max: 86_400.0, unit: "s" };
 
+/// A recipe file or `POST /recipe` body, bytes: at most 1 MiB. `forgemon teach` writes
+/// about 2.8 kB per blow (four windows and a 40-point envelope: 22 kB for the demo's 8
+/// blows), so this holds some 370 blows, twenty times the advisor's longest plan
+/// (`advise::MAX_BLOWS`, 15) and far more than a closed-die part takes; teach checks its own
+/// output against it.
+pub const RECIPE_BYTES: WholeLimits = WholeLimits { min: 1, max: 1 << 20, unit: "bytes" };
+
+/// A recipe's name, characters: it is shown in `/status`, the dashboard, logs and every
+/// judgement, so a short label.
+pub const RECIPE_NAME_CHARS: WholeLimits = WholeLimits { min: 1, max: 64, unit: "characters" };
+
+/// Points of one blow's envelope in a recipe: at least 2 (a segment), at most the 200
+/// points a blow's signature keeps (`recipe::signature::SIGNATURE_POINTS`), the curve the envelope is
+/// read against: a finer envelope resolves nothing more. `teach` writes
+/// `recipe::ENVELOPE_POINTS` (40).
+pub const ENVELOPE_POINTS: WholeLimits =
+    WholeLimits { min: 2, max: crate::recipe::signature::SIGNATURE_POINTS as u64, unit: "points" };
+const _: () = assert!(crate::recipe::ENVELOPE_POINTS as u64 <= ENVELOPE_POINTS.max);
+
 /// Alert window, blows.
 pub const ALERT_WINDOW_BLOWS: WholeLimits = WholeLimits { min: 1, max: 10_000, unit: "blows" };
 
@@ -147,6 +188,11 @@ pub const PLC_IDLE_TIMEOUT_S: Limits = Limits { min: 0.1, max: 86_400.0, unit: "
 pub const PLC_MAX_CONNECTIONS: WholeLimits = WholeLimits { min: 1, max: 10_000, unit: "connections" };
 
 impl Limits {
+    /// The range in words, as the messages give it: `0..1`, `0..4.5e9 J`.
+    pub fn range(&self) -> String {
+        format!("{}..{}{}", number(self.min), number(self.max), unit(self.unit))
+    }
+
     /// `x` if it is finite and in the range; otherwise why not, in words.
     pub fn check(&self, x: f64) -> Result<f64, String> {
         if self.min > 0.0 && !(x.is_finite() && x > 0.0) {

@@ -15,6 +15,7 @@ pub mod machine;
 pub mod opcua;
 pub mod process;
 pub mod recipe;
+pub mod reload;
 pub mod server_limits;
 pub mod service;
 mod source;
@@ -68,6 +69,10 @@ pub enum ConfigError {
     Missing { place: Place, key: String },
     #[error("{place}: key '{key}' {why}")]
     Invalid { place: Place, key: String, why: String },
+    /// The file is longer than its kind may be (a recipe, `limits::RECIPE_BYTES`); refused
+    /// before it is parsed.
+    #[error("{place}: {bytes} bytes, more than the {max} bytes this file may have")]
+    TooLarge { place: Place, bytes: u64, max: u64 },
 }
 
 fn in_table(table: &str) -> String {
@@ -82,7 +87,7 @@ impl ConfigError {
     /// The dotted key the error is about.
     pub fn key(&self) -> Option<&str> {
         match self {
-            ConfigError::Syntax { .. } => None,
+            ConfigError::Syntax { .. } | ConfigError::TooLarge { .. } => None,
             ConfigError::UnknownKey { key, .. }
             | ConfigError::Missing { key, .. }
             | ConfigError::Invalid { key, .. } => Some(key),

@@ -2,7 +2,8 @@
 //! the live pipeline (the same `pipeline::Feeder` replay uses) on the samples; results and
 //! alerts to the log, the recording, the status/metrics endpoint, the webhook and the PLC
 //! coil. systemd `Type=notify`: READY once listening, WATCHDOG pings, STOPPING on the way
-//! out; SIGTERM finishes the recording cleanly; SIGHUP reloads the alert rules.
+//! out; SIGTERM finishes the recording cleanly; SIGHUP reloads the alert rules and the
+//! machine model after checking every file again, and names what needs a restart.
 //!
 //! The sources are spawned by the caller and speak `acquire::SourceEvent` on one channel,
 //! so the service neither knows nor cares which transport (or simulated device) feeds it.
@@ -15,9 +16,11 @@ pub mod http_server;
 pub mod idle;
 pub mod live;
 pub mod opcua;
+mod parts;
 pub mod plc_server;
 pub mod queue;
 pub mod recipe_switch;
+pub mod reload;
 pub mod secret;
 mod service;
 pub mod sinks;
@@ -32,7 +35,7 @@ use anyhow::Context;
 use tokio::sync::{mpsc, watch};
 
 use crate::acquire::SourceEvent;
-use crate::config::service::{PipelineTuning, ServiceConfig, parse_service};
+use crate::config::service::{PipelineTuning, ServiceConfig};
 use crate::estimate::BlowEstimate;
 use crate::estimate::billet_book::BilletSummary;
 use crate::physics::machine::Machine;
@@ -188,10 +191,10 @@ pub async fn serve(
     if !taps.is_empty() {
         writer.set_tap(Box::new(move |m| taps.iter_mut().for_each(|tap| tap(m))));
     }
-    let pipeline = pipeline_with_recipe(&parts, &mut writer, &status)?;
+    let (pipeline, recipe_text) = pipeline_with_recipe(&parts, &mut writer, &status)?;
     let session = Session::new(pipeline, Some(writer), Stamp::Arrival);
-    let service =
-        service::Service::new(session, status, live.clone(), hooks, parts.config_path.clone(), cfg.min_free_bytes);
+    let in_force = reload::InForce::new(&parts, recipe_text);
+    let service = service::Service::new(session, status, live.clone(), hooks, in_force, cfg.min_free_bytes);
     let rx = queue::SourceQueue::new(rx, parts.backpressure);
     tracing::info!(listen = %cfg.http_listen, dir = %cfg.recording_dir.display(), "forgemon service ready");
     let summary = run_loop(service, rx, control_rx, recipe_rx, stop, &shutdown).await?;
@@ -240,28 +243,24 @@ async fn start_faces(ctx: &faces::FaceContext<'_>) -> anyhow::Result<Vec<Box<dyn
     Ok(running)
 }
 
-/// The pipeline of `parts`, judging with `[recipe]` when set: read, checked and recorded
-/// (so a replay judges with it), or the start stops here.
+/// The pipeline of `parts`, judging with `recipe` when set: read, checked and recorded (so a
+/// replay judges with it), or the start stops here; with the recipe file's text.
 fn pipeline_with_recipe(
     parts: &ServiceParts,
     writer: &mut RecordWriter,
     status: &SharedStatus,
-) -> anyhow::Result<Pipeline> {
+) -> anyhow::Result<(Pipeline, Option<String>)> {
     let cfg = &parts.config;
     let kind = parts.machine.kind().as_str();
     let mut pipeline = Pipeline::new(parts.machine, parts.process.clone(), pipeline_config(cfg, &parts.machine))
         .with_effects(parts.effects);
-    if let Some(path) = &cfg.recipe_path {
-        let text = std::fs::read_to_string(path).with_context(|| format!("recipe {}: cannot read", path.display()))?;
-        let recipe = crate::config::recipe::parse_recipe(&path.display().to_string(), &text)?;
-        if recipe.machine != kind {
-            anyhow::bail!("{}: recipe for a {} but the machine is a {kind}", path.display(), recipe.machine);
-        }
-        writer.write_config(host_now_ns(), RECIPE_CONFIG_NAME, &text)?;
+    let recipe = parts::read_recipe(cfg, kind)?;
+    if let Some((recipe, text)) = &recipe {
+        writer.write_config(host_now_ns(), RECIPE_CONFIG_NAME, text)?;
         status.lock().map(|mut s| s.recipe = Some(recipe.name.clone())).ok();
-        pipeline.set_recipe(Some(recipe));
+        pipeline.set_recipe(Some(recipe.clone()));
     }
-    Ok(pipeline)
+    Ok((pipeline, recipe.map(|(_, text)| text)))
 }
 
 /// The event loop: one `Service` method per event, until SIGTERM/SIGINT, `stop` or the
@@ -321,11 +320,4 @@ pub fn tuned_config(tuning: &PipelineTuning, machine: &Machine) -> PipelineConfi
     p.estimate.encoder_at_die_m = tuning.encoder_at_die_m;
     p.estimate.encoder_direction = tuning.encoder_direction;
     p
-}
-
-/// The service file read again (SIGHUP), checked, with its text.
-pub(crate) fn reload(path: &std::path::Path) -> anyhow::Result<(ServiceConfig, String)> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let cfg = parse_service(&path.display().to_string(), path.parent().unwrap_or(std::path::Path::new(".")), &text)?;
-    Ok((cfg, text))
 }

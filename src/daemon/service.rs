@@ -9,7 +9,6 @@
 //! The disk is watched every second: a `storage` alert is raised when its free space falls
 //! under `[recording] min_free_bytes`, and again if the recording is suspended.
 
-use std::path::PathBuf;
 use std::sync::Arc;
 
 use crate::acquire::SourceEvent;
@@ -21,8 +20,9 @@ use crate::session::{End, Outcome, Session};
 use crate::signal::sample::SampleBatch;
 
 use super::live::{Live, LiveEvent};
+use super::reload::{InForce, Plan, ReloadReport};
 use super::status::{SharedStatus, StorageStatus};
-use super::{Control, Hooks, Summary, host_now_ns, reload};
+use super::{Control, Hooks, Summary, host_now_ns};
 
 /// The service between its start and its stop.
 pub(super) struct Service {
@@ -33,7 +33,8 @@ pub(super) struct Service {
     live: Live,
     hooks: Hooks,
     summary: Summary,
-    config_path: PathBuf,
+    /// The files the service runs with, as a SIGHUP reload compares them.
+    in_force: InForce,
     /// `[recording] min_free_bytes`.
     min_free_bytes: u64,
     /// How bad the disk was at the last check (`StorageLevel`): an alert when it worsens.
@@ -58,7 +59,7 @@ impl Service {
         status: SharedStatus,
         live: Live,
         hooks: Hooks,
-        config_path: PathBuf,
+        in_force: InForce,
         min_free_bytes: u64,
     ) -> Self {
         Service {
@@ -68,7 +69,7 @@ impl Service {
             live,
             hooks,
             summary: Summary::default(),
-            config_path,
+            in_force,
             min_free_bytes,
             storage_level: StorageLevel::Ok,
             last_blow: 0,
@@ -140,27 +141,55 @@ impl Service {
         self.status.lock().map(|mut s| s.recipe = name).ok();
     }
 
-    /// SIGHUP: read the service file again and take its alert rules, and read its machine
-    /// file again and take its model (an effect adopted by `forgemon diagnose --adopt`); a bad
-    /// file keeps the old ones. Each new file is recorded where it took effect, so that a
-    /// replay changes the rules and the model at the same point.
+    /// SIGHUP: the service file and every file it names read and checked again
+    /// (`reload::plan`); on any error nothing is taken. Then the machine model and the alert
+    /// rules are taken where they changed, each recorded where it took effect so that a
+    /// replay takes it at the same point, and the keys that need a restart are named. The
+    /// outcome is logged and shown in `/status` (`reload`).
     pub fn reload(&mut self) {
-        match reload(&self.config_path) {
-            Ok((new, text)) => {
-                self.session.set_alerts(new.alerts, &text, host_now_ns());
-                tracing::info!("SIGHUP: alert rules reloaded");
-                let path = &new.machine_path;
-                let model = std::fs::read_to_string(path)
-                    .map_err(|e| format!("{}: cannot read: {e}", path.display()))
-                    .and_then(|text| self.session.set_model(&path.display().to_string(), &text, host_now_ns()));
-                match model {
-                    Ok(n) => tracing::info!(effects = n, "SIGHUP: machine model reloaded from {}", path.display()),
-                    Err(e) => tracing::error!("SIGHUP: keeping the old machine model: {e}"),
-                }
-                self.counted();
+        let report = match super::reload::plan(&self.in_force) {
+            Ok(plan) => self.take(plan),
+            Err(e) => {
+                tracing::error!("SIGHUP: nothing reloaded, everything in force is kept: {e:#}");
+                ReloadReport::new(Vec::new(), Vec::new(), Some(format!("{e:#}")))
             }
-            Err(e) => tracing::error!("SIGHUP: keeping the old alert rules and model: {e:#}"),
+        };
+        self.status.lock().map(|mut s| s.reload = Some(report)).ok();
+        self.counted();
+    }
+
+    /// Take what a checked reload changed: the model first, which the estimator may still
+    /// refuse (then nothing is taken), then the alert rules.
+    fn take(&mut self, plan: Plan) -> ReloadReport {
+        for w in &plan.warnings {
+            tracing::warn!("SIGHUP: {w}");
         }
+        let mut applied = Vec::new();
+        if let Some((path, text)) = plan.model {
+            if let Err(e) = self.session.set_model(&path.display().to_string(), &text, host_now_ns()) {
+                tracing::error!("SIGHUP: nothing reloaded, everything in force is kept: {e}");
+                return ReloadReport::new(Vec::new(), plan.needs_restart, Some(e));
+            }
+            tracing::info!("SIGHUP: machine model reloaded from {}", path.display());
+            (self.in_force.config.machine_path, self.in_force.machine_text) = (path, text);
+            applied.push("machine".to_string());
+        }
+        if let Some((alerts, text)) = plan.alerts {
+            self.session.set_alerts(alerts, &text, host_now_ns());
+            tracing::info!("SIGHUP: alert rules reloaded");
+            self.in_force.config.alerts = alerts;
+            applied.push("alerts".to_string());
+        }
+        if plan.needs_restart.is_empty() {
+            tracing::info!(applied = ?applied, "SIGHUP: reloaded");
+        } else {
+            tracing::warn!(
+                applied = ?applied,
+                "SIGHUP: changed, but taken only at a restart: {}; the values in force are kept",
+                plan.needs_restart.join(", ")
+            );
+        }
+        ReloadReport::new(applied, plan.needs_restart, None)
     }
 
     pub fn on_tick(&mut self) {

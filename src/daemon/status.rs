@@ -95,6 +95,9 @@ pub struct StatusSnapshot {
     /// The name of the recipe the blows are judged against (`recipe` in `service.toml`),
     /// `None` without one.
     pub recipe: Option<String>,
+    /// The last SIGHUP reload: what it took (`applied`), which changed keys wait for a
+    /// restart (`needs_restart`), or why it took nothing (`error`); `None` before the first.
+    pub reload: Option<super::reload::ReloadReport>,
     /// The live advisor's plan for the billet's next blows (`[advisor]`), `None` without
     /// one.
     pub advice: Option<crate::advise::Advice>,
@@ -136,6 +139,7 @@ impl StatusSnapshot {
             last_blow: None,
             latched_alert: None,
             recipe: None,
+            reload: None,
             advice: None,
             last_result_latency_ms: None,
             last_webhook_latency_ms: None,

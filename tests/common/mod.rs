@@ -65,14 +65,49 @@ pub fn http_get(port: u16, path: &str) -> Option<String> {
     out.split_once("\r\n\r\n").map(|(_, b)| b.to_string())
 }
 
+/// `method path` with `body` on the service's loopback `port`: the status code and the body
+/// of the answer. The request is written whole before the answer is read; a server that
+/// answers early (413) and closes may cut the writing short, which is not an error here.
+pub fn http_send(port: u16, method: &str, path: &str, body: &[u8]) -> (u16, String) {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).expect("connect");
+    s.set_read_timeout(Some(std::time::Duration::from_secs(10))).expect("timeout");
+    let head = format!(
+        "{method} {path} HTTP/1.1\r\nhost: localhost\r\ncontent-length: {}\r\nconnection: close\r\n\r\n",
+        body.len()
+    );
+    let _ = s.write_all(head.as_bytes()).and_then(|()| s.write_all(body));
+    let mut out = Vec::new();
+    let _ = s.read_to_end(&mut out);
+    let out = String::from_utf8_lossy(&out).into_owned();
+    let code = out.split(' ').nth(1).and_then(|c| c.parse().ok()).unwrap_or_else(|| panic!("no status line: {out:?}"));
+    (code, out.split_once("\r\n\r\n").map(|(_, b)| b.to_string()).unwrap_or_default())
+}
+
+/// A child process killed and reaped when dropped, so that a test that fails leaves no
+/// service running behind it.
+pub struct KillOnDrop(pub std::process::Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// `forgemon run --config CONFIG`, once its status endpoint on `http` answers (10 s at most).
 pub fn spawn_service(config: &std::path::Path, http: u16) -> std::process::Child {
+    spawn_service_logging(config, http, std::process::Stdio::null())
+}
+
+/// `spawn_service` with the service's log (stderr) going to `log`.
+pub fn spawn_service_logging(config: &std::path::Path, http: u16, log: std::process::Stdio) -> std::process::Child {
     use std::process::{Command, Stdio};
     use std::time::{Duration, Instant};
     let child = Command::new(env!("CARGO_BIN_EXE_forgemon"))
         .args(["run", "--config", config.to_str().unwrap()])
         .stdout(Stdio::null())
-        .stderr(Stdio::null())
+        .stderr(log)
         .spawn()
         .unwrap();
     let deadline = Instant::now() + Duration::from_secs(10);
