@@ -125,16 +125,19 @@ fn rfc3339_ns(ns: i64) -> String {
 }
 
 pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
+    // Each file with whether it came from a directory's listing.
     let mut files = Vec::new();
     for input in &args.inputs {
-        files.extend(super::inspect::recordings(input)?);
+        files.extend(super::inspect::recordings(input)?.into_iter().map(|f| (f, input.is_dir())));
     }
     let mut rows = Vec::new();
     let mut corrupt = false;
-    for file in &files {
-        // A file that cannot be read (empty, not MCAP, cut short) is named and skipped.
+    for (file, listed) in &files {
+        // A file named on the command line must be a recording; one of a directory's that
+        // cannot be read (empty, not MCAP) is named and skipped.
         let mut reader = match RecordReader::open(file) {
             Ok(r) => r,
+            Err(e) if !listed => return Err(e).with_context(|| format!("{}: cannot export", file.display())),
             Err(e) => {
                 eprintln!("forgemon: skipped {}: {e}", file.display());
                 corrupt = true;

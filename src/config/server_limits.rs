@@ -25,12 +25,18 @@ pub const DEFAULT_FOXGLOVE_HANDSHAKE_TIMEOUT_S: f64 = 10.0;
 /// `[foxglove] idle_timeout_s`: the server pings every third of it; Foxglove answers.
 pub const DEFAULT_FOXGLOVE_IDLE_TIMEOUT_S: f64 = 60.0;
 
+/// `[plc_server] idle_timeout_s`: a PLC polls every cycle (tens to hundreds of ms), so a
+/// connection without a request for 30 s is gone or hostile.
+pub const DEFAULT_PLC_IDLE_TIMEOUT_S: f64 = 30.0;
+/// `[plc_server] max_connections`: a press has one PLC, a line a few HMIs beside it.
+pub const DEFAULT_PLC_MAX_CONNECTIONS: u64 = 16;
+
 /// Each server's connection cap at its default, by its key: what the descriptor limit of
 /// the systemd unit must hold beside the service's own files.
 pub const DEFAULT_CONNECTION_CAPS: [(&str, u64); 3] = [
     ("http.max_connections", DEFAULT_HTTP_MAX_CONNECTIONS),
     ("foxglove.max_clients", DEFAULT_FOXGLOVE_MAX_CLIENTS),
-    ("plc_server.max_connections", super::service::DEFAULT_PLC_MAX_CONNECTIONS),
+    ("plc_server.max_connections", DEFAULT_PLC_MAX_CONNECTIONS),
 ];
 
 /// The HTTP server's limits (`[http]`).

@@ -17,7 +17,10 @@ use super::limits::{
     MIN_FREE_BYTES, NEW_BILLET_RISE_M, PLC_IDLE_TIMEOUT_S, PLC_MAX_CONNECTIONS, RESIDUAL_LIMIT, ROTATE_BYTES,
     ROTATE_SECONDS, SENSOR_LIMIT,
 };
-use super::server_limits::{FoxgloveLimits, HttpLimits, RawLimits, foxglove_limits, http_limits};
+use super::server_limits::{
+    DEFAULT_PLC_IDLE_TIMEOUT_S, DEFAULT_PLC_MAX_CONNECTIONS, FoxgloveLimits, HttpLimits, RawLimits, foxglove_limits,
+    http_limits,
+};
 use super::{ConfigError, source};
 use crate::acquire::ChannelSpec;
 use crate::alert::AlertConfig;
@@ -33,11 +36,6 @@ pub const DEFAULT_ROTATE_SECONDS: u64 = 3600;
 pub const DEFAULT_MIN_FREE_BYTES: u64 = 2 << 30;
 /// Default serial speed.
 pub const DEFAULT_BAUD: u32 = 921_600;
-/// `[plc_server] idle_timeout_s`: a PLC polls every cycle (tens to hundreds of ms), so a
-/// connection without a request for 30 s is gone or hostile.
-pub const DEFAULT_PLC_IDLE_TIMEOUT_S: f64 = 30.0;
-/// `[plc_server] max_connections`: a press has one PLC, a line a few HMIs beside it.
-pub const DEFAULT_PLC_MAX_CONNECTIONS: u64 = 16;
 
 /// Serial line format (CONTRACTS.md §7).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
