@@ -263,6 +263,38 @@ fn the_demo_resumes_recording_within_eight_blows_of_a_full_disk_being_freed() {
     assert!(dropped > 0 && dropped < blows, "{text}");
     // Every blow is in a file or counted as not recorded.
     assert_eq!(blows_recorded(&out.path().join("rec")) + dropped, blows, "{text}");
+    // `replay DIR` streams the run's files in order: every recorded blow comes back, at the
+    // same contact instant.
+    let out_dir = out.path().join("rec");
+    let replayed = Command::new(BIN).args(["replay", "--json"]).arg(&out_dir).output().unwrap();
+    let err = String::from_utf8_lossy(&replayed.stderr);
+    assert!(replayed.status.success(), "{err}");
+    let contacts: Vec<f64> = String::from_utf8_lossy(&replayed.stdout)
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["t_contact_s"].as_f64().unwrap())
+        .collect();
+    for f in recording_files(&out_dir) {
+        for m in read_recording(&f).unwrap().messages {
+            if let Payload::Result(r) = m.payload {
+                let t = r.t_contact_s;
+                assert!(contacts.iter().any(|c| (c - t).abs() < 1e-6), "blow at {t} s not replayed: {contacts:?}");
+            }
+        }
+    }
+    // An empty file before the run's and a foreign one between them: named, skipped, the
+    // same blows, exit status 3.
+    std::fs::write(out_dir.join("forgemon-00000.mcap"), b"").unwrap();
+    std::fs::write(out_dir.join("forgemon-00001.mcap.x.mcap"), b"junk").unwrap();
+    let again = Command::new(BIN).args(["replay", "--json"]).arg(&out_dir).output().unwrap();
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert_eq!(again.status.code(), Some(3), "{err}");
+    for bad in ["forgemon-00000.mcap", "forgemon-00001.mcap.x.mcap"] {
+        assert!(err.lines().any(|l| l.contains("skipped") && l.contains(bad)), "{bad} not named: {err}");
+    }
+    assert_eq!(again.stdout, replayed.stdout, "the skipped files changed the blows");
+    for junk in ["forgemon-00000.mcap", "forgemon-00001.mcap.x.mcap"] {
+        std::fs::remove_file(out_dir.join(junk)).unwrap();
+    }
     // The low-space alert, raised before the disk was full, is in the first file.
     let first = read_recording(&recording_files(&out.path().join("rec"))[0]).unwrap();
     assert!(

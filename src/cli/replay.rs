@@ -1,5 +1,6 @@
-//! `forgemon replay` (CONTRACTS.md §5): a recording, a capture CSV or a capture directory
-//! through exactly the live pipeline; one JSON line per blow (or a table with a line per
+//! `forgemon replay` (CONTRACTS.md §5): a recording (or a directory of them: a rotated run,
+//! its unreadable files named and skipped), a capture CSV or a capture directory through
+//! exactly the live pipeline; one JSON line per blow (or a table with a line per
 //! billet); `--out` records the replay. A recording brings its own machine model, process
 //! sheet and service file (alert rules, billet detection); options replace them.
 
@@ -25,7 +26,8 @@ use crate::signal::sample::SampleBatch;
 
 #[derive(Debug, Args)]
 pub struct ReplayArgs {
-    /// A recording (.mcap), a capture CSV, or a capture directory (blow_01.csv, ...).
+    /// A recording (.mcap), a directory of them (a rotated run, in name order), a capture
+    /// CSV, or a capture directory (blow_01.csv, ...).
     pub input: PathBuf,
     /// The machine model (machine.toml); defaults to the one stored in the recording, or
     /// the capture directory's machine.toml.
@@ -69,6 +71,10 @@ enum Input {
     Recording {
         reader: Box<RecordReader>,
         ahead: Vec<SampleBatch>,
+        /// The directory's recordings after this one, in name order (a rotated run).
+        rest: Vec<PathBuf>,
+        /// Whether unreadable files before this one were skipped.
+        skipped: bool,
     },
 }
 
@@ -237,51 +243,76 @@ impl<W: Write> Replay<W> {
                     super::for_each_capture_batch(&path, |batch| self.batch(&batch))?;
                 }
             }
-            Input::Recording { mut reader, ahead } => {
+            Input::Recording { reader, ahead, rest, skipped } => {
                 self.end = End::Stopped;
                 for batch in &ahead {
                     self.batch(batch)?;
                 }
-                for m in reader.by_ref() {
-                    let m = m?;
-                    let log_ns = m.log_time_ns;
-                    match m.payload {
-                        Payload::Samples(batch) => self.batch(&batch)?,
-                        // A new billet went into the dies here during the live run.
-                        Payload::Status(st) if is_new_billet_marker(&st) => {
-                            self.session.new_billet(None, log_ns, &mut self.outcomes);
-                            self.handle()?;
+                status = self.recording(reader, args)?;
+                if skipped {
+                    status = ExitCode::from(super::inspect::EXIT_CORRUPT_INPUT);
+                }
+                // A rotated run's next files continue its stream; one that cannot be read
+                // is named and skipped.
+                for path in rest {
+                    match RecordReader::open(&path) {
+                        Ok(reader) => {
+                            let s = self.recording(Box::new(reader), args)?;
+                            if s != ExitCode::SUCCESS {
+                                status = s;
+                            }
                         }
-                        // The live run switched recipes here (`POST /recipe`); a rotated file
-                        // repeats the same text, which changes nothing.
-                        Payload::Config(c) if c.name == RECIPE_CONFIG_NAME && args.recipe.is_none() => {
-                            let origin = format!("{} (recipe.toml stored in it)", args.input.display());
-                            let recipe = crate::daemon::recipe_switch::from_recorded(&origin, &c.text)?;
-                            self.session.set_recipe(recipe, &c.text, log_ns);
+                        Err(e) => {
+                            eprintln!("forgemon: skipped {}: {e}", path.display());
+                            status = ExitCode::from(super::inspect::EXIT_CORRUPT_INPUT);
                         }
-                        // The live run reloaded its machine model here (SIGHUP, after `diagnose
-                        // --adopt`); a rotated file repeats the same text, which changes nothing.
-                        Payload::Config(c) if c.name == MACHINE_CONFIG_NAME && args.machine.is_none() => {
-                            let origin = format!("{} (machine.toml stored in it)", args.input.display());
-                            self.session.set_model(&origin, &c.text, log_ns).map_err(anyhow::Error::msg)?;
-                        }
-                        // The live run reloaded its alert rules here (SIGHUP); a rotated file
-                        // repeats the same text, which changes nothing.
-                        Payload::Config(c) if c.name == SERVICE_CONFIG_NAME && args.service.is_none() => {
-                            let origin = format!("{} (service.toml stored in it)", args.input.display());
-                            self.session.set_alerts(parse_tuning(&origin, &c.text)?.alerts, &c.text, log_ns);
-                        }
-                        _ => {}
                     }
-                    self.recorded()?;
                 }
-                if !reader.report().complete {
-                    eprintln!("forgemon: {}", reader.report());
-                }
-                status = super::inspect::input_status(reader.report());
             }
         }
         Ok(status)
+    }
+
+    /// A recording's messages through the session, its control markers taken where the
+    /// live run took them; the exit status its state gives.
+    fn recording(&mut self, mut reader: Box<RecordReader>, args: &ReplayArgs) -> anyhow::Result<ExitCode> {
+        for m in reader.by_ref() {
+            let m = m?;
+            let log_ns = m.log_time_ns;
+            match m.payload {
+                Payload::Samples(batch) => self.batch(&batch)?,
+                // A new billet went into the dies here during the live run.
+                Payload::Status(st) if is_new_billet_marker(&st) => {
+                    self.session.new_billet(None, log_ns, &mut self.outcomes);
+                    self.handle()?;
+                }
+                // The live run switched recipes here (`POST /recipe`); a rotated file
+                // repeats the same text, which changes nothing.
+                Payload::Config(c) if c.name == RECIPE_CONFIG_NAME && args.recipe.is_none() => {
+                    let origin = format!("{} (recipe.toml stored in it)", args.input.display());
+                    let recipe = crate::daemon::recipe_switch::from_recorded(&origin, &c.text)?;
+                    self.session.set_recipe(recipe, &c.text, log_ns);
+                }
+                // The live run reloaded its machine model here (SIGHUP, after `diagnose
+                // --adopt`); a rotated file repeats the same text, which changes nothing.
+                Payload::Config(c) if c.name == MACHINE_CONFIG_NAME && args.machine.is_none() => {
+                    let origin = format!("{} (machine.toml stored in it)", args.input.display());
+                    self.session.set_model(&origin, &c.text, log_ns).map_err(anyhow::Error::msg)?;
+                }
+                // The live run reloaded its alert rules here (SIGHUP); a rotated file
+                // repeats the same text, which changes nothing.
+                Payload::Config(c) if c.name == SERVICE_CONFIG_NAME && args.service.is_none() => {
+                    let origin = format!("{} (service.toml stored in it)", args.input.display());
+                    self.session.set_alerts(parse_tuning(&origin, &c.text)?.alerts, &c.text, log_ns);
+                }
+                _ => {}
+            }
+            self.recorded()?;
+        }
+        if !reader.report().complete {
+            eprintln!("forgemon: {}", reader.report());
+        }
+        Ok(super::inspect::input_status(reader.report()))
     }
 
     /// A batch through the session: recorded (with `--out`), merged, fed.
@@ -388,8 +419,25 @@ fn table_row(e: &crate::estimate::BlowEstimate) -> String {
 }
 
 /// Classify the input and read the configuration it stores: a recording's (read up to its
-/// first samples), or a capture directory's machine.toml and process.toml.
+/// first samples), a capture directory's machine.toml and process.toml, or, for a
+/// directory of recordings (a rotated run), its first readable file's.
 fn open_input(path: &Path) -> anyhow::Result<(Input, Stored)> {
+    let recordings = path.is_dir() && super::capture_dir_files(path).is_err();
+    if let Some(files) = recordings.then(|| super::inspect::recordings(path).ok()).flatten() {
+        let (mut files, mut skipped) = (files.into_iter(), false);
+        while let Some(first) = files.next() {
+            match open_recording(&first) {
+                Ok((reader, ahead, stored)) => {
+                    return Ok((Input::Recording { reader, ahead, rest: files.collect(), skipped }, stored));
+                }
+                Err(e) => {
+                    eprintln!("forgemon: skipped {}: {e:#}", first.display());
+                    skipped = true;
+                }
+            }
+        }
+        bail!("{}: none of its recordings can be read", path.display());
+    }
     if path.is_dir() {
         let read = |name: &str| -> anyhow::Result<Option<String>> {
             let p = path.join(name);
@@ -401,29 +449,36 @@ fn open_input(path: &Path) -> anyhow::Result<(Input, Stored)> {
     }
     let name = path.to_string_lossy();
     if name.ends_with(".mcap") || name.ends_with(".mcap.part") {
-        let mut reader = RecordReader::open(path)?;
-        let mut stored = Stored::default();
-        let mut ahead = Vec::new();
-        // Configuration is written before the samples; read up to the first batch of them.
-        for m in reader.by_ref() {
-            match m?.payload {
-                Payload::Samples(b) => {
-                    ahead.push(b);
-                    break;
-                }
-                Payload::Config(c) if c.name == "machine.toml" => stored.machine = Some(c.text),
-                Payload::Config(c) if c.name == "process.toml" => stored.process = Some(c.text),
-                Payload::Config(c) if c.name == SERVICE_CONFIG_NAME => stored.service = Some(c.text),
-                Payload::Config(c) if c.name == RECIPE_CONFIG_NAME => stored.recipe = Some(c.text),
-                _ => {}
-            }
-        }
-        return Ok((Input::Recording { reader: Box::new(reader), ahead }, stored));
+        let (reader, ahead, stored) = open_recording(path)?;
+        return Ok((Input::Recording { reader, ahead, rest: Vec::new(), skipped: false }, stored));
     }
     if !path.exists() {
         bail!("{}: no such file or directory", path.display());
     }
     Ok((Input::Files(vec![path.to_path_buf()]), Stored::default()))
+}
+
+/// A recording, with the configuration it stores before its first samples and the samples
+/// read ahead while looking for it.
+fn open_recording(path: &Path) -> anyhow::Result<(Box<RecordReader>, Vec<SampleBatch>, Stored)> {
+    let mut reader = RecordReader::open(path)?;
+    let mut stored = Stored::default();
+    let mut ahead = Vec::new();
+    // Configuration is written before the samples; read up to the first batch of them.
+    for m in reader.by_ref() {
+        match m?.payload {
+            Payload::Samples(b) => {
+                ahead.push(b);
+                break;
+            }
+            Payload::Config(c) if c.name == "machine.toml" => stored.machine = Some(c.text),
+            Payload::Config(c) if c.name == "process.toml" => stored.process = Some(c.text),
+            Payload::Config(c) if c.name == SERVICE_CONFIG_NAME => stored.service = Some(c.text),
+            Payload::Config(c) if c.name == RECIPE_CONFIG_NAME => stored.recipe = Some(c.text),
+            _ => {}
+        }
+    }
+    Ok((Box::new(reader), ahead, stored))
 }
 
 /// A figure of the table, or `-` where the blow has none (an incomplete blow).
