@@ -360,3 +360,60 @@ fn export_and_inspect_of_a_directory_name_and_skip_empty_and_unreadable_files() 
         assert!(err.lines().any(|l| l.contains("skipped") && l.contains(bad)), "{bad} not named: {err}");
     }
 }
+
+/// `forgemon run` on a recording directory that already holds 25 files of 1 MiB, the first
+/// five last written ten days ago, with `keep_days = 7` and `keep_bytes = 16 MiB`: at the
+/// start the five old ones go for their age, then the oldest while more than 16 MiB are
+/// kept, each deletion logged, and the file being written stays.
+#[test]
+fn retention_deletes_the_oldest_whole_files_at_the_start_and_logs_each() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("rec");
+    std::fs::create_dir_all(&rec).unwrap();
+    let ten_days_ago = std::time::SystemTime::now() - Duration::from_secs(10 * 86_400);
+    for i in 1..=25 {
+        let f = std::fs::File::create(rec.join(format!("forgemon-{i:05}.mcap"))).unwrap();
+        f.set_len(1 << 20).unwrap();
+        if i <= 5 {
+            f.set_modified(ten_days_ago).unwrap();
+        }
+    }
+    let http = free_port();
+    let machine = common::root().join("config/hammer-lg1000.machine.toml");
+    let config = dir.path().join("service.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "machine = \"{}\"\n[recording]\ndir = \"rec\"\nkeep_days = 7\nkeep_bytes = 16777216\n\
+             [http]\nlisten = \"127.0.0.1:{http}\"\n[[sources]]\nname = \"daq\"\nkind = \"serial\"\n\
+             path = \"{}\"\n[[sources.channels]]\nrole = \"load_N\"\ngain = 1.0\n\
+             [[sources.channels]]\nrole = \"disp_m\"\ngain = 1e-6\n[[sources.channels]]\nrole = \"acc_mps2\"\ngain = 1e-3\n",
+            machine.display(),
+            dir.path().join("no-such-tty").display()
+        ),
+    )
+    .unwrap();
+    let log = std::fs::File::create(dir.path().join("log")).unwrap();
+    let service = common::KillOnDrop(common::spawn_service_logging(&config, http, log.into()));
+    let s = wait_for(http, "the storage report", Duration::from_secs(10), |s| s["storage"]["state"] == "recording");
+    drop(service);
+    let left: Vec<String> = recording_files(&rec)
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".mcap"))
+        .collect();
+    // 20 MiB younger than a week and the new file: 00006–00010 go, 15 MiB stay.
+    let expected: Vec<String> = (11..=25).map(|i| format!("forgemon-{i:05}.mcap")).collect();
+    assert_eq!(left, expected);
+    assert!(rec.join("forgemon-00026.mcap").exists() || rec.join("forgemon-00026.mcap.part").exists());
+    assert_eq!(s["storage"]["deleted_files"], 10, "{s}");
+    let log = std::fs::read_to_string(dir.path().join("log")).unwrap();
+    for i in 1..=10 {
+        let name = format!("forgemon-{i:05}.mcap");
+        let why = if i <= 5 { "keep_days" } else { "keep_bytes" };
+        assert!(
+            log.lines().any(|l| l.contains("retention: deleted") && l.contains(&name) && l.contains(why)),
+            "{name} not logged ({why}):\n{log}"
+        );
+    }
+}
