@@ -379,20 +379,10 @@ fn retention_deletes_the_oldest_whole_files_at_the_start_and_logs_each() {
         }
     }
     let http = free_port();
-    let machine = common::root().join("config/hammer-lg1000.machine.toml");
-    let config = dir.path().join("service.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "machine = \"{}\"\n[recording]\ndir = \"rec\"\nkeep_days = 7\nkeep_bytes = 16777216\n\
-             [http]\nlisten = \"127.0.0.1:{http}\"\n[[sources]]\nname = \"daq\"\nkind = \"serial\"\n\
-             path = \"{}\"\n[[sources.channels]]\nrole = \"load_N\"\ngain = 1.0\n\
-             [[sources.channels]]\nrole = \"disp_m\"\ngain = 1e-6\n[[sources.channels]]\nrole = \"acc_mps2\"\ngain = 1e-3\n",
-            machine.display(),
-            dir.path().join("no-such-tty").display()
-        ),
-    )
-    .unwrap();
+    let config = common::service_toml(dir.path(), http, "", "");
+    let text = std::fs::read_to_string(&config).unwrap();
+    let text = text.replace("dir = \"rec\"", "dir = \"rec\"\nkeep_days = 7\nkeep_bytes = 16777216");
+    std::fs::write(&config, text).unwrap();
     let log = std::fs::File::create(dir.path().join("log")).unwrap();
     let service = common::KillOnDrop(common::spawn_service_logging(&config, http, log.into()));
     let s = wait_for(http, "the storage report", Duration::from_secs(10), |s| s["storage"]["state"] == "recording");

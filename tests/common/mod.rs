@@ -122,34 +122,7 @@ pub fn spawn_service_logging(config: &std::path::Path, http: u16, log: std::proc
 /// `127.0.0.1:http`, the tables `tables` (TOML text), and one serial source that never
 /// opens (the service runs on without it), so that a server's face can be driven alone.
 pub fn service_file(dir: &std::path::Path, http: u16, tables: &str) -> std::path::PathBuf {
-    let machine = root().join("config/hammer-lg1000.machine.toml");
-    let cfg = format!(
-        r#"machine = "{}"
-[recording]
-dir = "rec"
-[http]
-listen = "127.0.0.1:{http}"
-{tables}
-[[sources]]
-name = "daq"
-kind = "serial"
-path = "{}"
-[[sources.channels]]
-role = "load_N"
-gain = 1.0
-[[sources.channels]]
-role = "disp_m"
-gain = 1.0
-[[sources.channels]]
-role = "acc_mps2"
-gain = 1.0
-"#,
-        machine.display(),
-        dir.join("no-such-tty").display()
-    );
-    let path = dir.join("service.toml");
-    std::fs::write(&path, cfg).expect("write the service file");
-    path
+    service_toml(dir, http, "", tables)
 }
 
 /// The files in `dir`, sorted by name.
