@@ -1,5 +1,8 @@
 use std::{
+    any::Any,
     collections::HashMap,
+    future::Future,
+    pin::Pin,
     net::{SocketAddr, ToSocketAddrs},
     sync::{
         atomic::{AtomicU16, AtomicU8},
@@ -90,6 +93,34 @@ pub struct Server {
     /// Manager for reverse connections. This does nothing unless users register
     /// reverse connect targets.
     reverse_connect_manager: ReverseConnectionManager,
+    /// forgemon patch: the gate every accepted connection passes, if any.
+    accept_gate: Option<Arc<dyn AcceptGate>>,
+}
+
+// forgemon patch (FORGEMON.md): an accept gate.
+
+/// Decides on each connection the server accepts, before anything is read from it.
+pub trait AcceptGate: Send + Sync + 'static {
+    /// `None` refuses the connection (its socket is closed at once); `Some` admits it.
+    fn admit(&self, peer: SocketAddr) -> Option<Admitted>;
+}
+
+/// An admitted connection.
+pub struct Admitted {
+    /// What [`connection_context`] returns inside the connection's task.
+    pub context: Arc<dyn Any + Send + Sync>,
+    /// When this resolves, the connection is closed.
+    pub close: Pin<Box<dyn Future<Output = ()> + Send>>,
+}
+
+tokio::task_local! {
+    static CONNECTION: Arc<dyn Any + Send + Sync>;
+}
+
+/// The context the accept gate gave the connection whose task calls this (for example an
+/// [`AuthManager`](crate::authenticator::AuthManager) method); `None` without a gate.
+pub fn connection_context() -> Option<Arc<dyn Any + Send + Sync>> {
+    CONNECTION.try_with(Arc::clone).ok()
 }
 
 impl Server {
@@ -249,9 +280,15 @@ impl Server {
                 session_notify,
                 status: status_wrapper.clone(),
                 reverse_connect_manager,
+                accept_gate: None,
             },
             handle,
         ))
+    }
+
+    /// forgemon patch: pass every accepted connection through `gate`.
+    pub fn set_accept_gate(&mut self, gate: Arc<dyn AcceptGate>) {
+        self.accept_gate = Some(gate);
     }
 
     /// Get a reference to the SubscriptionCache containing all subscriptions on the server.
@@ -373,6 +410,16 @@ impl Server {
                 rs = listener.accept() => {
                     match rs {
                         Ok((socket, addr)) => {
+                            let admitted = match &self.accept_gate {
+                                None => None,
+                                Some(gate) => match gate.admit(addr) {
+                                    Some(admitted) => Some(admitted),
+                                    None => {
+                                        debug!("Refused connection from {addr} at the accept gate");
+                                        continue;
+                                    }
+                                },
+                            };
                             info!("Accept new connection from {addr} ({connection_counter})");
                             let conn = SessionStarter::new(
                                 TcpConnector::new(socket, TransportConfig {
@@ -390,7 +437,7 @@ impl Server {
                             );
 
                             let (send, recv) = tokio::sync::mpsc::channel(5);
-                            let handle = tokio::spawn(async move {
+                            let task = async move {
                                 if let Err(payload) =
                                     std::panic::AssertUnwindSafe(conn.run(recv, |_| {}))
                                         .catch_unwind()
@@ -399,7 +446,21 @@ impl Server {
                                     log_connection_panic(connection_counter, payload);
                                 }
                                 connection_counter
-                            });
+                            };
+                            let handle = match admitted {
+                                None => tokio::spawn(task),
+                                Some(Admitted { context, close }) => {
+                                    tokio::spawn(CONNECTION.scope(context, async move {
+                                        tokio::select! {
+                                            id = task => id,
+                                            () = close => {
+                                                info!("Connection {connection_counter} closed by the accept gate");
+                                                connection_counter
+                                            }
+                                        }
+                                    }))
+                                }
+                            };
                             self.connections.push(handle);
                             self.connection_map.insert(connection_counter, ConnectionInfo {
                                 command_send: send
