@@ -8,6 +8,8 @@
 //! - `forgemon run` with `[opcua] user`/`password_file` on loopback: anonymous sessions and
 //!   a wrong password are refused, the right password over Basic256Sha256 is served; and a
 //!   non-loopback `listen` without a user stops the service with an error naming the key.
+//! - the limits (issue 39): wrong passwords throttled per peer address, the connection cap
+//!   counted at accept, the HEL timeout.
 //!
 //! CI installs asyncua (`.ci/run`); elsewhere the test fails saying how.
 
@@ -297,6 +299,59 @@ fn wrong_passwords_from_one_client_are_throttled_to_two_a_second_after_ten() {
     let six_s = at(15, "end") - at(10, "start");
     assert!(six_s >= 2.5 - 0.05, "tries 11 to 16 took {six_s:.2} s: more than 2 a second were served");
     assert_eq!(seen["right"]["ok"], 0, "the right password is still served: {seen}");
+}
+
+#[test]
+fn wrong_passwords_from_one_peer_do_not_slow_another_peers_login() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let password = "hammer-7c1f";
+    let (mut service, url, pki) = user_service(dir.path(), password, "max_sessions = 100");
+    let _ = user_client(&["auth"], &url, &pki, password, dir.path());
+    trust_rejected(&pki);
+    let seen = client_json(user_client(&["peers"], &url, &pki, password, dir.path()));
+    let _ = service.kill();
+    let _ = service.wait();
+    let took = |t: &Value| t["end"].as_f64().expect("end") - t["start"].as_f64().expect("start");
+    let queue = seen["a_queue"].as_array().expect("A's queued tries");
+    assert!(
+        seen["a_first"].as_array().expect("A's first tries").iter().chain(queue).all(|t| t.get("error").is_some()),
+        "a wrong password was served: {seen}"
+    );
+    // A's eight tries at once, after ten wrong: one is checked per 0.5 s, so the last one
+    // checked ends at least 3 s after they were sent, unless it was refused unchecked.
+    let (alone, during) = (&seen["b_alone"], &seen["b_during"]);
+    assert_eq!(alone["ok"], 0, "B's login alone: {seen}");
+    assert_eq!(during["ok"], 0, "B's login while A was throttled: {seen}");
+    // B's login did not wait behind A's queue (eight turns of 0.5 s, or a refusal): it took
+    // at most one turn longer than alone (issue 39: the throttle was the server's).
+    assert!(
+        took(during) <= took(alone) + 0.5,
+        "B's login took {:.2} s while A was throttled, {:.2} s alone",
+        took(during),
+        took(alone)
+    );
+    assert!(queue.iter().any(|t| took(t) >= 1.0), "A's queued tries were not throttled: {seen}");
+}
+
+#[test]
+fn the_connection_cap_is_counted_at_accept_and_clients_without_a_session_give_way() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (http, port) = (free_port(), free_port());
+    // A HEL timeout long past the test: only the cap can close a raw connection.
+    let table = format!("listen = \"opc.tcp://127.0.0.1:{port}\"\nhello_timeout_s = 60\nmax_connections = 2");
+    let mut service = common::spawn_service(&service_file(dir.path(), http, &table), http);
+    let seen = client_json(client(&["cap", &format!("opc.tcp://127.0.0.1:{port}")]).output().expect("python3"));
+    let _ = service.kill();
+    let _ = service.wait();
+    // Two raw connections fill the cap; each session that follows takes the place of the
+    // oldest one without a session, which is closed.
+    assert_eq!(seen["a"]["ok"], 0, "session A: {seen}");
+    assert_eq!(seen["b"]["ok"], 0, "session B: {seen}");
+    assert_eq!((&seen["raw1_closed"], &seen["raw2_closed"]), (&Value::Bool(true), &Value::Bool(true)), "{seen}");
+    // Both places hold sessions: a newcomer is closed at once.
+    assert_eq!(seen["raw3_closed"], true, "a connection past the cap was held: {seen}");
+    // A's session closed: its place is free again, and the newcomer is held.
+    assert_eq!(seen["raw4_closed"], false, "a connection under the cap was closed: {seen}");
 }
 
 #[test]

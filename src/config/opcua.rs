@@ -3,8 +3,8 @@
 //! loopback address only; any other address needs `user` and `password_file`, and then
 //! the server offers only a signed and encrypted endpoint (Basic256Sha256) whose self-signed
 //! certificate it keeps under `pki_dir`. The password itself is read when the service
-//! starts, not here (this module does no IO). `hello_timeout_s` and `max_sessions` bound
-//! what unauthenticated clients can hold.
+//! starts, not here (this module does no IO). `hello_timeout_s`, `max_connections` and
+//! `max_sessions` bound what unauthenticated clients can hold.
 
 use std::net::{IpAddr, SocketAddr};
 use std::path::{Path, PathBuf};
@@ -27,10 +27,16 @@ pub const DEFAULT_HELLO_TIMEOUT_S: u64 = 5;
 /// `max_sessions`: sessions open at once (async-opcua's `limits.max_sessions`); a plant
 /// has a few clients (an MES, a SCADA, an engineer's browser).
 pub const DEFAULT_MAX_SESSIONS: u64 = 10;
+/// `max_connections`: connections held at once, counted at accept (`daemon::slots`): at
+/// the cap a newcomer takes the place of the oldest connection without an activated
+/// session. Room for `max_sessions` clients and as many reconnecting.
+pub const DEFAULT_MAX_CONNECTIONS: u64 = 2 * DEFAULT_MAX_SESSIONS;
 /// `hello_timeout_s` from 1 s to 10 min.
 pub const HELLO_TIMEOUT_S: WholeLimits = WholeLimits { min: 1, max: 600, unit: "s" };
 /// `max_sessions` from 1 to 1000.
 pub const MAX_SESSIONS: WholeLimits = WholeLimits { min: 1, max: 1000, unit: "sessions" };
+/// `max_connections` from 1 to 1000.
+pub const MAX_CONNECTIONS: WholeLimits = WholeLimits { min: 1, max: 1000, unit: "connections" };
 
 /// `[opcua]` as written.
 #[derive(Deserialize)]
@@ -42,6 +48,7 @@ pub(super) struct RawOpcua {
     pki_dir: Option<String>,
     hello_timeout_s: Option<u64>,
     max_sessions: Option<u64>,
+    max_connections: Option<u64>,
 }
 
 /// Who may open a session.
@@ -66,6 +73,8 @@ pub struct OpcuaConfig {
     pub hello_timeout_s: u64,
     /// `max_sessions`: sessions open at once.
     pub max_sessions: u64,
+    /// `max_connections`: connections held at once, counted at accept.
+    pub max_connections: u64,
 }
 
 impl OpcuaConfig {
@@ -81,6 +90,7 @@ impl OpcuaConfig {
             access: OpcuaAccess::Anonymous,
             hello_timeout_s: DEFAULT_HELLO_TIMEOUT_S,
             max_sessions: DEFAULT_MAX_SESSIONS,
+            max_connections: DEFAULT_MAX_CONNECTIONS,
         })
     }
 }
@@ -151,7 +161,11 @@ pub(super) fn parse_opcua(
         Some(n) => doc.in_whole_range("opcua.max_sessions", n, &MAX_SESSIONS)?,
         None => DEFAULT_MAX_SESSIONS,
     };
-    Ok(Some(OpcuaConfig { url: raw.listen.clone(), listen, access, hello_timeout_s, max_sessions }))
+    let max_connections = match raw.max_connections {
+        Some(n) => doc.in_whole_range("opcua.max_connections", n, &MAX_CONNECTIONS)?,
+        None => DEFAULT_MAX_CONNECTIONS,
+    };
+    Ok(Some(OpcuaConfig { url: raw.listen.clone(), listen, access, hello_timeout_s, max_sessions, max_connections }))
 }
 
 #[cfg(test)]
@@ -233,6 +247,8 @@ mod tests {
         assert!(e.contains("'opcua.hello_timeout_s'"), "{e}");
         let e = err("[opcua]\nlisten = \"opc.tcp://127.0.0.1:4840\"\nmax_sessions = 0\n");
         assert!(e.contains("'opcua.max_sessions'"), "{e}");
+        let e = err("[opcua]\nlisten = \"opc.tcp://127.0.0.1:4840\"\nmax_connections = 1001\n");
+        assert!(e.contains("'opcua.max_connections'"), "{e}");
     }
 
     #[test]

@@ -33,10 +33,11 @@ pub const DEFAULT_PLC_MAX_CONNECTIONS: u64 = 16;
 
 /// Each server's connection cap at its default, by its key: what the descriptor limit of
 /// the systemd unit must hold beside the service's own files.
-pub const DEFAULT_CONNECTION_CAPS: [(&str, u64); 3] = [
+pub const DEFAULT_CONNECTION_CAPS: [(&str, u64); 4] = [
     ("http.max_connections", DEFAULT_HTTP_MAX_CONNECTIONS),
     ("foxglove.max_clients", DEFAULT_FOXGLOVE_MAX_CLIENTS),
     ("plc_server.max_connections", DEFAULT_PLC_MAX_CONNECTIONS),
+    ("opcua.max_connections", super::opcua::DEFAULT_MAX_CONNECTIONS),
 ];
 
 /// The HTTP server's limits (`[http]`).

@@ -24,6 +24,7 @@ pub mod reload;
 pub mod secret;
 mod service;
 pub mod sinks;
+pub mod slots;
 pub mod sparkplug;
 pub mod status;
 

@@ -360,11 +360,11 @@ pub async fn start(
 /// doc); a failed accept (out of file descriptors) is logged and retried after a pause.
 async fn serve(server: Server, service: ImageService, limits: PlcLimits) {
     let stats = service.stats.clone();
-    let slots = conn::Slots::new(usize::try_from(limits.max_connections).unwrap_or(usize::MAX));
+    let slots = crate::daemon::slots::Slots::new(usize::try_from(limits.max_connections).unwrap_or(usize::MAX));
     let idle = Duration::from_secs_f64(limits.idle_timeout_s);
     let on_connected = |stream, peer: SocketAddr| {
         let service = service.clone();
-        let slot = slots.take();
+        let slot = slots.open();
         async move {
             let Some(slot) = slot else {
                 service.stats.refused.fetch_add(1, Ordering::Relaxed);

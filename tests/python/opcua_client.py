@@ -17,6 +17,14 @@ The client of issue 21 §2, for tests/opcua_python.rs. It decodes nothing with f
   throttle URL SERVER_CERT_DER USER PASSWORD WORKDIR N
       N wrong passwords in a row, one session each (as `auth` makes them), then the right
       one; prints when each try started and ended (monotonic seconds) and how it ended.
+  peers URL SERVER_CERT_DER USER PASSWORD WORKDIR
+      Two peers: A from 127.0.0.1, B from 127.0.0.2. B logs in alone first; then A sends
+      10 wrong passwords in a row and 8 more at once, and while A's 8 wait, B logs in
+      again with the right password. Prints each try's start, end and outcome.
+  cap URL
+      Anonymous. Opens two raw connections that send nothing, then sessions A and B, then a
+      third raw connection; closes A and opens a fourth. Prints which raw connections the
+      server closed within a second of the step that followed them, and what A and B read.
 
 Prints one JSON object. Exit codes: 0 ok, 2 usage, 3 asyncua missing, 1 anything else.
 """
@@ -253,12 +261,101 @@ async def throttle(url, server_cert, user, password, workdir, n):
     return {"wrong": tries, "right": {"start": started, "end": time.monotonic(), **right}}
 
 
+def from_source(client, source_ip):
+    """`client`, connecting from `source_ip` (any 127.0.0.0/8 address is this machine's)."""
+    from asyncua.client.ua_client import UaClientState
+
+    ua_client = client.uaclient
+
+    async def connect_socket(host, port):
+        ua_client._set_state(UaClientState.CONNECTING)
+        await asyncio.wait_for(
+            asyncio.get_running_loop().create_connection(
+                ua_client._make_protocol, host, port, local_addr=(source_ip, 0)
+            ),
+            ua_client._timeout,
+        )
+        ua_client._set_state(UaClientState.SOCKET_OPEN)
+
+    ua_client.connect_socket = connect_socket
+    return client
+
+
+async def timed(coro):
+    started = time.monotonic()
+    r = await coro
+    return {"start": started, "end": time.monotonic(), **r}
+
+
+async def peers(url, server_cert, user, password, workdir):
+    key, cert = await client_cert(workdir)
+    await wait_for_server(url, time.monotonic() + 20)
+
+    async def login(source, pw):
+        return await timed(try_session(from_source(await secure(url, server_cert, key, cert, user, pw), source)))
+
+    b_alone = await login("127.0.0.2", password)
+    a_first = [await login("127.0.0.1", password + "x") for _ in range(10)]
+    a_queue = [asyncio.create_task(login("127.0.0.1", password + "x")) for _ in range(8)]
+    await asyncio.sleep(0.3)
+    b_during = await login("127.0.0.2", password)
+    return {"b_alone": b_alone, "a_first": a_first, "a_queue": list(await asyncio.gather(*a_queue)), "b_during": b_during}
+
+
+async def closed_within(reader, seconds):
+    """Whether the server closed this raw connection within `seconds`."""
+    try:
+        return await asyncio.wait_for(reader.read(1), seconds) == b""
+    except asyncio.TimeoutError:
+        return False
+    except ConnectionError:
+        return True
+
+
+async def cap(url):
+    host, port = url.removeprefix("opc.tcp://").rstrip("/").rsplit(":", 1)
+    await wait_for_server(url, time.monotonic() + 20)
+    raw = [await asyncio.open_connection(host, port) for _ in range(2)]
+    a = Client(url, timeout=4)
+    a_read = await timed(session_read(a))
+    b = Client(url, timeout=4)
+    b_read = await timed(session_read(b))
+    out = {"a": a_read, "b": b_read}
+    out["raw1_closed"] = await closed_within(raw[0][0], 1.0)
+    out["raw2_closed"] = await closed_within(raw[1][0], 1.0)
+    raw3 = await asyncio.open_connection(host, port)
+    out["raw3_closed"] = await closed_within(raw3[0], 1.0)
+    await a.disconnect()
+    await asyncio.sleep(0.3)
+    raw4 = await asyncio.open_connection(host, port)
+    out["raw4_closed"] = await closed_within(raw4[0], 1.0)
+    await b.disconnect()
+    for _, w in [*raw, raw3, raw4]:
+        w.close()
+    return out
+
+
+async def session_read(client):
+    """Connect `client` and read the CycleCounter, leaving the session open."""
+    try:
+        await client.connect()
+        mf = await client.get_namespace_index(MODEL_NS)
+        node = await client.nodes.objects.get_child([f"{mf}:Machines", f"{mf}:Hammer", f"{mf}:FormingWorkingUnit", f"{mf}:CycleCounter"])
+        return {"ok": plain(await node.read_value())}
+    except Exception as e:  # the refusal is what is being tested
+        return {"error": f"{type(e).__name__}: {e}"}
+
+
 def main():
     args = sys.argv[1:]
     if len(args) == 3 and args[0] == "demo":
         out = asyncio.run(demo(args[1], float(args[2])))
     elif len(args) == 6 and args[0] == "auth":
         out = asyncio.run(auth(*args[1:]))
+    elif len(args) == 6 and args[0] == "peers":
+        out = asyncio.run(peers(*args[1:]))
+    elif len(args) == 2 and args[0] == "cap":
+        out = asyncio.run(cap(args[1]))
     elif len(args) == 7 and args[0] == "throttle":
         out = asyncio.run(throttle(*args[1:6], int(args[6])))
     else:

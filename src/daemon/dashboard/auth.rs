@@ -22,7 +22,7 @@ use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use subtle::ConstantTimeEq as _;
 
-use crate::daemon::http_server::Admission;
+use crate::daemon::slots::Admission;
 
 /// The query parameter that carries the token on a `GET`.
 pub const TOKEN_QUERY: &str = "token";

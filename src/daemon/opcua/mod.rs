@@ -6,11 +6,13 @@
 //! channel (Basic256Sha256) with a self-signed server certificate kept under `pki_dir`.
 //! README "OPC UA server" documents the node layout for a plant's clients.
 //!
-//! Limits: a connection without HEL is closed after `hello_timeout_s`; at most
-//! `max_sessions` sessions; a client certificate the server does not know yet is refused
-//! and stored under `pki_dir/rejected` (an operator trusts it by moving it to
-//! `pki_dir/trusted`); wrong passwords are throttled (`auth.rs`); the server's key is
-//! private (`pki.rs`), and the password file must be (`daemon::secret`).
+//! Limits: at most `max_connections` connections, counted at accept, where one without an
+//! activated session gives its place to a newcomer (`auth.rs`); a connection without HEL
+//! is closed after `hello_timeout_s`; at most `max_sessions` sessions; a client
+//! certificate the server does not know yet is refused and stored under `pki_dir/rejected`
+//! (an operator trusts it by moving it to `pki_dir/trusted`); wrong passwords are throttled
+//! per peer (`auth.rs`); the server's key is private (`pki.rs`), and the password file
+//! must be (`daemon::secret`).
 
 pub mod auth;
 pub mod events;
@@ -99,6 +101,8 @@ fn builder(cfg: &OpcuaConfig) -> anyhow::Result<ServerBuilder> {
         ));
     Ok(match &cfg.access {
         OpcuaAccess::Anonymous => b
+            // Ours, so that an activated session admits its connection (`auth::Gate`).
+            .with_authenticator(Arc::new(auth::Authenticator::new(std::collections::BTreeMap::new())))
             .add_endpoint("none", ServerEndpoint::new_none(ENDPOINT_PATH, &[ANONYMOUS_USER_TOKEN_ID.to_string()]))
             .create_sample_keypair(false)
             // No certificate is used, but async-opcua makes its PKI folders all the same
@@ -154,8 +158,10 @@ pub async fn start(
     if let OpcuaAccess::User { pki_dir, .. } = &cfg.access {
         pki::prepare(pki_dir)?;
     }
-    let (server, handle) =
+    let (mut server, handle) =
         builder(cfg)?.build().map_err(|e| anyhow::anyhow!("opcua: the server's configuration is not valid: {e}"))?;
+    let slots = crate::daemon::slots::Slots::new(usize::try_from(cfg.max_connections).unwrap_or(usize::MAX));
+    server.set_accept_gate(Arc::new(auth::Gate { slots }));
     if let OpcuaAccess::User { pki_dir, .. } = &cfg.access {
         // async-opcua logs a certificate it could not make and serves on without it.
         let cert = pki_dir.join("own/cert.der");
@@ -238,6 +244,7 @@ mod tests {
             },
             hello_timeout_s: 2,
             max_sessions: 3,
+            max_connections: 6,
         };
         let b = builder(&cfg).expect("builds");
         let eps = &b.config().endpoints;

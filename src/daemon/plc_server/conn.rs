@@ -7,113 +7,21 @@
 //! connection that completes no request within the idle timeout (counted from the accept
 //! and from each request; bytes trickled in do not count) ends with `TimedOut`, and bytes
 //! that are not Modbus TCP end it with `InvalidData`, and a connection whose place under
-//! the cap went to a newer one (`Slots`) with `ConnectionAborted`: tokio-modbus then drops
+//! the cap went to a newer one (`daemon::slots`) with `ConnectionAborted`: tokio-modbus then drops
 //! the socket.
 
-use std::collections::VecDeque;
 use std::io;
 use std::pin::Pin;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, Weak};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::task::{Context, Poll, ready};
 use std::time::Duration;
 
-use futures_util::task::AtomicWaker;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::time::{Instant, Sleep};
 
 use super::gate::{self, Judged, MAX_ADU};
-
-/// The open connections, counted when accepted (`[plc_server] max_connections`). At the
-/// cap, a new connection takes the place of the oldest one that has not completed a
-/// request yet (a client that connects and waits cannot keep a PLC out); when every open
-/// connection has completed one, the new connection is refused.
-#[derive(Debug, Clone)]
-pub struct Slots {
-    registry: Arc<Mutex<Registry>>,
-    max: usize,
-}
-
-#[derive(Debug, Default)]
-struct Registry {
-    open: usize,
-    /// Connections without a completed request yet, oldest first (dropped and proven ones
-    /// are skipped and pruned as they are met).
-    unproven: VecDeque<Weak<SlotState>>,
-}
-
-#[derive(Debug, Default)]
-struct SlotState {
-    /// A request completed on this connection.
-    proven: AtomicBool,
-    /// Its place was given to a newer connection: it is to close.
-    evicted: AtomicBool,
-    waker: AtomicWaker,
-}
-
-/// A connection's place under the cap, given back when it is dropped.
-#[derive(Debug)]
-pub struct Slot {
-    state: Arc<SlotState>,
-    registry: Arc<Mutex<Registry>>,
-}
-
-impl Slot {
-    /// A request completed: the connection keeps its place until it closes.
-    fn proven(&self) {
-        self.state.proven.store(true, Ordering::Release);
-    }
-
-    /// Whether the place was given to a newer connection; wakes `cx` when it is.
-    fn evicted(&self, cx: &Context<'_>) -> bool {
-        self.state.waker.register(cx.waker());
-        self.state.evicted.load(Ordering::Acquire)
-    }
-}
-
-impl Drop for Slot {
-    fn drop(&mut self) {
-        let mut r = self.registry.lock().unwrap_or_else(|p| p.into_inner());
-        // An evicted connection's place is already the newer one's.
-        if !self.state.evicted.load(Ordering::Acquire) {
-            r.open = r.open.saturating_sub(1);
-        }
-    }
-}
-
-impl Slots {
-    pub fn new(max: usize) -> Self {
-        Slots { registry: Arc::default(), max }
-    }
-
-    /// A place for one more connection: a free one, or the place of the oldest connection
-    /// without a completed request, which is told to close; `None` when there is neither.
-    pub fn take(&self) -> Option<Slot> {
-        let mut r = self.registry.lock().unwrap_or_else(|p| p.into_inner());
-        if r.open >= self.max {
-            let victim = loop {
-                let oldest = r.unproven.pop_front()?;
-                match oldest.upgrade() {
-                    Some(v) if !v.proven.load(Ordering::Acquire) && !v.evicted.load(Ordering::Acquire) => break v,
-                    _ => continue,
-                }
-            };
-            victim.evicted.store(true, Ordering::Release);
-            victim.waker.wake();
-        } else {
-            r.open += 1;
-        }
-        let state = Arc::new(SlotState::default());
-        r.unproven.retain(|w| w.upgrade().is_some_and(|s| !s.proven.load(Ordering::Acquire)));
-        r.unproven.push_back(Arc::downgrade(&state));
-        Some(Slot { state, registry: self.registry.clone() })
-    }
-
-    /// Connections holding a place.
-    pub fn open(&self) -> usize {
-        self.registry.lock().unwrap_or_else(|p| p.into_inner()).open
-    }
-}
+use crate::daemon::slots::Slot;
 
 /// The socket `S` behind the frame gate (module doc).
 pub struct Gated<S> {
@@ -153,7 +61,7 @@ impl<S> Gated<S> {
     /// its place.
     fn active(&mut self) {
         self.idle.as_mut().reset(Instant::now() + self.idle_timeout);
-        self.slot.proven();
+        self.slot.admit();
     }
 
     /// Judge the first unjudged request: `true` when there was one to hand on or answer.
@@ -183,7 +91,7 @@ impl<S> Gated<S> {
 impl<S: AsyncRead + AsyncWrite + Unpin> AsyncRead for Gated<S> {
     fn poll_read(mut self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &mut ReadBuf<'_>) -> Poll<io::Result<()>> {
         let this = &mut *self;
-        if this.slot.evicted(cx) {
+        if this.slot.poll_shed(cx) {
             let why = "closed for a newer connection: max_connections are open and this one made no request";
             return Poll::Ready(Err(io::Error::new(io::ErrorKind::ConnectionAborted, why)));
         }
@@ -240,34 +148,32 @@ impl<S: AsyncWrite + Unpin> AsyncWrite for Gated<S> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::daemon::slots::Slots;
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
     fn gated(s: tokio::io::DuplexStream, idle: Duration, slots: &Slots) -> Gated<tokio::io::DuplexStream> {
-        Gated::new(s, idle, slots.take().expect("a slot"), Arc::new(AtomicU64::new(0)))
+        Gated::new(s, idle, slots.open().expect("a slot"), Arc::new(AtomicU64::new(0)))
     }
 
     fn cx() -> Context<'static> {
         Context::from_waker(std::task::Waker::noop())
     }
 
-    #[test]
-    fn the_cap_counts_open_connections_and_evicts_the_oldest_that_made_no_request() {
+    #[tokio::test]
+    async fn a_request_keeps_the_place_and_a_shed_connection_ends_aborted() {
         let slots = Slots::new(2);
-        let (a, b) = (slots.take().expect("a"), slots.take().expect("b"));
-        a.proven();
-        // At the cap: c takes b's place (b made no request), a keeps its own.
-        let c = slots.take().expect("c");
-        assert!(b.evicted(&cx()) && !a.evicted(&cx()) && !c.evicted(&cx()));
-        assert_eq!(slots.open(), 2);
-        drop(b);
-        assert_eq!(slots.open(), 2, "the evicted one's place is c's");
-        c.proven();
-        assert!(slots.take().is_none(), "every open connection made a request: refused");
-        drop(a);
-        assert_eq!(slots.open(), 1);
-        let d = slots.take().expect("a closed connection frees its place");
-        drop((c, d));
-        assert_eq!(slots.open(), 0);
+        let (mut client_a, server_a) = tokio::io::duplex(1024);
+        let (_client_b, server_b) = tokio::io::duplex(1024);
+        let (mut a, mut b) =
+            (gated(server_a, Duration::from_secs(5), &slots), gated(server_b, Duration::from_secs(5), &slots));
+        client_a.write_all(&[0, 1, 0, 0, 0, 6, 1, 0x03, 0, 0, 0, 1]).await.expect("write");
+        let mut got = [0u8; 12];
+        a.read_exact(&mut got).await.expect("a's request passes");
+        // At the cap, a newcomer takes b's place (b made no request), not a's.
+        let _c = slots.open().expect("a place");
+        let err = b.read(&mut got).await.expect_err("b was shed");
+        assert_eq!(err.kind(), io::ErrorKind::ConnectionAborted);
+        assert!(matches!(Pin::new(&mut a).poll_read(&mut cx(), &mut ReadBuf::new(&mut got)), Poll::Pending));
     }
 
     #[tokio::test]
