@@ -110,7 +110,7 @@ pub struct SynthBlow {
 /// What remains is plain accuracy: at the default 3e-5, five copper blows of the tests' press
 /// (`tests/diagnose.rs`) differ from the converged run by up to 63 kN (13 times the press
 /// captures' 5 kN noise); the hammer's steel blows by under 1 kN, and by 17 kN with a 0.3 mm
-/// clearance (8 times its 2 kN noise). Measured causes (README, "Why captures stay at
+/// clearance (8 times its 2 kN noise). Measured causes (docs/validation.md, "Why captures stay at
 /// 1e-8"): on the press, the drop of the flow load as the plastic rate falls to the strain
 /// rate floor (flow stress ∝ rate^0.0147) comes 40 µs late, because the step control judges
 /// positions and the plastic compression against their distance from first contact (mm)

@@ -1,6 +1,6 @@
-//! The README's example commands, run: every fenced block that follows the line
-//! `<!-- readme_examples: checked -->` in README.md holds `$ forgemon ...` commands, each
-//! followed by the output the README shows for it. This test runs each command with the
+//! The examples of the README and the user guide, run: every fenced block that follows the
+//! line `<!-- readme_examples: checked -->` in README.md or docs/guide.md ([`DOCS`]) holds
+//! `$ forgemon ...` commands, each followed by the output the document shows for it. This test runs each command with the
 //! built binary from the repository's root, in README order, and compares what it prints
 //! (stdout, then stderr) with the README, line by line (trailing spaces ignored), so the
 //! examples cannot go stale. Paths under `/tmp/` are moved into a temporary directory and
@@ -18,9 +18,13 @@ use std::process::Command;
 
 /// The line that marks the next fenced block as checked.
 const MARKER: &str = "<!-- readme_examples: checked -->";
+/// The documents whose checked blocks are run, from the repository's root.
+const DOCS: [&str; 2] = ["README.md", "docs/guide.md"];
 
-/// One command of a checked block and the output the README shows for it.
+/// One command of a checked block and the output the document shows for it.
 struct Example {
+    /// The document it is in.
+    file: &'static str,
     /// The README line the command starts on (from 1).
     line: usize,
     /// The arguments after `forgemon`.
@@ -30,7 +34,7 @@ struct Example {
 
 /// The checked examples of `readme`, in order. A marker not followed by a fenced block, or
 /// a block without a `$ forgemon` command, fails the test.
-fn examples(readme: &str) -> Vec<Example> {
+fn examples(file: &'static str, readme: &str) -> Vec<Example> {
     let lines: Vec<&str> = readme.lines().collect();
     let mut out = Vec::new();
     let mut i = 0;
@@ -39,16 +43,12 @@ fn examples(readme: &str) -> Vec<Example> {
             i += 1;
             continue;
         }
-        assert!(
-            lines.get(i + 1).is_some_and(|l| l.starts_with("```")),
-            "README.md:{}: no block after the marker",
-            i + 1
-        );
+        assert!(lines.get(i + 1).is_some_and(|l| l.starts_with("```")), "{file}:{}: no block after the marker", i + 1);
         let body_start = i + 2;
         let len = lines[body_start..].iter().position(|l| l.starts_with("```")).expect("the block is closed");
         let before = out.len();
-        out.extend(block_examples(&lines[body_start..body_start + len], body_start + 1));
-        assert!(out.len() > before, "README.md:{}: a checked block without a command", i + 1);
+        out.extend(block_examples(file, &lines[body_start..body_start + len], body_start + 1));
+        assert!(out.len() > before, "{file}:{}: a checked block without a command", i + 1);
         i = body_start + len + 1;
     }
     out
@@ -56,13 +56,13 @@ fn examples(readme: &str) -> Vec<Example> {
 
 /// The commands of one block whose first line is README line `first_line`: `$ ` starts a
 /// command (a trailing `\` continues it), the lines up to the next command are its output.
-fn block_examples(body: &[&str], first_line: usize) -> Vec<Example> {
+fn block_examples(file: &'static str, body: &[&str], first_line: usize) -> Vec<Example> {
     let mut out: Vec<Example> = Vec::new();
     let mut k = 0;
     while k < body.len() {
         let Some(start) = body[k].strip_prefix("$ ") else {
             let current =
-                out.last_mut().unwrap_or_else(|| panic!("README.md:{}: output before a command", first_line + k));
+                out.last_mut().unwrap_or_else(|| panic!("{file}:{}: output before a command", first_line + k));
             current.expected.push(body[k].trim_end().to_string());
             k += 1;
             continue;
@@ -73,11 +73,11 @@ fn block_examples(body: &[&str], first_line: usize) -> Vec<Example> {
             command.pop();
             k += 1;
             command.push(' ');
-            command.push_str(body.get(k).unwrap_or_else(|| panic!("README.md:{line}: unfinished command")).trim());
+            command.push_str(body.get(k).unwrap_or_else(|| panic!("{file}:{line}: unfinished command")).trim());
         }
         let mut words = command.split_whitespace().map(str::to_string);
-        assert_eq!(words.next().as_deref(), Some("forgemon"), "README.md:{line}: only forgemon commands are run");
-        out.push(Example { line, args: words.collect(), expected: Vec::new() });
+        assert_eq!(words.next().as_deref(), Some("forgemon"), "{file}:{line}: only forgemon commands are run");
+        out.push(Example { file, line, args: words.collect(), expected: Vec::new() });
         k += 1;
     }
     for e in &mut out {
@@ -96,7 +96,8 @@ fn run(root: &Path, tmp: &Path, e: &Example) -> Vec<String> {
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     assert!(
         out.status.success(),
-        "README.md:{}: forgemon {} failed ({}):\n{text}",
+        "{}:{}: forgemon {} failed ({}):\n{text}",
+        e.file,
         e.line,
         e.args.join(" "),
         out.status
@@ -157,11 +158,16 @@ fn a_readme_line_matches_its_words_exactly_and_its_numbers_within_tolerance() {
 #[test]
 fn the_readme_examples_print_what_the_readme_shows() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let readme = std::fs::read_to_string(root.join("README.md")).expect("README.md");
-    let all = examples(&readme);
+    let all: Vec<Example> = DOCS
+        .iter()
+        .flat_map(|file| {
+            let text = std::fs::read_to_string(root.join(file)).unwrap_or_else(|e| panic!("{file}: {e}"));
+            examples(file, &text)
+        })
+        .collect();
     // The simulate, replay and inspect sections each mark their examples.
     for verb in ["simulate", "replay", "inspect"] {
-        assert!(all.iter().any(|e| e.args[0] == verb), "no checked `forgemon {verb}` example in README.md");
+        assert!(all.iter().any(|e| e.args[0] == verb), "no checked `forgemon {verb}` example in {DOCS:?}");
     }
     let tmp = tempfile::tempdir().expect("tempdir");
     let mut stale = Vec::new();
@@ -170,11 +176,12 @@ fn the_readme_examples_print_what_the_readme_shows() {
         let got = run(root, tmp.path(), e);
         // Every replay the README shows, again as JSON lines: no number outside its range.
         if e.args[0] == "replay" {
-            let json = Example { args: replay_as_json(&e.args), expected: Vec::new(), line: e.line };
+            let json = Example { file: e.file, args: replay_as_json(&e.args), expected: Vec::new(), line: e.line };
             let blows: Vec<serde_json::Value> =
                 run(root, tmp.path(), &json).iter().filter_map(|l| serde_json::from_str(l).ok()).collect();
-            assert!(!blows.is_empty(), "README.md:{}: no blow in the replay", e.line);
-            out_of_range.extend(common::out_of_range(&blows).into_iter().map(|b| format!("README.md:{}: {b}", e.line)));
+            assert!(!blows.is_empty(), "{}:{}: no blow in the replay", e.file, e.line);
+            out_of_range
+                .extend(common::out_of_range(&blows).into_iter().map(|b| format!("{}:{}: {b}", e.file, e.line)));
         }
         if got.len() != e.expected.len() || got.iter().zip(&e.expected).any(|(a, b)| !same_line(a, b)) {
             let first = got
@@ -183,7 +190,8 @@ fn the_readme_examples_print_what_the_readme_shows() {
                 .position(|(a, b)| !same_line(a, b))
                 .unwrap_or(got.len().min(e.expected.len()));
             stale.push(format!(
-                "README.md:{}: `forgemon {}` differs from its output line {} on:\n  README: {:?}\n  output: {:?}\nits whole output:\n{}",
+                "{}:{}: `forgemon {}` differs from its output line {} on:\n  document: {:?}\n  output: {:?}\nits whole output:\n{}",
+                e.file,
                 e.line,
                 e.args.join(" "),
                 first + 1,
@@ -193,7 +201,13 @@ fn the_readme_examples_print_what_the_readme_shows() {
             ));
         }
     }
-    assert!(stale.is_empty(), "{} of {} README examples are stale:\n\n{}", stale.len(), all.len(), stale.join("\n\n"));
+    assert!(
+        stale.is_empty(),
+        "{} of {} documented examples are stale:\n\n{}",
+        stale.len(),
+        all.len(),
+        stale.join("\n\n")
+    );
     assert!(out_of_range.is_empty(), "{}", out_of_range.join("\n"));
 }
 
@@ -227,6 +241,7 @@ fn the_fixtures_and_the_demo_keep_every_number_in_its_range() {
     // `run` moves `/tmp/` into the temporary directory.
     let dir = "/tmp/demo".to_string();
     let demo = Example {
+        file: "README.md",
         line: 0,
         args: ["demo", "--fast", "--billets", "2", "--dir", &dir].map(String::from).to_vec(),
         expected: vec![],
@@ -240,6 +255,7 @@ fn the_fixtures_and_the_demo_keep_every_number_in_its_range() {
         .expect("the demo's recording");
     let name = rec.file_name().expect("a file").to_string_lossy();
     let replay = Example {
+        file: "README.md",
         line: 0,
         args: vec!["replay".into(), format!("/tmp/demo/{name}"), "--json".into()],
         expected: vec![],
@@ -290,7 +306,7 @@ fn a_checked_block_is_cut_into_commands_and_their_outputs() {
     let text = format!(
         "intro\n{MARKER}\n```\n$ forgemon a --x 1 \\\n      --y 2\nout 1  \nout 2\n\n$ forgemon b\n```\n\n```\n$ forgemon unchecked\n```\n"
     );
-    let got = examples(&text);
+    let got = examples("README.md", &text);
     assert_eq!(got.len(), 2);
     assert_eq!((got[0].line, got[0].args.join(" ")), (4, "a --x 1 --y 2".to_string()));
     assert_eq!(got[0].expected, vec!["out 1", "out 2"]);

@@ -396,12 +396,12 @@ const METRICS: [(&str, &str, &str, Value); 26] = [
 mod tests {
     use super::*;
 
-    /// The README's `/status` table names exactly the fields the endpoint returns, so the
-    /// two cannot drift apart.
+    /// The user guide's `/status` table names exactly the fields the endpoint returns, so
+    /// the two cannot drift apart.
     #[test]
-    fn the_readme_documents_every_status_field() {
-        let readme = include_str!("../../README.md");
-        let start = readme.find("### `/status`: what the service reports").expect("the README's /status section");
+    fn the_guide_documents_every_status_field() {
+        let readme = include_str!("../../docs/guide.md");
+        let start = readme.find("### `/status`: what the service reports").expect("the guide's /status section");
         let table: Vec<&str> = readme[start..]
             .lines()
             .skip_while(|l| !l.starts_with("| field"))

@@ -3,7 +3,7 @@
 //! sampled it: the analogue channels (load, accelerometer) through the nominal linear-phase
 //! anti-alias low-pass at 0.4 × the lower rate, the encoder (a counter) read directly. The
 //! fit costs its window's samples, so a 50 kHz hammer blow fitted at 10 kHz costs what a
-//! 10 kHz one does, and the fit is as accurate at 10 kHz as at 50 kHz (README "Sample
+//! 10 kHz one does, and the fit is as accurate at 10 kHz as at 50 kHz (docs/guide.md "Sample
 //! rate"): what the sampling cannot resolve, the model supplies either way.
 //!
 //! The decimated grid keeps the segmenter's contact sample, so the approach fit and the
@@ -15,7 +15,7 @@ use crate::signal::fir::LowPass;
 use crate::signal::segment::{Blow, Sample};
 
 /// The model fit runs at most at this sample rate, Hz: the lowest rate whose fit meets the
-/// 10 ms latency target of issue 16 on this machine's bench (README "Sample rate"), and a
+/// 10 ms latency target of issue 16 on this machine's bench (docs/guide.md "Sample rate"), and a
 /// rate the fit is tested at directly.
 pub const FIT_MAX_RATE_HZ: f64 = 10e3;
 

@@ -465,7 +465,7 @@ mod tests {
     #[test]
     fn the_fits_tolerance_is_the_loosest_the_captures_cannot_see() {
         // The fits' rtol (`identify::objective::FIT_RTOL`, 1e-6) against the next looser one
-        // of issue 17's sweep (1e-6, 3e-6, 1e-5, 3e-5, 1e-4; README "Exact linear phases"),
+        // of issue 17's sweep (1e-6, 3e-6, 1e-5, 3e-5, 1e-4; docs/validation.md "Exact linear phases"),
         // each run as the fits run it (100 kHz on the hammers, 20 kHz on the press; the
         // hammers with their exact phases), errors against the general plant at rtol 1e-10.
         // Bounds: what a capture cannot see (as in the test above): 1e-3 of the 10 µm encoder

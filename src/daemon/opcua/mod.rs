@@ -4,7 +4,7 @@
 //! (`events.rs`), served by async-opcua on `[opcua] listen`. Anonymous sessions on a
 //! loopback address only; elsewhere one user with a password, over a signed and encrypted
 //! channel (Basic256Sha256) with a self-signed server certificate kept under `pki_dir`.
-//! README "OPC UA server" documents the node layout for a plant's clients.
+//! docs/guide.md "OPC UA server" documents the node layout for a plant's clients.
 //!
 //! Limits: at most `max_connections` connections, counted at accept, where one without an
 //! activated session gives its place to a newcomer (`auth.rs`); a connection without HEL

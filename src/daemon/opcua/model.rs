@@ -5,7 +5,7 @@
 //! cannot be loaded here, so the nodes that follow them keep the specifications' browse
 //! names in a namespace of forgemon's own ([`MODEL_NS`]); the values the specifications
 //! have no place for (energies, efficiency, blow class, billet counter, the per-blow event
-//! type) are in the forgemon namespace ([`FORGEMON_NS`]). README "OPC UA server" lists
+//! type) are in the forgemon namespace ([`FORGEMON_NS`]). docs/guide.md "OPC UA server" lists
 //! which is which. Pure construction: no IO, no clock.
 
 use opcua::nodes::{AccessLevel, EventNotifier, MethodBuilder, ObjectBuilder, ObjectTypeBuilder, VariableBuilder};

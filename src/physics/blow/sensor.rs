@@ -9,7 +9,7 @@ use crate::physics::plant::Plant;
 
 /// What a fit keeps of a blow (`simulate_blow_sensor_until`): a `BlowResult` without the
 /// sensor's peak and without a trace of outputs. No fit reads the peak, and keeping it took
-/// a walk over every sample: 4.5 µs of the suite's 68 µs blow (README, issue 17's seventh
+/// a walk over every sample: 4.5 µs of the suite's 68 µs blow (docs/validation.md, the seventh
 /// pass).
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitBlow {

@@ -6,7 +6,7 @@
 //! follow the ringing (250 steps over the suite's hammer's 11.7 ms of flow); this integrator
 //! advances the lower tool's oscillator exactly for a load that is quadratic in time over the
 //! step, so its steps are set by the load: `ETD_STEP_RAD` of the ringing, 100 µs on the
-//! suite's hammer (`benches/plastic_integrators.py` and the README's "fifth pass": 3.3× fewer
+//! suite's hammer (`benches/plastic_integrators.py` and docs/validation.md's "fifth pass": 3.3× fewer
 //! evaluations, each bound of `blow::tests` met with room).
 //!
 //! - The linear part is the lower tool's oscillator, and the compression's share of its
