@@ -14,7 +14,8 @@ use crate::daemon::{Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
 
 #[derive(Debug, Args)]
 pub struct RunArgs {
-    /// The service configuration (see config/*.service.toml).
+    /// The service configuration: /etc/forgemon/forgemon.toml once the package is installed;
+    /// annotated examples in config/*.service.toml (packaged: /usr/share/doc/forgemon/examples).
     #[arg(long)]
     pub config: PathBuf,
 }
