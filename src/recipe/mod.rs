@@ -5,13 +5,16 @@
 //! references' mean ± max(k·sd, a tolerance), Helm's limits as a share of the learnt value
 //! (so they follow each job); the envelope is then widened by a compression tolerance, as a
 //! DIGIFORCE envelope is by ΔX. A blow is judged against its index's entry: which window it
-//! left and by how much, or where it left the envelope. Pure code: the file is read and
+//! left and by how much (with the digits that show it, `digits`), or where it left the
+//! envelope. Pure code: the file is read and
 //! written by `config::recipe`, the pipeline judges (`pipeline`), `forgemon teach` teaches.
 
+pub mod digits;
 pub mod signature;
 
 use serde::Serialize;
 
+use digits::fixed;
 pub use signature::{Estimated, Signature, signature};
 
 /// Envelope points per blow.
@@ -204,15 +207,15 @@ impl Recipe {
                 self.blows.len()
             )),
             Some(w) => {
-                let mut window = |name: &str, x: f64, win: &Window, unit: f64, u: &str, digits: usize| {
+                // Each printed with its usual decimals, more where they would round the value
+                // onto a bound (`digits`).
+                let mut window = |name: &str, x: f64, win: &Window, unit: f64, u: &str, least: usize| {
                     if !win.contains(x) {
                         let side = if x > win.max { "above" } else { "below" };
-                        reasons.push(format!(
-                            "{name} {side} window: {:.digits$} {u} outside [{:.digits$}, {:.digits$}]",
-                            x / unit,
-                            win.min / unit,
-                            win.max / unit
-                        ));
+                        let (x, min, max) = (x / unit, win.min / unit, win.max / unit);
+                        let d = digits::decimals_apart(x, min, max, least);
+                        let (x, min, max) = (fixed(x, d), fixed(min, d), fixed(max, d));
+                        reasons.push(format!("{name} {side} window: {x} {u} outside [{min}, {max}]"));
                     }
                 };
                 window("efficiency", sig.efficiency, &w.efficiency, 1.0, "", 3);
@@ -248,11 +251,12 @@ fn envelope_exit(w: &BlowWindows, sig: &Signature) -> Option<String> {
             continue;
         };
         if worst.as_ref().is_none_or(|(e, _)| excess > *e) {
+            let d = digits::decimals_apart(load / 1e3, lo / 1e3, hi / 1e3, 0);
             let why = format!(
-                "load left the envelope at {:.2} mm compression: {:.0} kN {side} {:.0} kN",
+                "load left the envelope at {:.2} mm compression: {} kN {side} {} kN",
                 x * 1e3,
-                load / 1e3,
-                bound / 1e3
+                fixed(load / 1e3, d),
+                fixed(bound / 1e3, d)
             );
             worst = Some((excess, why));
         }
