@@ -6,10 +6,12 @@
 //! (so they follow each job); the envelope is then widened by a compression tolerance, as a
 //! DIGIFORCE envelope is by ΔX. A blow is judged against its index's entry: which window it
 //! left and by how much (with the digits that show it, `digits`), or where it left the
-//! envelope. Pure code: the file is read and
+//! envelope. A taught recipe is rounded outward to what the measurements resolve
+//! (`rounding`), so its file reads short and still holds its blows. Pure code: the file is read and
 //! written by `config::recipe`, the pipeline judges (`pipeline`), `forgemon teach` teaches.
 
 pub mod digits;
+pub mod rounding;
 pub mod signature;
 
 use serde::Serialize;
@@ -147,7 +149,9 @@ pub fn teach(
             }
             break;
         }
-        blows.push(learn_blow(blow, &sigs, tol));
+        // Rounded outward to what the measurements resolve: the file reads short, and each
+        // window still holds every blow the exact one held (`rounding`).
+        blows.push(rounding::blow(learn_blow(blow, &sigs, tol)));
     }
     Ok(Recipe {
         name: name.to_string(),
@@ -166,8 +170,9 @@ fn learn_blow(blow: u32, sigs: &[&Signature], tol: Tolerances) -> BlowWindows {
     let (peak_mean, _) = mean_sd(&col(|s| s.peak_load_n));
     // The envelope reaches as far as the shortest reference's compression.
     let reach = sigs.iter().map(|s| s.max_compression_m()).fold(f64::INFINITY, f64::min).max(0.0);
-    let compression_m: Vec<f64> =
-        (0..ENVELOPE_POINTS).map(|j| reach * j as f64 / (ENVELOPE_POINTS - 1) as f64).collect();
+    // On whole micrometres (`rounding::grid`): the bounds below are learnt at the points the
+    // file shows.
+    let compression_m = rounding::grid(reach, ENVELOPE_POINTS);
     let (mut lower, mut upper) = (Vec::new(), Vec::new());
     for &x in &compression_m {
         let loads: Vec<f64> = sigs.iter().map(|s| s.load_at(x)).collect();
