@@ -214,8 +214,11 @@ fn configured(
     Ok((pipeline, writer, machine.kind()))
 }
 
-const TABLE_HEADER: &str =
-    "blow  t_contact s     v m/s  kinetic J  plastic J  elastic J  efficiency  class         final kN  h_end mm  alert";
+/// The table's columns; `recipe` is the blow's judgement (OK or NOK, `-` without a recipe or
+/// on a blow never judged) and the last column says why: the alert, the implausible value,
+/// or the recipe's reasons.
+const TABLE_HEADER: &str = "blow  t_contact s     v m/s  kinetic J  plastic J  elastic J  efficiency  class         \
+                            final kN  h_end mm  recipe  alert";
 
 /// The session (the live service's core) and the output of one replay.
 struct Replay<W: Write> {
@@ -399,7 +402,7 @@ impl<W: Write> Replay<W> {
 /// A blow's row of the table.
 fn table_row(e: &crate::estimate::BlowEstimate) -> String {
     format!(
-        "{:>4}  {:>12.4}  {:>6.3}  {:>9}  {:>9}  {:>9}  {:>10}  {:<12}  {:>8.0}  {:>8}  {}",
+        "{:>4}  {:>12.4}  {:>6.3}  {:>9}  {:>9}  {:>9}  {:>10}  {:<12}  {:>8.0}  {:>8}  {:<6}  {}",
         e.blow,
         e.t_contact_s,
         e.v_impact_mps,
@@ -410,10 +413,16 @@ fn table_row(e: &crate::estimate::BlowEstimate) -> String {
         e.class.as_str(),
         e.final_load_n / 1e3,
         e.h_end_m.map_or("-".to_string(), |h| format!("{:.2}", h * 1e3)),
-        match (&e.alert, &e.implausible) {
-            (Some(a), _) => a.reason.clone(),
-            (None, Some(i)) => i.reason.clone(),
-            (None, None) => String::new(),
+        match &e.judgement {
+            Some(j) if j.ok => "OK",
+            Some(_) => "NOK",
+            None => "-",
+        },
+        match (&e.alert, &e.implausible, &e.judgement) {
+            (Some(a), _, _) => a.reason.clone(),
+            (None, Some(i), _) => i.reason.clone(),
+            (None, None, Some(j)) => j.reasons.join("; "),
+            (None, None, None) => String::new(),
         },
     )
 }
