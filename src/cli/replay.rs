@@ -133,18 +133,21 @@ pub(crate) fn replay_into<W: Write>(
     {
         bail!("recipe '{}' was taught on a {} but the machine model is a {}", r.name, r.machine, kind.as_str());
     }
+    // The table's recipe column, when the replay judges from the start.
+    let judged = pipeline.recipe().is_some();
     let mut replay = Replay {
         session: Session::new(pipeline, writer, Stamp::DeviceEnd),
         outcomes: Vec::new(),
         input: args.input.clone(),
         out: std::io::BufWriter::new(out),
         json: args.json,
+        judged,
         blows: 0,
         rejected: 0,
         end: End::InputEnded,
     };
     if !args.json {
-        writeln!(replay.out, "{TABLE_HEADER}")?;
+        writeln!(replay.out, "{}", table_header(judged))?;
     }
     let status = replay.play(input, args)?;
     let feeder = replay.finish()?;
@@ -214,8 +217,15 @@ fn configured(
     Ok((pipeline, writer, machine.kind()))
 }
 
-const TABLE_HEADER: &str =
-    "blow  t_contact s     v m/s  kinetic J  plastic J  elastic J  efficiency  class         final kN  h_end mm  alert";
+/// The table's columns, with `recipe` (`judged`) when the replay judges with a recipe from
+/// the start: each blow's judgement, OK or NOK (`-` on a blow never judged). The last column
+/// says why: the alert, the implausible value, or the recipe's reasons.
+fn table_header(judged: bool) -> String {
+    let recipe = if judged { "  recipe" } else { "" };
+    format!(
+        "blow  t_contact s     v m/s  kinetic J  plastic J  elastic J  efficiency  class         final kN  h_end mm{recipe}  alert"
+    )
+}
 
 /// The session (the live service's core) and the output of one replay.
 struct Replay<W: Write> {
@@ -225,6 +235,8 @@ struct Replay<W: Write> {
     input: PathBuf,
     out: W,
     json: bool,
+    /// The table has its recipe column (`table_header`).
+    judged: bool,
     blows: u64,
     rejected: u64,
     /// How the input ends: a recording where its service stopped, capture files after their
@@ -339,7 +351,7 @@ impl<W: Write> Replay<W> {
                     if self.json {
                         writeln!(self.out, "{}", serde_json::to_string(&estimate)?)?;
                     } else {
-                        writeln!(self.out, "{}", table_row(&estimate))?;
+                        writeln!(self.out, "{}", table_row(&estimate, self.judged))?;
                     }
                 }
                 Outcome::Billet { summary, .. } => {
@@ -396,10 +408,30 @@ impl<W: Write> Replay<W> {
     }
 }
 
-/// A blow's row of the table.
-fn table_row(e: &crate::estimate::BlowEstimate) -> String {
+/// A blow's row of the table; with its recipe column when `judged` (`table_header`). A blow
+/// judged without the column (a recipe the recording switched to later) says OK or NOK in
+/// the last column.
+fn table_row(e: &crate::estimate::BlowEstimate, judged: bool) -> String {
+    let verdict = match &e.judgement {
+        Some(j) if j.ok => "OK",
+        Some(_) => "NOK",
+        None => "-",
+    };
+    let mut why: Vec<String> = match (&e.alert, &e.implausible) {
+        (Some(a), _) => vec![a.reason.clone()],
+        (None, Some(i)) => vec![i.reason.clone()],
+        (None, None) => Vec::new(),
+    };
+    match &e.judgement {
+        Some(j) if !judged => {
+            why.push(format!("recipe {verdict}{}", j.reasons.iter().map(|r| format!("; {r}")).collect::<String>()))
+        }
+        Some(j) if e.alert.is_none() && e.implausible.is_none() => why.extend(j.reasons.iter().cloned()),
+        _ => {}
+    }
+    let recipe = if judged { format!("  {verdict:<6}") } else { String::new() };
     format!(
-        "{:>4}  {:>12.4}  {:>6.3}  {:>9}  {:>9}  {:>9}  {:>10}  {:<12}  {:>8.0}  {:>8}  {}",
+        "{:>4}  {:>12.4}  {:>6.3}  {:>9}  {:>9}  {:>9}  {:>10}  {:<12}  {:>8.0}  {:>8}{recipe}  {}",
         e.blow,
         e.t_contact_s,
         e.v_impact_mps,
@@ -410,11 +442,7 @@ fn table_row(e: &crate::estimate::BlowEstimate) -> String {
         e.class.as_str(),
         e.final_load_n / 1e3,
         e.h_end_m.map_or("-".to_string(), |h| format!("{:.2}", h * 1e3)),
-        match (&e.alert, &e.implausible) {
-            (Some(a), _) => a.reason.clone(),
-            (None, Some(i)) => i.reason.clone(),
-            (None, None) => String::new(),
-        },
+        why.join("; "),
     )
 }
 

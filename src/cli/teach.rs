@@ -58,7 +58,7 @@ pub fn run(args: TeachArgs) -> anyhow::Result<ExitCode> {
         plastic_fraction: args.tol_plastic,
         peak_load_fraction: args.tol_peak_load,
         load_fraction: args.tol_load,
-        compression_m: args.tol_compression_mm * 1e-3,
+        compression_m: args.tol_compression_mm / 1e3,
     };
     for (flag, x) in [
         ("--k", tol.k),

@@ -160,6 +160,7 @@ impl StatusSnapshot {
             s.clock_drift_ppm = Some(clock.drift_ppm());
             s.clock_offset_s = Some((clock.map(b.device_time_ns) - b.device_time_ns) as f64 * 1e-9);
         }
+        self.board.on_samples(b, clock);
     }
 
     pub fn on_gap(&mut self, g: &Gap) {

@@ -5,13 +5,18 @@
 //! references' mean ± max(k·sd, a tolerance), Helm's limits as a share of the learnt value
 //! (so they follow each job); the envelope is then widened by a compression tolerance, as a
 //! DIGIFORCE envelope is by ΔX. A blow is judged against its index's entry: which window it
-//! left and by how much, or where it left the envelope. Pure code: the file is read and
+//! left and by how much (with the digits that show it, `digits`), or where it left the
+//! envelope. A taught recipe is rounded outward to what the measurements resolve
+//! (`rounding`), so its file reads short and still holds its blows. Pure code: the file is read and
 //! written by `config::recipe`, the pipeline judges (`pipeline`), `forgemon teach` teaches.
 
+pub mod digits;
+pub mod rounding;
 pub mod signature;
 
 use serde::Serialize;
 
+use digits::fixed;
 pub use signature::{Estimated, Signature, signature};
 
 /// Envelope points per blow.
@@ -144,7 +149,9 @@ pub fn teach(
             }
             break;
         }
-        blows.push(learn_blow(blow, &sigs, tol));
+        // Rounded outward to what the measurements resolve: the file reads short, and each
+        // window still holds every blow the exact one held (`rounding`).
+        blows.push(rounding::blow(learn_blow(blow, &sigs, tol)));
     }
     Ok(Recipe {
         name: name.to_string(),
@@ -163,8 +170,9 @@ fn learn_blow(blow: u32, sigs: &[&Signature], tol: Tolerances) -> BlowWindows {
     let (peak_mean, _) = mean_sd(&col(|s| s.peak_load_n));
     // The envelope reaches as far as the shortest reference's compression.
     let reach = sigs.iter().map(|s| s.max_compression_m()).fold(f64::INFINITY, f64::min).max(0.0);
-    let compression_m: Vec<f64> =
-        (0..ENVELOPE_POINTS).map(|j| reach * j as f64 / (ENVELOPE_POINTS - 1) as f64).collect();
+    // On whole micrometres (`rounding::grid`): the bounds below are learnt at the points the
+    // file shows.
+    let compression_m = rounding::grid(reach, ENVELOPE_POINTS);
     let (mut lower, mut upper) = (Vec::new(), Vec::new());
     for &x in &compression_m {
         let loads: Vec<f64> = sigs.iter().map(|s| s.load_at(x)).collect();
@@ -204,15 +212,15 @@ impl Recipe {
                 self.blows.len()
             )),
             Some(w) => {
-                let mut window = |name: &str, x: f64, win: &Window, unit: f64, u: &str, digits: usize| {
+                // Each printed with its usual decimals, more where they would round the value
+                // onto a bound (`digits`).
+                let mut window = |name: &str, x: f64, win: &Window, unit: f64, u: &str, least: usize| {
                     if !win.contains(x) {
                         let side = if x > win.max { "above" } else { "below" };
-                        reasons.push(format!(
-                            "{name} {side} window: {:.digits$} {u} outside [{:.digits$}, {:.digits$}]",
-                            x / unit,
-                            win.min / unit,
-                            win.max / unit
-                        ));
+                        let (x, min, max) = (x / unit, win.min / unit, win.max / unit);
+                        let d = digits::decimals_apart(x, min, max, least);
+                        let (x, min, max) = (fixed(x, d), fixed(min, d), fixed(max, d));
+                        reasons.push(format!("{name} {side} window: {x} {u} outside [{min}, {max}]"));
                     }
                 };
                 window("efficiency", sig.efficiency, &w.efficiency, 1.0, "", 3);
@@ -248,11 +256,12 @@ fn envelope_exit(w: &BlowWindows, sig: &Signature) -> Option<String> {
             continue;
         };
         if worst.as_ref().is_none_or(|(e, _)| excess > *e) {
+            let d = digits::decimals_apart(load / 1e3, lo / 1e3, hi / 1e3, 0);
             let why = format!(
-                "load left the envelope at {:.2} mm compression: {:.0} kN {side} {:.0} kN",
+                "load left the envelope at {:.2} mm compression: {} kN {side} {} kN",
                 x * 1e3,
-                load / 1e3,
-                bound / 1e3
+                fixed(load / 1e3, d),
+                fixed(bound / 1e3, d)
             );
             worst = Some((excess, why));
         }

@@ -3,11 +3,15 @@
 Usage: dashboard_cdp.py CHROMIUM URL SCREENSHOT.png
        dashboard_cdp.py --restart CHROMIUM FORGEMON PORT DIR
 
-Opens URL at 1280 x 800 while the demo runs, and prints one JSON object: the first blow row
+Opens URL at 1280 x 800 while the demo runs, in the time zone Asia/Kathmandu (UTC+5:45, no
+daylight saving: a zone no CI machine runs in), and prints one JSON object: the first blow row
 the page showed (its cells as the DOM has them), whether a row arrived while the page was open
-(the live feed, not a reload), the points of the curve it drew, the alert panel before and after
-pressing its Acknowledge button, and /status's latched alert after that. Saves a screenshot
-with the alert latched. Needs the `websockets` package (.ci/run installs it).
+(the live feed, not a reload), the time of day that row showed with the wall clock when it
+arrived, the sources' rate cells read every 0.1 s from the first render on with the rate this
+script measured from /status, the points of the curve it drew, the alert panel before and after
+pressing its Acknowledge button, its reason before and after a click on it, and /status's
+latched alert after that. Saves a screenshot with the alert latched. Needs the `websockets`
+package (.ci/run installs it).
 """
 
 import base64
@@ -75,6 +79,25 @@ FIRST_ROW = """(() => { const tr = document.querySelector('#blows tbody tr[data-
 MAX_BLOW = "Math.max(0, ...Array.from(document.querySelectorAll('#blows tbody tr')).map(r => +r.dataset.blow))"
 ALERT = "({cls: document.getElementById('alert').className, kind: document.getElementById('alert-kind').textContent,\
  button_hidden: document.getElementById('ack').hidden})"
+# The sources table's state and rate cells, and the header's link.
+LINK = """({conn: document.getElementById('conn').textContent,
+  states: Array.from(document.querySelectorAll('#sources tbody tr')).map(r => r.cells[1].textContent),
+  rates: Array.from(document.querySelectorAll('#sources tbody tr')).map(r => r.cells[3].textContent)})"""
+# The alert's reason: its text, title, whether the panel cuts it, and whether it is on top
+# and inside the window.
+REASON = """(() => { const r = document.getElementById('alert-reason'), b = r.getBoundingClientRect();
+  const top = document.elementFromPoint(b.left + b.width / 2, b.top + b.height / 2);
+  return {text: r.textContent, title: r.title, cut: r.scrollHeight > r.clientHeight + 1,
+          on_top: r === top || r.contains(top), inside: b.top >= 0 && b.bottom <= window.innerHeight,
+          expanded: r.getAttribute('aria-expanded')}; })()"""
+# The time zone the page runs in, and its offset from UTC, s.
+ZONE, ZONE_OFFSET_S = "Asia/Kathmandu", 5 * 3600 + 45 * 60
+
+
+def time_of_day_s(text):
+    """'14:03:27.4' as seconds since midnight."""
+    h, m, s = text.split(":")
+    return int(h) * 3600 + int(m) * 60 + float(s)
 
 
 def restart(chromium, forgemon, port, workdir):
@@ -105,13 +128,17 @@ def restart(chromium, forgemon, port, workdir):
             first.wait()
             before = p.eval(MAX_BLOW)
             p.wait("document.getElementById('conn').textContent !== 'live'", "the page to see the service gone")
+            time.sleep(1.5)  # a poll of the state fails too: the page has had every chance to disagree
+            gone = p.eval(LINK)
             second = demo("b", "1.0")
             p.wait(f"document.getElementById('conn').textContent === 'live' && {MAX_BLOW} >= 1", "the page to reconnect",
                    timeout_s=30)
             time.sleep(0.2)
             after = p.eval(f"({{max_blow: {MAX_BLOW}, header_blows: document.getElementById('blows-total').textContent}})")
+            back = p.eval(LINK)
             status = json.load(urllib.request.urlopen(url + "status"))
-            print(json.dumps({"max_blow_before": before, "after": after, "status_blows": status["blows"]}))
+            print(json.dumps({"max_blow_before": before, "after": after, "status_blows": status["blows"],
+                              "gone": gone, "back": back}))
         finally:
             for child in (first, second, proc):
                 if child:
@@ -128,14 +155,30 @@ def main():
         try:
             p = Page(ws_url)
             p.call("Emulation.setDeviceMetricsOverride", width=1280, height=800, deviceScaleFactor=1, mobile=False)
+            p.call("Emulation.setTimezoneOverride", timezoneId=ZONE)
             p.call("Page.enable")
             p.call("Page.navigate", url=url)
+            base = url.split("?")[0].rstrip("/")
+            # The rate cells from the page's first render of its sources, every 0.1 s for 2 s,
+            # against the rate of /status's sample count over the same time.
+            p.wait("document.querySelectorAll('#sources tbody tr').length > 0", "the sources table")
+            blows_at_load = p.eval(MAX_BLOW)
+            s0, t0 = json.load(urllib.request.urlopen(base + "/status"))["samples"], time.monotonic()
+            rates = []
+            while time.monotonic() - t0 < 2.0:
+                rates.extend(p.eval(LINK)["rates"])
+                time.sleep(0.1)
+            s1, t1 = json.load(urllib.request.urlopen(base + "/status"))["samples"], time.monotonic()
             p.wait("document.readyState === 'complete' && document.getElementById('conn').textContent === 'live'",
                    "the page and its event stream")
-            blows_at_load = p.eval(MAX_BLOW)
             first = p.wait(FIRST_ROW, "blow 1's row")
-            # A row for a blow after the page loaded: the live feed, not the initial state.
-            p.wait(f"{MAX_BLOW} > {blows_at_load}", "a blow's row arriving live")
+            # A row for a blow after the page loaded (the live feed, not the initial state),
+            # and when it arrived.
+            shown = max(p.eval(MAX_BLOW), blows_at_load)
+            p.wait(f"{MAX_BLOW} > {shown}", "a blow's row arriving live")
+            arrived_s = time.time()
+            live_row = p.eval("""(() => { const tr = document.querySelector('#blows tbody tr');
+              return {blow: +tr.dataset.blow, time: tr.cells[2].textContent, title: tr.cells[2].title}; })()""")
             p.wait("!!document.querySelector('#alert.latched')", "the latched alert")
             curve_points = p.eval("curve ? [curve.blow, curve.measured.t_s.length, curve.model.t_s.length] : null")
             before = p.eval(ALERT)
@@ -144,14 +187,25 @@ def main():
             png = p.call("Page.captureScreenshot", format="png")["data"]
             with open(shot, "wb") as f:
                 f.write(base64.b64decode(png))
+            reason_before = p.eval(REASON)
+            latched_reason = json.load(urllib.request.urlopen(base + "/status"))["latched_alert"]["reason"]
+            p.eval("document.getElementById('alert-reason').click()")
+            p.wait("document.getElementById('alert-reason').classList.contains('open')", "the reason to open")
+            reason_open = p.eval(REASON)
+            p.eval("document.getElementById('alert-reason').click()")
             p.eval("document.getElementById('ack').click()")
             p.wait("!!document.querySelector('#alert.acked')", "the acknowledged state")
             after = p.eval(ALERT)
-            base = url.split("?")[0].rstrip("/")
             status = json.load(urllib.request.urlopen(base + "/status"))
             print(json.dumps({"first_row": first, "blows_at_load": blows_at_load, "curve": curve_points,
                               "alert_before": before, "alert_after": after, "advice": advice,
-                              "status_latched_alert": status["latched_alert"]}))
+                              "status_latched_alert": status["latched_alert"],
+                              "rates": rates, "rate_status_hz": (s1 - s0) / (t1 - t0),
+                              "live_row": live_row, "live_row_time_s": time_of_day_s(live_row["time"])
+                              if live_row["time"].count(":") == 2 else None,
+                              "arrived_time_s": (arrived_s + ZONE_OFFSET_S) % 86400,
+                              "reason_before": reason_before, "reason_open": reason_open,
+                              "latched_reason": latched_reason}))
         finally:
             proc.kill()
             proc.wait()

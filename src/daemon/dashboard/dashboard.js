@@ -1,7 +1,9 @@
 // forgemon's operator screen (src/daemon/dashboard/mod.rs). Everything shown comes from the
 // service: /dashboard/state (the status snapshot, the last 50 blows, this billet's blows),
 // /blow/last/curve and the live feed on /events. The state is fetched again on every event
-// and whenever the event stream (re)connects, so a service restart is followed by itself.
+// and whenever the event stream (re)connects, so a service restart is followed by itself,
+// and polled every second. The header's link and the sources table's states are drawn from one
+// state (`link`), so that they never disagree.
 // A token given as ?token= is sent as a bearer header on every fetch (and as ?token= on the
 // event stream, which cannot send headers).
 "use strict";
@@ -13,7 +15,10 @@ const CLASSES = ["soft", "intermediate", "hard", "incomplete", "implausible"];
 // The class words under the bars, short enough for a bar 40 px wide (the full word is its title).
 const SHORT = { soft: "soft", intermediate: "interm.", hard: "hard", incomplete: "incompl.", implausible: "implaus." };
 
-let lastHealth = null; // {t_ms, samples by source}: the sample rate between two polls
+// The one state the header and the sources table show: whether the service answers (its
+// event stream is open and its last state fetch answered), and its last state.
+const link = { stream: false, answered: false, state: null, at: null };
+const serviceUp = () => link.stream && link.answered;
 
 async function getJSON(path) {
   const r = await fetch(path, { headers, cache: "no-store" });
@@ -43,23 +48,49 @@ function renderLast(b) {
   $("big-height").textContent = b.h_end_m === null ? "–" : fmt(1000 * b.h_end_m, 2) + " mm";
 }
 
+// The panel shows three lines of the reason: the whole of it is the element's title (on
+// hover) and opens over the page on a click (or Enter), closing on the next.
+function setReason(text) {
+  const r = $("alert-reason");
+  if (r.textContent === text) return;
+  r.textContent = text;
+  r.title = text;
+  openReason(false);
+}
+
+function openReason(open) {
+  const r = $("alert-reason");
+  if (open && r.textContent) {
+    const box = r.getBoundingClientRect();
+    r.style.left = box.left + "px";
+    r.style.top = box.top + "px";
+    r.style.width = Math.max(box.width, 420) + "px";
+    r.style.maxHeight = window.innerHeight - box.top - 8 + "px";
+  } else {
+    open = false;
+    r.removeAttribute("style");
+  }
+  r.classList.toggle("open", open);
+  r.setAttribute("aria-expanded", String(open));
+}
+
 function renderAlert(latched, acked) {
   const box = $("alert"), button = $("ack");
   if (latched) {
     box.className = "panel alert latched";
     $("alert-kind").textContent = latched.kind + " · blow " + latched.blow;
-    $("alert-reason").textContent = latched.reason;
+    setReason(latched.reason);
     button.hidden = false;
     button.disabled = false;
   } else if (acked) {
     box.className = "panel alert acked";
     $("alert-kind").textContent = "acknowledged: " + acked.kind + " · blow " + acked.blow;
-    $("alert-reason").textContent = acked.reason;
+    setReason(acked.reason);
     button.hidden = true;
   } else {
     box.className = "panel alert none";
     $("alert-kind").textContent = "no alert";
-    $("alert-reason").textContent = "";
+    setReason("");
     button.hidden = true;
   }
 }
@@ -97,12 +128,27 @@ function judgementCell(j) {
   return td;
 }
 
+// The time of day in the browser's zone, which on the plant PC the dashboard runs on is the
+// plant's: hours, minutes, seconds and tenths, 24 h.
+const ZONE = Intl.DateTimeFormat().resolvedOptions().timeZone;
+const CLOCK = new Intl.DateTimeFormat("en-GB", { hour: "2-digit", minute: "2-digit", second: "2-digit",
+  fractionalSecondDigits: 1, hourCycle: "h23" });
+
+// First contact as the time of day, its device time as the title; the device time alone
+// before the service had a batch to map it by.
+function timeCell(b) {
+  if (b.t_contact_unix_s === null || b.t_contact_unix_s === undefined) return cell(fmt(b.t_contact_s, 4) + " s", "t");
+  const td = cell(CLOCK.format(new Date(1000 * b.t_contact_unix_s)), "t");
+  td.title = "first contact, " + ZONE + " time; device clock t = " + fmt(b.t_contact_s, 4) + " s";
+  return td;
+}
+
 function renderBlows(blows) {
   const rows = blows.map((b) => {
     const tr = document.createElement("tr");
     tr.dataset.blow = b.blow;
     tr.append(
-      cell(b.billet), cell(b.blow), cell(fmt(b.t_contact_s, 4)), cell(fmt(b.v_impact_mps, 2)),
+      cell(b.billet), cell(b.blow), timeCell(b), cell(fmt(b.v_impact_mps, 2)),
       cell(fmt(b.kinetic_in_J, 0)), cell(fmt(b.plastic_J, 0)), cell(fmt(b.friction_J, 0)),
       cell(fmt(b.damped_J, 0)), cell(fmt(b.elastic_J, 0)), cell(fmt(b.efficiency, 3), "eff"),
       cell(fmt(b.final_load_N / 1000, 1)), cell(b.h_end_m === null ? "–" : fmt(1000 * b.h_end_m, 2)),
@@ -112,27 +158,53 @@ function renderBlows(blows) {
   $("blows").tBodies[0].replaceChildren(...rows);
 }
 
-function renderSources(status) {
-  const now = performance.now();
-  const rows = Object.entries(status.sources).map(([name, s]) => {
-    let rate = "–";
-    if (lastHealth && lastHealth.samples[name] !== undefined && now - lastHealth.t_ms >= 900) {
-      const hz = (s.samples - lastHealth.samples[name]) / ((now - lastHealth.t_ms) / 1000);
-      rate = hz >= 1000 ? (hz / 1000).toFixed(1) + " kHz" : hz.toFixed(0) + " Hz";
-    }
+const rateText = (hz) => (hz === null || hz === undefined ? "–" : hz >= 1000 ? (hz / 1000).toFixed(1) + " kHz" :
+  hz.toFixed(0) + " Hz");
+
+// Each source's state as the service last reported it while it answers; "unknown" while it
+// does not (a stopped service cannot say its sources are connected). The rate is the
+// service's measure (samples received over the last seconds, `board.rs`).
+function sourceState(s) {
+  return serviceUp() ? s.state || "unknown" : "unknown";
+}
+
+function renderSources(st) {
+  const up = serviceUp();
+  const rows = Object.entries(st.status.sources).map(([name, s]) => {
+    const state = sourceState(s);
     const tr = document.createElement("tr");
-    tr.title = "samples lost in gaps: " + s.samples_lost + (s.detail ? "; " + s.detail : "");
-    tr.append(cell(name), cell(s.state || "–", s.state === "connected" ? "st-connected" : "st-other"),
+    tr.title = (up ? "" : "the service does not answer: its last report, at " + CLOCK.format(link.at) + "; ") +
+      "samples lost in gaps: " + s.samples_lost + (s.detail ? "; " + s.detail : "");
+    tr.append(cell(name), cell(state, state === "connected" ? "st-connected" : "st-other"),
       cell(s.samples >= 1e6 ? (s.samples / 1e6).toFixed(1) + " M" : s.samples >= 1e4 ? (s.samples / 1e3).toFixed(0) + " k" : s.samples),
-      cell(rate), cell(s.drops), cell(s.gaps + (s.samples_lost ? " (" + s.samples_lost + " lost)" : "")),
-      cell(fmt(s.clock_drift_ppm, 1)));
+      cell(up ? rateText((st.source_rate_hz || {})[name]) : "–", "rate"), cell(s.drops),
+      cell(s.gaps + (s.samples_lost ? " (" + s.samples_lost + " lost)" : "")), cell(fmt(s.clock_drift_ppm, 1)));
     return tr;
   });
-  // The rate is averaged over 1 to 5 s: batches arrive in bursts and fetches jitter.
-  if (!lastHealth || now - lastHealth.t_ms > 5000) {
-    lastHealth = { t_ms: now, samples: Object.fromEntries(Object.entries(status.sources).map(([k, s]) => [k, s.samples])) };
-  }
   $("sources").tBodies[0].replaceChildren(...rows);
+}
+
+// The header's link, from the same state as the sources table: "live" while the service
+// answers and every source is connected; the sources that are not, while it answers; and
+// "reconnecting…" while it does not.
+function renderLink() {
+  const conn = $("conn");
+  const sources = link.state ? Object.entries(link.state.status.sources) : [];
+  const down = sources.filter(([, s]) => sourceState(s) !== "connected");
+  if (!serviceUp()) {
+    conn.className = "conn down";
+    conn.textContent = "reconnecting…";
+    conn.title = "the service does not answer; the sources' states are unknown";
+  } else if (down.length > 0) {
+    conn.className = "conn warn";
+    conn.textContent = down.map(([name, s]) => name + " " + sourceState(s)).join(", ");
+    conn.title = "the service answers; these sources are not connected";
+  } else {
+    conn.className = "conn up";
+    conn.textContent = "live";
+    conn.title = "the service answers and every source is connected";
+  }
+  if (link.state) renderSources(link.state);
 }
 
 function renderHeader(status) {
@@ -179,7 +251,7 @@ function render(st) {
   renderAlert(st.status.latched_alert, st.acknowledged_alert);
   renderBars(st.billet_blows);
   renderBlows(st.recent_blows);
-  renderSources(st.status);
+  renderLink();
 }
 
 // The plot: load (kN) against time from first contact (ms), phases shaded.
@@ -272,9 +344,12 @@ function drawCurve(c) {
 let curve = null;
 async function refresh() {
   try {
-    render(await getJSON("/dashboard/state"));
+    const st = await getJSON("/dashboard/state");
+    Object.assign(link, { answered: true, state: st, at: new Date() });
+    render(st);
   } catch (e) {
-    console.warn(e);
+    link.answered = false;
+    renderLink();
   }
 }
 async function refreshCurve() {
@@ -287,8 +362,8 @@ async function refreshCurve() {
 }
 
 function setLive(up) {
-  $("conn").className = "conn " + (up ? "up" : "down");
-  $("conn").textContent = up ? "live" : "reconnecting…";
+  link.stream = up;
+  renderLink();
 }
 
 function connect() {
@@ -304,6 +379,11 @@ function connect() {
   }
 }
 
+$("alert-reason").addEventListener("click", () => openReason(!$("alert-reason").classList.contains("open")));
+$("alert-reason").addEventListener("keydown", (e) => {
+  if (e.key === "Enter" || e.key === " ") { e.preventDefault(); openReason(!$("alert-reason").classList.contains("open")); }
+  if (e.key === "Escape") openReason(false);
+});
 $("ack").addEventListener("click", async () => {
   $("ack").disabled = true;
   try {
@@ -315,7 +395,5 @@ $("ack").addEventListener("click", async () => {
   }
 });
 window.addEventListener("resize", () => drawCurve(curve));
-setInterval(async () => {
-  try { renderSources((await getJSON("/status"))); } catch (e) { setLive(false); }
-}, 1000);
+setInterval(refresh, 1000);
 connect();

@@ -72,12 +72,14 @@ async fn asset(body: &'static str, content_type: &'static str) -> Response {
     ([(header::CONTENT_TYPE, content_type), (header::CACHE_CONTROL, "no-cache")], body).into_response()
 }
 
-/// `GET /dashboard/state`: the status snapshot and the board, as one JSON object.
+/// `GET /dashboard/state`: the status snapshot, the board, and each source's sample rate
+/// measured now (`Board::rates_hz`), as one JSON object.
 #[derive(Serialize)]
 struct DashboardState<'a> {
     status: &'a StatusSnapshot,
     #[serde(flatten)]
     board: &'a Board,
+    source_rate_hz: std::collections::BTreeMap<String, Option<f64>>,
 }
 
 fn json(body: Result<String, serde_json::Error>) -> Response {
@@ -89,7 +91,10 @@ fn json(body: Result<String, serde_json::Error>) -> Response {
 
 async fn state(State(sh): State<Shared>) -> Response {
     match sh.status.lock() {
-        Ok(s) => json(serde_json::to_string(&DashboardState { status: &s, board: &s.board })),
+        Ok(s) => {
+            let source_rate_hz = s.board.rates_hz(super::host_now_ns());
+            json(serde_json::to_string(&DashboardState { status: &s, board: &s.board, source_rate_hz }))
+        }
         Err(_) => (StatusCode::INTERNAL_SERVER_ERROR, "the status is unavailable\n").into_response(),
     }
 }
