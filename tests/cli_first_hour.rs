@@ -58,10 +58,11 @@ fn stderr_of(child: &mut Child) -> String {
     s
 }
 
-/// A short demo recording (one billet, fast) in `dir/rec`: its `.mcap`.
-fn demo_recording(dir: &Path) -> PathBuf {
+/// A short demo recording (`billets` of 8 blows, fast) in `dir/rec`: its `.mcap`.
+fn demo_recording(dir: &Path, billets: usize) -> PathBuf {
     let rec = dir.join("rec");
-    let out = forgemon(&["demo", "--fast", "--billets", "1", "--dir"]).arg(&rec).output().expect("demo runs");
+    let n = billets.to_string();
+    let out = forgemon(&["demo", "--fast", "--billets", &n, "--dir"]).arg(&rec).output().expect("demo runs");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     files_in(&rec).into_iter().find(|p| p.extension().is_some_and(|x| x == "mcap")).expect("an mcap file")
 }
@@ -165,21 +166,25 @@ fn into_closed_pipe(args: &[&str], paths: &[&Path]) -> (Option<i32>, String) {
 }
 
 /// Issue 40: every verb that prints ends quietly when the reader of its stdout is gone:
-/// inspect and advise wrote "Broken pipe" as an error (exit 1), replay too (and left its
-/// `--out` recording open), simulate panicked (101), `export --csv -` wrote a file `-`.
+/// inspect, advise, replay and simulate wrote "Broken pipe" as an error (exit 1; replay
+/// left its `--out` recording open), teach panicked (101), `export --csv -` wrote a file `-`.
 #[test]
 fn verbs_into_a_closed_pipe_end_quietly() {
     let dir = tempfile::tempdir().unwrap();
-    let mcap = demo_recording(dir.path());
+    // Two billets: teach needs two for a spread.
+    let mcap = demo_recording(dir.path(), 2);
     let machine = root().join("config/hammer-lg1000.machine.toml");
     let steel = root().join("config/steel-16NiCrMo13.process.toml");
     let replayed = dir.path().join("replayed");
-    let runs: [(&[&str], Vec<&Path>); 6] = [
+    let recipe = dir.path().join("part.recipe.toml");
+    let runs: [(&[&str], Vec<&Path>); 7] = [
         (&["inspect"], vec![&mcap]),
         (&["inspect", "--json"], vec![mcap.parent().unwrap()]),
         (&["export", "--csv", "-"], vec![&mcap]),
         (&["replay", "--out"], vec![&replayed, &mcap]),
+        // simulate writes with `writeln!(stdout)?`, teach with `println!` (main's fallbacks).
         (&["simulate", "--v0", "3.9,5.3", "--machine"], vec![&machine, Path::new("--process"), &steel]),
+        (&["teach", "--machine"], vec![&machine, Path::new("--reference"), &mcap, Path::new("-o"), &recipe]),
         (
             &["advise", "--h-now", "0.112", "--target", "0.04", "--v-max", "5.3", "--machine"],
             vec![&machine, Path::new("--process"), &steel],
@@ -198,7 +203,7 @@ fn verbs_into_a_closed_pipe_end_quietly() {
 #[test]
 fn export_csv_dash_writes_to_stdout() {
     let dir = tempfile::tempdir().unwrap();
-    let mcap = demo_recording(dir.path());
+    let mcap = demo_recording(dir.path(), 1);
     let out = forgemon(&["export", "--csv", "-"]).arg(&mcap).current_dir(dir.path()).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = String::from_utf8_lossy(&out.stdout);
