@@ -102,6 +102,24 @@ fn demo_on_a_terminal_keeps_its_dashboard_up_until_ctrl_c() {
     assert_closed_recording(&piped);
 }
 
+/// Issue 40: the service takes SIGHUP as "reload"; a demo kept up on a terminal ends on it
+/// (its terminal closed) as on Ctrl-C, its recording closed, instead of running on orphaned.
+#[test]
+fn a_hangup_ends_a_demo_kept_up_on_a_terminal() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("tty");
+    let out = Command::new("python3")
+        .arg(root().join("tests/python/on_pty.py"))
+        .args(["60", "demo finished", "HUP", "--", BIN, "demo", "--billets", "1", "--interval", "0.2", "--dir"])
+        .arg(&rec)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run python3 ({e}): the pty test needs Python 3's standard library"));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("running yes"), "the demo did not stay up:\n{text}");
+    assert!(text.contains("exit 0"), "SIGHUP did not end the demo cleanly:\n{text}");
+    assert_closed_recording(&rec);
+}
+
 /// Issue 40: `demo --billets 0` silently forged one billet. It forges until stopped, as
 /// `simulate-device --billets 0` does, and SIGTERM closes its recording.
 #[test]

@@ -218,6 +218,7 @@ async fn serve_demo(
         faults: Default::default(),
     };
     let device_stop = shutdown_rx.clone();
+    stop_on_hangup(faces.stop.clone())?;
     let (control_tx, control_rx) = mpsc::channel::<Control>(16);
     let device = tokio::spawn(async move {
         let mut master = master;
@@ -261,6 +262,19 @@ async fn serve_demo(
             "forgemon demo: {n} recording writes failed; {} blows were not recorded (the disk was full?)",
             summary.dropped_blows
         ),
+    });
+    Ok(())
+}
+
+/// A hangup (the demo's terminal closed) ends the demo as Ctrl-C does. The service takes
+/// SIGHUP as "reload", so a demo keeping its faces up would otherwise run on with no
+/// terminal to stop it from, its recording open.
+fn stop_on_hangup(stop: watch::Sender<bool>) -> anyhow::Result<()> {
+    let mut hangup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
+    tokio::spawn(async move {
+        if hangup.recv().await.is_some() {
+            stop.send_replace(true);
+        }
     });
     Ok(())
 }

@@ -1,10 +1,10 @@
 """Run a command with its stdout and stderr on a pty, as on a terminal (tests/cli_first_hour.rs).
 
-usage: on_pty.py TIMEOUT_S MARKER -- COMMAND...
+usage: on_pty.py TIMEOUT_S MARKER [SIGNAL] -- COMMAND...
 
 Echoes what the command prints. Once a line holds MARKER (or after TIMEOUT_S), it fetches
 the first http:// URL of that line and prints `GET <status>` (or `GET failed: why`), waits
-a second, prints `running <yes|no>`, sends SIGINT and prints `exit <status>` when the
+a second, prints `running <yes|no>`, sends SIGNAL (INT unless named: HUP, TERM) and prints `exit <status>` when the
 command has ended (`exit timeout` if it has not within TIMEOUT_S more). Standard library only.
 """
 
@@ -36,7 +36,9 @@ def read_some(fd, out, wait_s):
 
 def main():
     timeout_s, marker = float(sys.argv[1]), sys.argv[2]
-    cmd = sys.argv[sys.argv.index("--") + 1:]
+    dash = sys.argv.index("--")
+    signum = getattr(signal, "SIG" + sys.argv[3]) if dash > 3 else signal.SIGINT
+    cmd = sys.argv[dash + 1:]
     master, slave = pty.openpty()
     proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=slave, stderr=slave, close_fds=True)
     os.close(slave)
@@ -61,7 +63,7 @@ def main():
             pass
     print(f"running {'yes' if proc.poll() is None else 'no'}")
     if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signum)
     try:
         code = proc.wait(timeout=timeout_s)
         print(f"exit {code}")
