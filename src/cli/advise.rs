@@ -11,10 +11,11 @@ use clap::Args;
 
 use super::{parse_process_warn, read_text};
 use crate::advise::{Advisor, PlanRequest, Speeds};
-use crate::config::limits::IMPACT_SPEED_MPS;
+use crate::config::limits::{IMPACT_SPEED_MPS, MEASURED_HEIGHT_M};
 use crate::config::parse_machine;
 
 #[derive(Debug, Args)]
+#[command(group = clap::ArgGroup::new("speeds").required(true).multiple(false))]
 pub struct AdviseArgs {
     /// The machine model (machine.toml), with its effects if it has any.
     #[arg(long)]
@@ -22,17 +23,19 @@ pub struct AdviseArgs {
     /// The billet's process sheet (process.toml): its law, friction and original height.
     #[arg(long)]
     pub process: PathBuf,
-    /// The billet's height now, m.
+    /// The billet's height now, m (0.112 for 112 mm).
     #[arg(long, value_name = "H")]
     pub h_now: f64,
-    /// The height to reach, m (within ±0.5 mm).
+    /// The height to reach, m (within ±0.5 mm; 0.04 for 40 mm).
     #[arg(long, value_name = "T")]
     pub target: f64,
-    /// The machine's impact speeds, m/s, comma separated (a hammer's drop heights).
-    #[arg(long, value_delimiter = ',', num_args = 1.., conflicts_with = "v_max", required_unless_present = "v_max")]
+    /// The machine's impact speeds, m/s, comma separated (a hammer's drop heights); or
+    /// give `--v-max` instead.
+    #[arg(long, value_name = "V,...", value_delimiter = ',', num_args = 1.., group = "speeds")]
     pub settings: Vec<f64>,
-    /// Any impact speed up to this, m/s (a screw press's energy setting).
-    #[arg(long, value_name = "V")]
+    /// Any impact speed up to this, m/s (a screw press's energy setting); or give
+    /// `--settings` instead. Either supplies the speeds the plan may choose from.
+    #[arg(long, value_name = "V", group = "speeds")]
     pub v_max: Option<f64>,
     /// Blows the billet already took (the machine's `thermal` effect counts them).
     #[arg(long, default_value_t = 0)]
@@ -43,6 +46,8 @@ pub struct AdviseArgs {
 }
 
 pub fn run(args: AdviseArgs) -> anyhow::Result<ExitCode> {
+    let h_now_m = super::length_m("--h-now", args.h_now, MEASURED_HEIGHT_M)?;
+    let target_m = super::length_m("--target", args.target, MEASURED_HEIGHT_M)?;
     let machine = parse_machine(&args.machine.display().to_string(), &read_text(&args.machine)?)?;
     let process = parse_process_warn(&args.process.display().to_string(), &read_text(&args.process)?)?;
     if process.machine != machine.machine.kind() {
@@ -68,10 +73,10 @@ pub fn run(args: AdviseArgs) -> anyhow::Result<ExitCode> {
     }
     let effects = machine.effect_set();
     let advisor = Advisor::new(&machine.machine, &effects, &process);
-    let req = PlanRequest { h_now_m: args.h_now, target_m: args.target, blows_done: args.blows_done, speeds };
+    let req = PlanRequest { h_now_m, target_m, blows_done: args.blows_done, speeds };
     let plan = advisor.plan(&req)?;
-    let stdout = std::io::stdout();
-    let mut w = stdout.lock();
+    // Through `out`: a closed stdout (`| head`) ends the verb quietly (`main`).
+    let mut w = super::out::stdout();
     if args.json {
         writeln!(w, "{}", serde_json::to_string(&plan)?)?;
     } else {

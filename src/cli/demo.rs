@@ -2,16 +2,21 @@
 //! hardware. A simulated MONTBARD LG1000 (hammer paper, Table 1) forges steel billets and
 //! streams its DAQ samples over an in-process pty pair in the serial framing of
 //! CONTRACTS.md §7; the real service reads the other end, prints one line per blow,
-//! records to `./forgemon-demo/`, and stops after the billets (or on Ctrl-C).
+//! records to `./forgemon-demo/`, and stops after the billets (or on Ctrl-C). On a terminal
+//! its faces (the dashboard, ...) stay up after the last billet until Ctrl-C, so the URL it
+//! printed can still be opened; piped or `--fast`, it ends after the last billet. A reader
+//! that closes its stdout (`| head`) stops it as Ctrl-C does, with the recording closed.
 
-use std::io::Write;
+use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::{Arc, OnceLock};
 
 use anyhow::Context;
 use clap::Args;
 use tokio::sync::{mpsc, watch};
 
+use super::out;
 use crate::acquire::serial::driver::{SerialConfig, SerialFormat, run_on_stream, system_clock_ns};
 use crate::acquire::{Backpressure, ChannelSpec};
 use crate::config::advisor::AdvisorConfig;
@@ -28,12 +33,16 @@ use crate::synth::CaptureSpec;
 const MACHINE: &str = include_str!("../../config/hammer-lg1000.machine.toml");
 const STEEL: &str = include_str!("../../config/steel-16NiCrMo13.process.toml");
 
+/// `--billets 0`: billets enough to forge until Ctrl-C (at the default interval, 8 blows of
+/// 1.5 s a billet, 33 hours); each is a plan held in memory, so not unbounded.
+const UNTIL_STOPPED_BILLETS: usize = 10_000;
+
 /// How long the simulated device keeps the pty open after its last frame.
 const DEVICE_LINGER: std::time::Duration = std::time::Duration::from_secs(1);
 
 #[derive(Debug, Args)]
 pub struct DemoArgs {
-    /// How many billets to forge.
+    /// How many billets to forge (0: keep forging until Ctrl-C).
     #[arg(long, default_value_t = 2)]
     pub billets: usize,
     /// Seconds between blows.
@@ -42,7 +51,8 @@ pub struct DemoArgs {
     /// Where to record.
     #[arg(long, default_value = "forgemon-demo")]
     pub dir: PathBuf,
-    /// Run as fast as possible instead of in real time.
+    /// Run as fast as possible instead of in real time, and end after the last billet
+    /// (on a terminal the demo otherwise keeps its dashboard up until Ctrl-C).
     #[arg(long)]
     pub fast: bool,
     /// Serve the dashboard and `/status` here (loopback only: the demo has no token);
@@ -95,19 +105,38 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let machine = parse_machine("hammer-lg1000.machine.toml", MACHINE)?.machine;
     let steel = parse_process("steel-16NiCrMo13.process.toml", STEEL)?;
     let plan = BilletPlan { process: steel, v0s_mps: vec![3.9, 5.3, 5.3, 5.3, 5.3, 5.3, 5.3, 5.3] };
-    let sim = SimMachine::new(
-        machine,
-        EffectSet::NONE,
-        vec![plan; args.billets.max(1)],
-        CaptureSpec::hammer(7),
-        args.interval,
-    );
+    let billets = if args.billets == 0 { UNTIL_STOPPED_BILLETS } else { args.billets };
+    let sim = SimMachine::new(machine, EffectSet::NONE, vec![plan; billets], CaptureSpec::hammer(7), args.interval);
     let parts = parts(&args, opcua.clone())?;
-    let hooks = hooks(&args, opcua.map(|o| o.url));
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let faces = Faces {
+        stay_up: !args.fast && std::io::stdout().is_terminal(),
+        http: Arc::new(OnceLock::new()),
+        stop: stop_tx,
+    };
+    let hooks = hooks(&args, opcua.map(|o| o.url), &faces);
     super::run::init_logging("error");
     let rt = tokio::runtime::Runtime::new()?;
-    rt.block_on(serve_demo(args.fast, sim, parts, hooks))?;
+    rt.block_on(serve_demo(args.fast, sim, parts, hooks, faces, stop_rx))?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// How the demo's faces end, and what stops the demo besides the signals.
+struct Faces {
+    /// Keep the faces up after the last billet until Ctrl-C (stdout a terminal, not `--fast`).
+    stay_up: bool,
+    /// The dashboard's address, once it listens.
+    http: Arc<OnceLock<std::net::SocketAddr>>,
+    /// Stops the service as Ctrl-C does: sent when stdout is closed (`say`).
+    stop: watch::Sender<bool>,
+}
+
+/// One line of the demo's output. A closed stdout (`| head`) stops the demo as Ctrl-C
+/// would, so the recording is closed; `main` then exits quietly (`out::EXIT_STDOUT_CLOSED`).
+fn say(stop: &watch::Sender<bool>, line: std::fmt::Arguments<'_>) {
+    if out::line(line).is_err() {
+        stop.send_replace(true);
+    }
 }
 
 /// The flags' values, before anything opens.
@@ -121,8 +150,7 @@ fn check(args: &DemoArgs) -> anyhow::Result<()> {
         );
     }
     if let Some(t) = args.target {
-        let limits = crate::config::limits::MEASURED_HEIGHT_M;
-        limits.check(t).map_err(|why| anyhow::anyhow!("--target {t}: {why}"))?;
+        super::length_m("--target", t, crate::config::limits::MEASURED_HEIGHT_M)?;
         let speed = crate::config::limits::IMPACT_SPEED_MPS;
         for v in &args.settings {
             speed.check(*v).map_err(|why| anyhow::anyhow!("--settings {v}: {why}"))?;
@@ -168,12 +196,21 @@ fn parts(args: &DemoArgs, opcua: Option<crate::config::opcua::OpcuaConfig>) -> a
 }
 
 /// The simulated hammer on one end of a pty, the service on the other, until the device
-/// has sent its last billet; then the summary line.
-async fn serve_demo(fast: bool, sim: SimMachine, parts: ServiceParts, hooks: Hooks) -> anyhow::Result<()> {
+/// has sent its last billet (or, with `faces.stay_up`, until Ctrl-C); then the summary line.
+async fn serve_demo(
+    fast: bool,
+    sim: SimMachine,
+    parts: ServiceParts,
+    hooks: Hooks,
+    faces: Faces,
+    stop_rx: watch::Receiver<bool>,
+) -> anyhow::Result<()> {
     let (master, slave) = tokio_serial::SerialStream::pair().context("cannot open a pty pair")?;
     let (tx, rx) = mpsc::channel(SOURCE_CHANNEL_CAPACITY);
+    // The service ends when its sources hang up; a sender held here keeps it serving after
+    // the device's last frame, until Ctrl-C, SIGTERM or a closed stdout.
+    let hold_open = faces.stay_up.then(|| tx.clone());
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
-    let (_stop_tx, stop_rx) = watch::channel(false);
     let spec = SerialDeviceSpec {
         channels: demo_channels(),
         frame_samples: 1000,
@@ -181,15 +218,21 @@ async fn serve_demo(fast: bool, sim: SimMachine, parts: ServiceParts, hooks: Hoo
         faults: Default::default(),
     };
     let device_stop = shutdown_rx.clone();
+    stop_on_hangup(faces.stop.clone())?;
     let (control_tx, control_rx) = mpsc::channel::<Control>(16);
     let device = tokio::spawn(async move {
         let mut master = master;
+        let stopped = device_stop.clone();
         let stats = drive_serial(sim, &spec, &mut master, device_stop, |_, _| {}).await?;
         // A pty discards what the reader has not read yet when its master closes (the
         // last frame was lost this way: 1 of 24000 on `--fast --billets 20`). The reader
         // needs room for a read's events to take it, which a pipeline at 10× real time
         // frees within tens of ms: stay open a second after the last frame.
         tokio::time::sleep(DEVICE_LINGER).await;
+        if faces.stay_up && !*stopped.borrow() {
+            let url = faces.http.get().map_or_else(|| "its address".to_string(), |a| format!("http://{a}/"));
+            say(&faces.stop, format_args!("demo finished: the dashboard stays up at {url} until Ctrl-C"));
+        }
         Ok::<_, std::io::Error>(stats)
     });
     let cfg = SerialConfig {
@@ -198,8 +241,11 @@ async fn serve_demo(fast: bool, sim: SimMachine, parts: ServiceParts, hooks: Hoo
     };
     tokio::spawn(run_on_stream(cfg, slave, system_clock_ns, tx, shutdown_rx));
     let summary = serve(parts, rx, shutdown_tx, stop_rx, hooks, Some((control_tx, control_rx))).await?;
+    drop(hold_open);
     let stats = device.await.context("the simulated device task")??;
-    println!(
+    let files: Vec<String> = summary.files.iter().map(|f| f.display().to_string()).collect();
+    // The recording is closed; a closed stdout only loses these lines (`main` exits quietly).
+    let _ = out::outln!(
         "forgemon demo: {} billets, {} blows ({} incomplete), {} alerts, {} samples ({} frames from the device, {} events dropped); recorded {}",
         summary.billets,
         summary.blows,
@@ -208,91 +254,113 @@ async fn serve_demo(fast: bool, sim: SimMachine, parts: ServiceParts, hooks: Hoo
         summary.samples,
         stats.frames,
         summary.dropped_events,
-        summary.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
-    );
-    if summary.record_errors > 0 {
-        println!(
-            "forgemon demo: {} recording writes failed; {} blows were not recorded (the disk was full?)",
-            summary.record_errors, summary.dropped_blows
-        );
-    }
+        files.join(", ")
+    )
+    .and_then(|()| match summary.record_errors {
+        0 => Ok(()),
+        n => out::outln!(
+            "forgemon demo: {n} recording writes failed; {} blows were not recorded (the disk was full?)",
+            summary.dropped_blows
+        ),
+    });
+    Ok(())
+}
+
+/// A hangup (the demo's terminal closed) ends the demo as Ctrl-C does. The service takes
+/// SIGHUP as "reload", so a demo keeping its faces up would otherwise run on with no
+/// terminal to stop it from, its recording open.
+fn stop_on_hangup(stop: watch::Sender<bool>) -> anyhow::Result<()> {
+    let mut hangup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
+    tokio::spawn(async move {
+        if hangup.recv().await.is_some() {
+            stop.send_replace(true);
+        }
+    });
     Ok(())
 }
 
 /// What the demo prints: where each face listens, then a line per blow, billet and plan.
-fn hooks(args: &DemoArgs, opcua_url: Option<String>) -> Hooks {
-    let (billets, dir) = (args.billets.max(1), args.dir.clone());
+/// Each hook stops the demo when stdout is closed (`say`).
+fn hooks(args: &DemoArgs, opcua_url: Option<String>, faces: &Faces) -> Hooks {
+    let dir = args.dir.clone();
+    let billets = match args.billets {
+        0 => "steel billets until Ctrl-C".to_string(),
+        n => format!("{n} steel billets"),
+    };
     let (plc, foxglove, mqtt) = (args.plc, args.foxglove, args.mqtt.clone());
+    let (http, stop) = (faces.http.clone(), faces.stop.clone());
+    let [blow_stop, reject_stop, billet_stop, advice_stop] = [(); 4].map(|()| faces.stop.clone());
     Hooks {
         on_listening: Some(Box::new(move |addr| {
-            println!(
-                "forgemon demo: a simulated MONTBARD LG1000 drop hammer (paper Table 1) forges {billets} steel billets, 60 x 112 mm,"
-            );
-            println!(
+            let _ = http.set(addr);
+            let say = |line: std::fmt::Arguments<'_>| say(&stop, line);
+            say(format_args!(
+                "forgemon demo: a simulated MONTBARD LG1000 drop hammer (paper Table 1) forges {billets}, 60 x 112 mm,"
+            ));
+            say(format_args!(
                 "  streaming 3 channels at 100 kHz over a pty; recording to {}/; status on http://{addr}/status",
                 dir.display()
-            );
-            println!("  dashboard on http://{addr}/");
+            ));
+            say(format_args!("  dashboard on http://{addr}/"));
             if let Some(plc) = plc {
-                println!("  PLC result image (Modbus TCP, unit 1) on {plc}");
+                say(format_args!("  PLC result image (Modbus TCP, unit 1) on {plc}"));
             }
             if let Some(url) = &opcua_url {
-                println!("  OPC UA server (Metal Forming, anonymous) on {url}");
+                say(format_args!("  OPC UA server (Metal Forming, anonymous) on {url}"));
             }
             if let Some(fox) = foxglove {
-                println!("  Foxglove live view on ws://{fox}");
+                say(format_args!("  Foxglove live view on ws://{fox}"));
             }
             if let Some(url) = &mqtt {
-                println!("  Sparkplug B to {url} as spBv1.0/forge/DDATA/forgemon/machine");
+                say(format_args!("  Sparkplug B to {url} as spBv1.0/forge/DDATA/forgemon/machine"));
             }
-            println!("blow  billet  impact m/s  plastic J  efficiency                    class");
+            say(format_args!("blow  billet  impact m/s  plastic J  efficiency                    class"));
         })),
-        on_blow: Some(Box::new(print_blow)),
-        on_rejected: Some(Box::new(|m| println!("      (not estimated: {m})"))),
-        on_billet: Some(Box::new(|b| {
-            println!("      {b}");
-            let _ = std::io::stdout().flush();
-        })),
-        on_advice: Some(Box::new(|a| {
-            println!("      advisor: {}", advice_line(a));
-            let _ = std::io::stdout().flush();
-        })),
+        on_blow: Some(Box::new(move |e| print_blow(&blow_stop, e))),
+        on_rejected: Some(Box::new(move |m| say(&reject_stop, format_args!("      (not estimated: {m})")))),
+        on_billet: Some(Box::new(move |b| say(&billet_stop, format_args!("      {b}")))),
+        on_advice: Some(Box::new(move |a| say(&advice_stop, format_args!("      advisor: {}", advice_line(a))))),
     }
 }
 
 /// A blow's line: its figures and an efficiency bar, then its judgement and alert.
-fn print_blow(e: &BlowEstimate) {
+fn print_blow(stop: &watch::Sender<bool>, e: &BlowEstimate) {
     let billet = e.billet.billet;
     match (e.plastic_j, e.efficiency) {
         (Some(plastic_j), Some(efficiency)) => {
             let bar_len = (efficiency.clamp(0.0, 1.0) * 24.0).round() as usize;
             let bar: String = "#".repeat(bar_len) + &".".repeat(24 - bar_len);
-            println!(
-                "{:>4}  {:>6}  {:>10.2}  {plastic_j:>9.0}  [{bar}] {efficiency:.2}  {}",
+            say(
+                stop,
+                format_args!(
+                    "{:>4}  {:>6}  {:>10.2}  {plastic_j:>9.0}  [{bar}] {efficiency:.2}  {}",
+                    e.blow,
+                    billet,
+                    e.v_impact_mps,
+                    e.class.as_str()
+                ),
+            );
+        }
+        _ => say(
+            stop,
+            format_args!(
+                "{:>4}  {:>6}  {:>10.2}  {:>9}  {:<31}  {} ({:.1} ms lost)",
                 e.blow,
                 billet,
                 e.v_impact_mps,
-                e.class.as_str()
-            );
-        }
-        _ => println!(
-            "{:>4}  {:>6}  {:>10.2}  {:>9}  {:<31}  {} ({:.1} ms lost)",
-            e.blow,
-            billet,
-            e.v_impact_mps,
-            "-",
-            "(not estimated: samples lost)",
-            e.class.as_str(),
-            e.gap_s * 1e3
+                "-",
+                "(not estimated: samples lost)",
+                e.class.as_str(),
+                e.gap_s * 1e3
+            ),
         ),
     }
     if let Some(j) = e.judgement.as_ref().filter(|j| !j.ok) {
-        println!("      NOK against recipe '{}': {}", j.recipe, j.reasons.join("; "));
+        say(stop, format_args!("      NOK against recipe '{}': {}", j.recipe, j.reasons.join("; ")));
     }
     if let Some(a) = &e.alert {
-        println!("      ALERT {}: {}", a.kind.as_str(), a.reason);
+        say(stop, format_args!("      ALERT {}: {}", a.kind.as_str(), a.reason));
     }
-    let _ = std::io::stdout().flush();
 }
 
 /// The advisor's plan in one line: the blows left and the next blow's speed, or why not.

@@ -32,7 +32,7 @@ pub struct ExportArgs {
     #[arg(required = true, value_name = "RECORDING_OR_DIR")]
     pub inputs: Vec<PathBuf>,
     /// Write CSV (a header row, then one row per blow; an empty field where a value is
-    /// `null`).
+    /// `null`); `-` writes it to standard output.
     #[arg(long, value_name = "OUT.csv", required_unless_present = "parquet", conflicts_with = "parquet")]
     pub csv: Option<PathBuf>,
     /// Write Parquet (snappy-compressed; nullable columns where a value can be `null`).
@@ -169,15 +169,27 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     Ok(if corrupt { ExitCode::from(EXIT_CORRUPT_INPUT) } else { ExitCode::SUCCESS })
 }
 
+/// `--csv -`: the table to standard output.
+const STDOUT_PATH: &str = "-";
+
 fn write_csv(out: &Path, rows: &[ExportRow]) -> anyhow::Result<()> {
-    let mut w = csv::Writer::from_path(out).with_context(|| format!("{}: cannot write", out.display()))?;
+    if out == Path::new(STDOUT_PATH) {
+        // Through `out`: a closed stdout (`| head`) ends the export quietly (`main`).
+        return write_csv_to(csv::Writer::from_writer(super::out::stdout()), rows, "standard output");
+    }
+    let file = std::fs::File::create(out).with_context(|| format!("{}: cannot write", out.display()))?;
+    write_csv_to(csv::Writer::from_writer(file), rows, &out.display().to_string())
+}
+
+/// The table to `w`, which `place` names in the errors.
+fn write_csv_to<W: std::io::Write>(mut w: csv::Writer<W>, rows: &[ExportRow], place: &str) -> anyhow::Result<()> {
     if rows.is_empty() {
         w.write_record(column_names())?;
     }
     for r in rows {
-        w.serialize(r).with_context(|| format!("{}: cannot write", out.display()))?;
+        w.serialize(r).with_context(|| format!("{place}: cannot write"))?;
     }
-    w.flush().with_context(|| format!("{}: cannot write", out.display()))?;
+    w.flush().with_context(|| format!("{place}: cannot write"))?;
     Ok(())
 }
 

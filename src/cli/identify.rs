@@ -47,6 +47,7 @@ pub struct IdentifyArgs {
     /// Local searches (the prior plus random starts).
     #[arg(long, default_value_t = 8)]
     pub starts: usize,
+    /// Seed of the random starts and the Monte Carlo draws (the same seed, the same fit).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Monte Carlo draws for the load bands.

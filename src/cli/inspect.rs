@@ -167,8 +167,9 @@ pub fn run(args: InspectArgs) -> anyhow::Result<ExitCode> {
         match inspect(file, args.json) {
             Ok(s) if s == ExitCode::SUCCESS => {}
             Ok(s) => status = s,
+            Err(e) if super::out::closed() => return Err(e),
             Err(e) => {
-                eprintln!("forgemon: skipped {}: {e:#}", file.display());
+                eprintln!("forgemon: skipped {}: {}", file.display(), super::error_message(&e));
                 status = ExitCode::from(EXIT_CORRUPT_INPUT);
             }
         }
@@ -185,8 +186,8 @@ fn inspect(file: &Path, json: bool) -> anyhow::Result<ExitCode> {
     }
     let report = reader.report().clone();
     let out = tally.json(&file.display().to_string(), &report);
-    let stdout = std::io::stdout();
-    let mut w = stdout.lock();
+    // Through `out`: a closed stdout (`| head`) ends the verb quietly (`main`).
+    let mut w = super::out::stdout();
     if json {
         writeln!(w, "{out}")?;
     } else {

@@ -13,6 +13,7 @@ pub mod export;
 pub mod identify;
 pub mod import;
 pub mod inspect;
+pub mod out;
 pub mod replay;
 pub mod run;
 pub mod simulate;
@@ -72,6 +73,34 @@ impl Cli {
             Command::Teach(args) => teach::run(args),
         }
     }
+}
+
+/// An error and its causes joined by ": ", as `{:#}` joins them, but without a cause the
+/// message before it already ends with: errors that print their source in their own
+/// message (`RecordError::Io`: "x.mcap: cannot open: No such file or directory (os error
+/// 2)") would otherwise say it twice.
+pub fn error_message(err: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in err.chain().map(ToString::to_string) {
+        if text.ends_with(&cause) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&cause);
+    }
+    text
+}
+
+/// A length option in metres, checked against its physical range (`config::limits`). A
+/// value above the range that fits it in millimetres is a unit slip (`--h-now 112` for
+/// 112 mm) and the error says so, with the value in metres.
+pub(crate) fn length_m(flag: &str, value_m: f64, limits: crate::config::limits::Limits) -> anyhow::Result<f64> {
+    if value_m > limits.max && limits.check(value_m / 1e3).is_ok() {
+        anyhow::bail!("{flag} {value_m} looks like millimetres; the option takes metres: {}", value_m / 1e3);
+    }
+    limits.check(value_m).map_err(|why| anyhow::anyhow!("{flag} {value_m}: {why}"))
 }
 
 /// Read a text file, naming it in the error.

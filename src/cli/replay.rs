@@ -102,8 +102,8 @@ fn pick(option: &Option<PathBuf>, stored: Option<String>, input: &Path, name: &s
 
 pub fn run(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     let recipe = args.recipe.as_ref().map(|p| load_recipe(p)).transpose()?;
-    let stdout = std::io::stdout();
-    let (status, _) = replay_into(&args, stdout.lock(), |p| p.set_recipe(recipe))?;
+    // Through `out`: a closed stdout (`| head`) ends the replay quietly (`main`).
+    let (status, _) = replay_into(&args, super::out::stdout(), |p| p.set_recipe(recipe))?;
     Ok(status)
 }
 
@@ -149,7 +149,14 @@ pub(crate) fn replay_into<W: Write>(
     if !args.json {
         writeln!(replay.out, "{}", table_header(judged))?;
     }
-    let status = replay.play(input, args)?;
+    let status = match replay.play(input, args) {
+        // The reader of stdout is gone: finish the recording (`--out`), then stop.
+        Err(e) if super::out::closed() => {
+            let _ = replay.finish();
+            return Err(e);
+        }
+        status => status?,
+    };
     let feeder = replay.finish()?;
     Ok((status, feeder))
 }
@@ -459,7 +466,7 @@ fn open_input(path: &Path) -> anyhow::Result<(Input, Stored)> {
                     return Ok((Input::Recording { reader, ahead, rest: files.collect(), skipped }, stored));
                 }
                 Err(e) => {
-                    eprintln!("forgemon: skipped {}: {e:#}", first.display());
+                    eprintln!("forgemon: skipped {}: {}", first.display(), super::error_message(&e));
                     skipped = true;
                 }
             }

@@ -67,8 +67,10 @@ pub struct SimulateDeviceArgs {
     /// Unmodelled effects to put into the simulated machine: NAME:param=value (repeatable).
     #[arg(long = "effect", value_name = "SPEC")]
     pub effects: Vec<String>,
+    /// The byte format on the pty (`--transport pty`).
     #[arg(long, value_enum, default_value = "binary")]
     pub wire: Wire,
+    /// Where the samples go: a pty, a Modbus TCP server or a candump log file.
     #[arg(long, value_enum, default_value = "pty")]
     pub transport: Transport,
     /// Modbus TCP: the address to listen on.
