@@ -64,7 +64,7 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -s o -l out 
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l initial -d 'Prior machine: the centre of the search bounds and the first start (default: the paper\'s machine of the kind). The press\'s sensor stiffness is taken from it' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l fit-blows -d 'Blow numbers to fit, e.g. 1 or 1,3 (default: all); the others are predicted and reported as held out' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l starts -d 'Local searches (the prior plus random starts)' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l seed -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l seed -d 'Seed of the random starts and the Monte Carlo draws (the same seed, the same fit)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l monte-carlo -d 'Monte Carlo draws for the load bands' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l report -d 'The HTML report (default: the output with .html)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l bare -d 'The references are bare strikes (tool on tool), not blows on a billet'
@@ -87,14 +87,14 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand import" -s o -l out -d
 complete -c forgemon -n "__fish_forgemon_using_subcommand import" -l machine -d 'A machine model to store in the recording too' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand import" -l process -d 'A process sheet to store (defaults to the directory\'s process.toml)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand import" -s h -l help -d 'Print help'
-complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l csv -d 'Write CSV (a header row, then one row per blow; an empty field where a value is `null`)' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l csv -d 'Write CSV (a header row, then one row per blow; an empty field where a value is `null`); `-` writes it to standard output' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l parquet -d 'Write Parquet (snappy-compressed; nullable columns where a value can be `null`)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand inspect" -l json -d 'Print one JSON object instead of text'
 complete -c forgemon -n "__fish_forgemon_using_subcommand inspect" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand run" -l config -d 'The service configuration: /etc/forgemon/forgemon.toml once the package is installed; annotated examples in config/*.service.toml (packaged: /usr/share/doc/forgemon/examples)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand run" -s h -l help -d 'Print help'
-complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l billets -d 'How many billets to forge' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l billets -d 'How many billets to forge (0: keep forging until Ctrl-C)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l interval -d 'Seconds between blows' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l dir -d 'Where to record' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l http -d 'Serve the dashboard and `/status` here (loopback only: the demo has no token); default: a free loopback port' -r
@@ -105,7 +105,7 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l opcua -d 'Ser
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l recipe -d 'Judge every blow against this recipe (`forgemon teach`), OK/NOK' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l target -d 'Run the live blow advisor towards this billet height, m: after each blow it plans the blows left (`[advisor]` in a service file)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l settings -d 'The hammer\'s impact speeds the advisor may choose from, m/s (its drop heights)' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l fast -d 'Run as fast as possible instead of in real time'
+complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l fast -d 'Run as fast as possible instead of in real time, and end after the last billet (on a terminal the demo otherwise keeps its dashboard up until Ctrl-C)'
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l machine -d 'The machine model (machine.toml)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l process -d 'The billet forged, again and again (process.toml)' -r -F
@@ -116,8 +116,8 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l he
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l billet-idle -d 'Seconds more the machine stands idle before each billet after the first' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l rate -d 'Sample rate, Hz (up to 100 kHz)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l effect -d 'Unmodelled effects to put into the simulated machine: NAME:param=value (repeatable)' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l wire -r -f -a "binary\t'COBS frames with CRC-32C (CONTRACTS.md §7)'"
-complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l transport -r -f -a "pty\t'A pty pair, in real time; the path to open is printed'
+complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l wire -d 'The byte format on the pty (`--transport pty`)' -r -f -a "binary\t'COBS frames with CRC-32C (CONTRACTS.md §7)'"
+complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l transport -d 'Where the samples go: a pty, a Modbus TCP server or a candump log file' -r -f -a "pty\t'A pty pair, in real time; the path to open is printed'
 modbus-tcp\t'A Modbus TCP server with the block-mode sample ring at register 0, in real time'
 candump\t'A `candump -L` log file, one CAN frame per sample (fixtures/can/hammer.dbc), or with `--can-fd` one CAN FD frame per 8 samples (config/hammer-canfd.dbc)'"
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l listen -d 'Modbus TCP: the address to listen on' -r
@@ -129,10 +129,10 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l ca
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -s h -l help -d 'Print help (see more with \'--help\')'
 complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l machine -d 'The machine model (machine.toml), with its effects if it has any' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l process -d 'The billet\'s process sheet (process.toml): its law, friction and original height' -r -F
-complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l h-now -d 'The billet\'s height now, m' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l target -d 'The height to reach, m (within ±0.5 mm)' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l settings -d 'The machine\'s impact speeds, m/s, comma separated (a hammer\'s drop heights)' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l v-max -d 'Any impact speed up to this, m/s (a screw press\'s energy setting)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l h-now -d 'The billet\'s height now, m (0.112 for 112 mm)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l target -d 'The height to reach, m (within ±0.5 mm; 0.04 for 40 mm)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l settings -d 'The machine\'s impact speeds, m/s, comma separated (a hammer\'s drop heights); or give `--v-max` instead' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l v-max -d 'Any impact speed up to this, m/s (a screw press\'s energy setting); or give `--settings` instead. Either supplies the speeds the plan may choose from' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l blows-done -d 'Blows the billet already took (the machine\'s `thermal` effect counts them)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l json -d 'Print one JSON object (CONTRACTS §9) instead of a table'
 complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -s h -l help -d 'Print help'
