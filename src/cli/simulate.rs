@@ -71,8 +71,9 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = DEFAULT_TRACE_DT_S, requires = "trace")]
     pub trace_dt: f64,
     /// Also write the blows as a capture directory (blow_01.csv, ..., process.toml), the way a
-    /// DAQ would have recorded them: approach, sensor offset and noise, 10 µm encoder. The
-    /// sheet's measured heights are the simulated ones, as a caliper reads them (0.01 mm).
+    /// DAQ would have recorded them: approach, sensor offset and noise, 10 µm encoder. Where
+    /// the sheet lists measured heights, the directory's sheet lists the simulated ones
+    /// instead, after every blow, as a caliper reads them (0.01 mm).
     /// With --bare: bare strikes, blow_01.csv, ..., without a process sheet.
     #[arg(long, value_name = "DIR")]
     pub captures: Option<PathBuf>,
@@ -257,6 +258,12 @@ fn write_captures(
     let spec = capture_spec(inputs.machine.machine.kind(), args.capture_seed);
     let blows = synth_blows(&inputs.machine.machine, &inputs.set, process, &args.v0, &spec)?;
     write_capture_files(dir, &blows)?;
+    // A sheet without measured heights stays without (each blow then starts where the
+    // model's one before ended); measured heights are another billet's: the simulated ones.
+    if process.measured_final_heights_m.is_empty() {
+        std::fs::copy(process_path, dir.join("process.toml"))?;
+        return Ok(());
+    }
     let heights: Vec<f64> = blows.iter().filter_map(|b| b.truth.forming.map(|f| f.h_end_m)).collect();
     let sheet = sheet_with_heights(&read_text(process_path)?, &heights)
         .with_context(|| format!("{}: cannot be read as TOML", process_path.display()))?;
