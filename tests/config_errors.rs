@@ -99,18 +99,31 @@ fn a_sheet_whose_heights_rise_by_caliper_noise_is_kept_with_a_warning() {
     let warning =
         "measured heights rise between blow 3 (62.00 mm) and blow 4 (62.10 mm): caliper noise? kept as measured";
     assert!(err.contains("forgemon: warning: ") && err.contains(warning) && err.contains(p), "{err}");
-    // replay reads the same sheet from the capture directory.
-    let sheet_copy = caps.join("process.toml");
-    let out = forgemon(&["replay", c, "--machine", HAMMER, "--process", sheet_copy.to_str().unwrap(), "--json"]);
+    // replay reads the same sheet (the capture directory's own holds the simulated heights).
+    let out = forgemon(&["replay", c, "--machine", HAMMER, "--process", p, "--json"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
     assert!(err.contains(warning), "{err}");
     assert_eq!(String::from_utf8_lossy(&out.stdout).lines().count(), 4, "one JSON line per blow");
-    // identify starts each later blow from the sheet's height after the one before: the
-    // rise changes a start height by 0.1 mm and nothing else. Few starts keep it cheap.
+    // identify reads it too (and cross-checks it against the encoder). Few starts keep it
+    // cheap.
     let out_machine = tmp("noisy.machine.toml");
     let o = out_machine.to_str().unwrap();
-    let args = ["identify", "--kind", "hammer", "--reference", c, "-o", o, "--starts", "2", "--monte-carlo", "10"];
+    let args = [
+        "identify",
+        "--kind",
+        "hammer",
+        "--reference",
+        c,
+        "--process",
+        p,
+        "-o",
+        o,
+        "--starts",
+        "2",
+        "--monte-carlo",
+        "10",
+    ];
     let out = forgemon(&args);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");

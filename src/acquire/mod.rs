@@ -8,6 +8,7 @@
 
 pub mod can;
 pub mod modbus;
+pub mod outage;
 pub mod serial;
 
 pub use crate::signal::sample::Counters;

@@ -102,15 +102,24 @@ pub fn run(args: IdentifyArgs) -> anyhow::Result<ExitCode> {
         )
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    let n_fit = fit.len();
     let result = identify(fit, held, setting, prior, &cfg, &|| bar.inc(1))?;
     bar.finish_and_clear();
+    // The sheet against the encoder, as `replay` checks it (`identify::heights`).
+    for w in result.sheet_checks.iter().filter_map(|c| c.warning()) {
+        eprintln!("forgemon: warning: {w}");
+    }
+    let n_fit = result.blows.iter().filter(|b| !b.held_out).count();
     let provenance = format!(
         "{} ({} {} fitted{})",
         args.reference.display(),
         n_fit,
         if args.bare { "bare strikes" } else { "billet blows" },
-        if result.blows.iter().any(|b| b.held_out) { ", others held out" } else { "" }
+        match (result.blows.iter().any(|b| b.in_doubt), result.blows.iter().any(|b| b.held_out && !b.in_doubt)) {
+            (true, true) => ", others held out, some for a start height in doubt",
+            (true, false) => ", others held out for a start height in doubt",
+            (false, true) => ", others held out",
+            (false, false) => "",
+        }
     );
     // The filter the model was identified through goes on with it.
     let text = result.to_toml(&provenance) + &load_filter.to_toml();
@@ -149,7 +158,11 @@ fn print_summary(result: &crate::identify::Identified, elapsed_s: f64) {
             b.reference.v0_mps,
             b.rms_error * 100.0,
             b.over_noise.map_or(String::new(), |r| format!(", {r:.2}× the noise")),
-            if b.held_out { "  (held out: predicted)" } else { "" }
+            match (b.held_out, b.in_doubt) {
+                (true, true) => "  (left out, start height in doubt: predicted)",
+                (true, false) => "  (held out: predicted)",
+                _ => "",
+            }
         );
     }
     println!(

@@ -71,7 +71,9 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = DEFAULT_TRACE_DT_S, requires = "trace")]
     pub trace_dt: f64,
     /// Also write the blows as a capture directory (blow_01.csv, ..., process.toml), the way a
-    /// DAQ would have recorded them: approach, sensor offset and noise, 10 µm encoder.
+    /// DAQ would have recorded them: approach, sensor offset and noise, 10 µm encoder. Where
+    /// the sheet lists measured heights, the directory's sheet lists the simulated ones
+    /// instead, after every blow, as a caliper reads them (0.01 mm).
     /// With --bare: bare strikes, blow_01.csv, ..., without a process sheet.
     #[arg(long, value_name = "DIR")]
     pub captures: Option<PathBuf>,
@@ -256,8 +258,45 @@ fn write_captures(
     let spec = capture_spec(inputs.machine.machine.kind(), args.capture_seed);
     let blows = synth_blows(&inputs.machine.machine, &inputs.set, process, &args.v0, &spec)?;
     write_capture_files(dir, &blows)?;
-    std::fs::copy(process_path, dir.join("process.toml"))?;
+    // A sheet without measured heights stays without (each blow then starts where the
+    // model's one before ended); measured heights are another billet's: the simulated ones.
+    if process.measured_final_heights_m.is_empty() {
+        std::fs::copy(process_path, dir.join("process.toml"))?;
+        return Ok(());
+    }
+    let heights: Vec<f64> = blows.iter().filter_map(|b| b.truth.forming.map(|f| f.h_end_m)).collect();
+    let sheet = sheet_with_heights(&read_text(process_path)?, &heights)
+        .with_context(|| format!("{}: cannot be read as TOML", process_path.display()))?;
+    std::fs::write(dir.join("process.toml"), sheet)?;
     Ok(())
+}
+
+/// A caliper's readings per metre: it reads to 0.01 mm (and is good to
+/// `EstimatorConfig::DEFAULT_CALIPER_RESOLUTION_M`).
+const CALIPER_READINGS_PER_M: f64 = 1e5;
+
+/// The process sheet `text` with its measured heights (`[[blows]] final_height_m`) replaced
+/// by `heights_m`, each read to a caliper's 0.01 mm (`CALIPER_READINGS_PER_M`): the heights the simulated blows left,
+/// so that a capture directory's sheet agrees with its encoder (the input sheet's heights
+/// are another billet's, measured).
+fn sheet_with_heights(text: &str, heights_m: &[f64]) -> Result<String, toml_edit::TomlError> {
+    use toml_edit::{ArrayOfTables, DocumentMut, Table, value};
+    let mut doc: DocumentMut = text.parse()?;
+    let mut blows = ArrayOfTables::new();
+    for (i, h) in heights_m.iter().enumerate() {
+        let mut t = Table::new();
+        t["final_height_m"] = value((h * CALIPER_READINGS_PER_M).round() / CALIPER_READINGS_PER_M);
+        if i == 0 {
+            t.decor_mut()
+                .set_prefix("\n# The heights the simulated blows left (forgemon simulate --captures), to 0.01 mm.\n");
+        }
+        blows.push(t);
+    }
+    doc.remove("blows");
+    if !blows.is_empty() {
+        doc.insert("blows", toml_edit::Item::ArrayOfTables(blows));
+    }
+    Ok(doc.to_string())
 }
 
 fn capture_spec(kind: MachineKind, seed: u64) -> CaptureSpec {
@@ -374,6 +413,7 @@ fn write_table(w: &mut impl Write, out: &Value) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::super::{Cli, Command};
+    use super::sheet_with_heights;
     use clap::Parser;
 
     #[test]
@@ -405,6 +445,21 @@ mod tests {
             Cli::try_parse_from(["forgemon", "simulate", "--machine", "m", "--process", "p", "--v0", "1", "--bare"])
                 .is_err()
         );
+    }
+
+    #[test]
+    fn the_capture_sheet_carries_the_simulated_heights() {
+        let text =
+            "machine = \"hammer\"\n[billet]\nheight_m = 0.112 # note\n\n[[blows]]\nfinal_height_m = 0.089  # Table 3\n";
+        let out = sheet_with_heights(text, &[0.0929303714, 0.0663104]).unwrap();
+        let t: toml::Table = out.parse().unwrap();
+        let h: Vec<f64> =
+            t["blows"].as_array().unwrap().iter().map(|b| b["final_height_m"].as_float().unwrap()).collect();
+        assert_eq!(h, vec![0.09293, 0.06631]);
+        assert!(out.contains("height_m = 0.112 # note") && !out.contains("Table 3"), "{out}");
+        // No blows: no measured heights.
+        let none: toml::Table = sheet_with_heights(text, &[]).unwrap().parse().unwrap();
+        assert!(!none.contains_key("blows"));
     }
 
     #[test]

@@ -24,6 +24,10 @@ struct RawSerial {
     name: String,
     #[allow(dead_code)]
     kind: String,
+    /// The device. A `/dev/serial/by-id/...` path names one adapter and is followed to
+    /// whatever `ttyUSBn` it comes back as when plugged in again; any other path is reopened
+    /// only while it is the device first opened there (the same device number, and for a pty
+    /// the same pty), else refused and retried (`acquire::serial::identity`).
     path: String,
     baud: Option<u64>,
     format: Option<RawFormat>,

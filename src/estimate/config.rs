@@ -96,6 +96,14 @@ impl EstimatorConfig {
         }
     }
 
+    /// How far an encoder's height and a measured one may differ and still agree, m: the
+    /// encoder's and the caliper's resolutions and one sample's travel at impact (the
+    /// contact is known to a sample). `replay`'s `height_check` and `identify`'s cross-check
+    /// both hold the sheet to this.
+    pub fn height_tolerance_m(&self, sample_travel_m: f64) -> f64 {
+        self.encoder_resolution_m + self.caliper_resolution_m + sample_travel_m
+    }
+
     pub fn classify(&self, efficiency: f64) -> BlowClass {
         if efficiency >= self.soft_min {
             BlowClass::Soft

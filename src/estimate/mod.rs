@@ -561,10 +561,9 @@ impl Estimator {
         forming_end_s.is_some_and(|t| blow.samples.iter().any(|s| s.t_s > t && s.load_n - blow.load_zero_n < level_n))
     }
 
-    /// How well a contact position compares with a height: the encoder's and the caliper's
-    /// resolutions and one sample's travel at impact, m.
+    /// How well a contact position compares with a height (`EstimatorConfig::height_tolerance_m`).
     fn contact_tolerance_m(&self, sample_travel_m: f64) -> f64 {
-        self.cfg.encoder_resolution_m + self.cfg.caliper_resolution_m + sample_travel_m
+        self.cfg.height_tolerance_m(sample_travel_m)
     }
 }
 

@@ -95,6 +95,14 @@ pub struct HeightCheck {
     pub agree: bool,
 }
 
+impl HeightCheck {
+    /// The sheet's height against the encoder's, within `tolerance_m`
+    /// (`EstimatorConfig::height_tolerance_m`).
+    pub fn compare(sheet_m: f64, encoder_m: f64, tolerance_m: f64) -> HeightCheck {
+        HeightCheck { sheet_m, encoder_m, tolerance_m, agree: (sheet_m - encoder_m).abs() <= tolerance_m }
+    }
+}
+
 /// Where a blow's start height came from (CONTRACTS §5 `height_source`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]

@@ -188,12 +188,8 @@ impl Estimator {
             .process
             .as_ref()
             .and_then(|p| self.billet_blows.checked_sub(2).and_then(|i| p.measured_final_heights_m.get(i).copied()));
-        let check = chained.zip(sheet).map(|(encoder_m, sheet_m)| HeightCheck {
-            sheet_m,
-            encoder_m,
-            tolerance_m,
-            agree: (sheet_m - encoder_m).abs() <= tolerance_m,
-        });
+        let check =
+            chained.zip(sheet).map(|(encoder_m, sheet_m)| HeightCheck::compare(sheet_m, encoder_m, tolerance_m));
         match (chained, sheet) {
             (Some(h), _) => (Some(h), check, HeightSource::Encoder),
             (None, Some(h)) if offset_unknown => (Some(h), check, HeightSource::Sheet),

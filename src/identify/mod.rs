@@ -8,6 +8,7 @@
 
 pub mod clip;
 pub mod fit;
+pub mod heights;
 pub mod model;
 pub mod objective;
 pub mod report;
@@ -19,6 +20,7 @@ use crate::physics::effects::EffectSet;
 use crate::physics::load_filter::LoadFilter;
 use crate::physics::machine::Machine;
 use fit::{Run, Uncertainty};
+use heights::SheetCheck;
 use model::ParamSet;
 use objective::{Fidelity, Heights, Objective, Reference, Setting, Simulated};
 
@@ -98,6 +100,9 @@ pub struct FittedBlow {
     /// explains everything but the noise. `None` without a noise measurement.
     pub over_noise: Option<f64>,
     pub held_out: bool,
+    /// Held out because its start height is in doubt (`heights::SheetCheck::in_doubt`), not
+    /// by `--fit-blows`.
+    pub in_doubt: bool,
 }
 
 /// The result of an identification.
@@ -120,6 +125,9 @@ pub struct Identified {
     pub monte_carlo_runs: usize,
     /// Spectra of each blow (fitted and held out): bin frequencies, measured, model.
     pub spectra: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)>,
+    /// The sheet's measured heights against the encoder, one per blow that has both
+    /// (`heights::cross_check`); the blows in doubt were left out of the fit.
+    pub sheet_checks: Vec<SheetCheck>,
 }
 
 /// Why identification failed.
@@ -127,6 +135,12 @@ pub struct Identified {
 pub enum IdentifyError {
     #[error("no reference blow to fit")]
     NoReference,
+    #[error(
+        "no reference blow to fit: the start height of every blow to fit is in doubt (blows {blows}: the sheet's \
+         measured heights and the encoder's disagree by more than a caliper's scatter); fit the first blow \
+         (--fit-blows 1), or correct the sheet"
+    )]
+    AllInDoubt { blows: String },
     #[error(
         "the model with the fitted parameters cannot simulate {label}{held}: the fit left a machine that does \
          not strike this blow (fit it too with --fit-blows, or check its capture)"
@@ -160,7 +174,22 @@ pub fn identify(
         refs.into_iter().map(|r| (r, true)).chain(held_out.into_iter().map(|r| (r, false))).collect();
     all.sort_by_key(|((r, _), _)| r.blow_index.unwrap_or(0));
     let speed_rel_sd: Vec<f64> = all.iter().map(|((r, sd), _)| sd / r.v0_mps).collect();
-    let (all_refs, fitted): (Vec<Reference>, Vec<bool>) = all.into_iter().map(|((r, _), f)| (r, f)).unzip();
+    let (all_refs, mut fitted): (Vec<Reference>, Vec<bool>) = all.into_iter().map(|((r, _), f)| (r, f)).unzip();
+    // The sheet against the encoder, as `replay` checks it: a blow whose start height is in
+    // doubt is only predicted.
+    let sheet_checks = match &setting {
+        Setting::Billet(p) => heights::cross_check(&all_refs, p),
+        Setting::Bare => Vec::new(),
+    };
+    let in_doubt: Vec<bool> =
+        all_refs.iter().map(|r| sheet_checks.iter().any(|c| Some(c.blow) == r.blow_index && c.in_doubt())).collect();
+    if fitted.iter().zip(&in_doubt).all(|(f, d)| !f || *d) {
+        let blows: Vec<String> = sheet_checks.iter().filter(|c| c.in_doubt()).map(|c| c.blow.to_string()).collect();
+        return Err(IdentifyError::AllInDoubt { blows: blows.join(", ") });
+    }
+    for (f, d) in fitted.iter_mut().zip(&in_doubt) {
+        *f &= !d;
+    }
     // Start heights from the encoder's chain where it agrees with the sheet
     // (`Heights::Encoder`), as `diagnose` takes them: the calipers' scatter (±0.2 mm) is an
     // error of the blow's input that the covariance does not hold.
@@ -237,6 +266,7 @@ pub fn identify(
             rms_error: rms[k],
             over_noise: r.noise_n.filter(|n| *n > 0.0).map(|n| rms[k] * r.peak_n / n),
             held_out: !fitted[k],
+            in_doubt: in_doubt[k],
         });
     }
     let fit_check = FitCheck::of(&blows);
@@ -260,6 +290,7 @@ pub fn identify(
         blows,
         monte_carlo_runs: mc.len(),
         spectra,
+        sheet_checks,
     })
 }
 
@@ -324,6 +355,22 @@ impl Identified {
             );
         }
         let _ = writeln!(s, "model_fits = {}  # residual_over_noise within {MISFIT_OVER_NOISE}", self.fit_check.fits);
+        if !self.sheet_checks.is_empty() {
+            let list = |f: &dyn Fn(&SheetCheck) -> bool| {
+                let v: Vec<String> = self.sheet_checks.iter().filter(|c| f(c)).map(|c| c.blow.to_string()).collect();
+                v.join(", ")
+            };
+            let _ = writeln!(
+                s,
+                "height_check_disagree = [{}]  # blows whose start height on the sheet and the encoder's disagree (replay's height_check)",
+                list(&|c| !c.check.agree)
+            );
+            let _ = writeln!(
+                s,
+                "left_out_in_doubt = [{}]  # of those, apart by more than a caliper's scatter: left out of the fit",
+                list(&|c| c.in_doubt())
+            );
+        }
         let _ = writeln!(s, "starts = {}", self.runs.len());
         let _ = writeln!(s, "starts_agreeing = {}", self.runs_agreeing);
         let _ = writeln!(s, "residual_lag1 = {:.4}", self.uncertainty.residual_lag1);
@@ -342,6 +389,25 @@ impl Identified {
                 if r.abs() > 0.5 {
                     let _ = writeln!(s, "\"{}:{}\" = {:.4}", self.set.params[a].key, self.set.params[b].key, r);
                 }
+            }
+        }
+        if !self.sheet_checks.is_empty() {
+            let _ = writeln!(
+                s,
+                "\n[identify.height_check]  # the sheet's height before each blow against the encoder's, m"
+            );
+            for c in &self.sheet_checks {
+                let h = &c.check;
+                let _ = writeln!(
+                    s,
+                    "blow_{:02} = {{ sheet_m = {:.6}, encoder_m = {:.6}, tolerance_m = {:.3e}, agree = {}, left_out = {} }}",
+                    c.blow,
+                    h.sheet_m,
+                    h.encoder_m,
+                    h.tolerance_m,
+                    h.agree,
+                    c.in_doubt()
+                );
             }
         }
         s
@@ -423,6 +489,7 @@ impl Identified {
             ));
         }
         summary.push(self.fit_check.verdict());
+        summary.extend(self.sheet_checks.iter().filter_map(|c| c.warning()).map(|w| format!("Heights: {w}.")));
         let undetermined: Vec<&str> =
             self.set.params.iter().zip(&u.determined).filter(|(_, d)| !**d).map(|(p, _)| p.key).collect();
         if !undetermined.is_empty() {

@@ -14,6 +14,7 @@ use socketcan::tokio::{CanFdSocket, CanSocket};
 use socketcan::{CanAnyFrame, SocketOptions};
 use tokio::sync::{mpsc, watch};
 
+use crate::acquire::outage::OutageLog;
 use crate::acquire::{SourceEvent, next_backoff_ms, offer};
 
 use super::candump::LoggedFrame;
@@ -97,6 +98,7 @@ pub async fn run(cfg: CanSourceConfig, tx: mpsc::Sender<SourceEvent>, mut shutdo
     let mut backoff_ms = 0;
     let mut ever_connected = false;
     let mut events = Vec::new();
+    let mut outage = OutageLog::new();
     loop {
         if *shutdown.borrow() {
             break;
@@ -105,6 +107,9 @@ pub async fn run(cfg: CanSourceConfig, tx: mpsc::Sender<SourceEvent>, mut shutdo
             Ok(s) => s,
             Err(e) => {
                 backoff_ms = next_backoff_ms(backoff_ms);
+                if let Some(line) = outage.failed(&format!("{}: {e}", cfg.iface), ns_since_epoch(SystemTime::now())) {
+                    tracing::warn!(source = %cfg.name, "{line}");
+                }
                 let detail = format!("{}: {e}; retry in {backoff_ms} ms", cfg.iface);
                 if !status(&tx, &mut dec, "reconnecting", Some(detail)) {
                     return;
@@ -118,6 +123,9 @@ pub async fn run(cfg: CanSourceConfig, tx: mpsc::Sender<SourceEvent>, mut shutdo
         };
         if ever_connected {
             dec.counters_mut().reconnects += 1;
+        }
+        if let Some(line) = outage.opened(&cfg.iface, ns_since_epoch(SystemTime::now())) {
+            tracing::info!(source = %cfg.name, "{line}");
         }
         ever_connected = true;
         backoff_ms = 0;
@@ -159,6 +167,8 @@ pub async fn run(cfg: CanSourceConfig, tx: mpsc::Sender<SourceEvent>, mut shutdo
             return;
         }
         backoff_ms = next_backoff_ms(backoff_ms);
+        tracing::warn!(source = %cfg.name, "link lost: {}: {lost}", cfg.iface);
+        outage.lost(ns_since_epoch(SystemTime::now()));
         if !status(&tx, &mut dec, "reconnecting", Some(format!("{}: {lost}", cfg.iface))) {
             return;
         }

@@ -17,6 +17,7 @@ use tokio_modbus::{ExceptionCode, Slave};
 
 use super::block::{BlockError, BlockHeader, BlockPlan, BlockTracker, HEADER_REGISTERS, decode_slots};
 use super::registers::{DecodeError, RegisterKind, RegisterSpec, Signal, decode_one, plan_reads};
+use crate::acquire::outage::OutageLog;
 use crate::acquire::{ChannelSpec, Counters, SourceEvent, next_backoff_ms, offer};
 use crate::signal::sample::Gap;
 use crate::signal::sample::{Role, SampleBatch};
@@ -408,6 +409,11 @@ pub async fn run(cfg: ModbusConfig, tx: mpsc::Sender<SourceEvent>, mut shutdown:
     };
     let mut backoff_ms = 0;
     let mut first = true;
+    let mut log = OutageLog::new();
+    let place = match &cfg.transport {
+        Transport::Tcp { addr } => addr.to_string(),
+        Transport::Rtu { path, .. } => path.clone(),
+    };
     loop {
         if *shutdown.borrow() {
             break;
@@ -421,6 +427,9 @@ pub async fn run(cfg: ModbusConfig, tx: mpsc::Sender<SourceEvent>, mut shutdown:
                 }
                 first = false;
                 backoff_ms = 0;
+                if let Some(line) = log.opened(&place, host_now_ns()) {
+                    tracing::info!(source = %cfg.source, "{line}");
+                }
                 if !d.status("connected") {
                     break;
                 }
@@ -430,12 +439,19 @@ pub async fn run(cfg: ModbusConfig, tx: mpsc::Sender<SourceEvent>, mut shutdown:
                     End::Shutdown | End::Closed => break,
                     End::Lost(e) => {
                         let down = matches!(e, ModbusError::Io(_));
+                        if down {
+                            tracing::warn!(source = %cfg.source, "link lost: {place}: {e}");
+                            log.lost(host_now_ns());
+                        }
                         (e, down)
                     }
                 }
             }
             Err(e) => {
                 d.count(&e);
+                if let Some(line) = log.failed(&format!("{place}: {e}"), host_now_ns()) {
+                    tracing::warn!(source = %cfg.source, "{line}");
+                }
                 (e, true)
             }
         };

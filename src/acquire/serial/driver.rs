@@ -2,7 +2,11 @@
 //! to the sans-IO decoder of the configured format, and hand batches, gaps and status to
 //! the service through `acquire::offer`, never waiting on a full channel. A read error or
 //! end of file closes the port; it is reopened with backoff, and the sequence numbers of
-//! the frames that follow record the samples lost meanwhile as a `Gap`.
+//! the frames that follow record the samples lost meanwhile as a `Gap`. A port that cannot
+//! be opened is logged at warn level with its path and cause (`acquire::outage`: again only
+//! when the cause changes or every few minutes), and at info level when it opens again. A
+//! path is reopened only while it leads to the device it first opened, unless it is a
+//! `/dev/serial/by-id/` name (`identity` states the rule).
 
 use std::future::Future;
 use std::io;
@@ -13,7 +17,9 @@ use tokio::sync::{mpsc, watch};
 
 use super::ascii::{AsciiEvent, DEFAULT_ASCII_BATCH_S, LineDecoder};
 use super::frame::FrameDecoder;
+use super::identity::{DeviceGuard, DeviceId};
 use super::tracker::FrameTracker;
+use crate::acquire::outage::OutageLog;
 use crate::acquire::{BACKOFF_START_MS, Backpressure, ChannelSpec, Counters, SourceEvent, next_backoff_ms, offer};
 
 /// Interval between periodic status reports, ms.
@@ -37,7 +43,9 @@ pub enum SerialFormat {
 pub struct SerialConfig {
     /// The source id (config name) stamped on every batch, gap and status.
     pub source: String,
-    /// Device path, for example `/dev/ttyUSB0`.
+    /// Device path, for example `/dev/serial/by-id/usb-FTDI_...-if00-port0` or `/dev/ttyUSB0`;
+    /// `run` reopens it only while it is the device first opened (`identity`: a by-id path
+    /// follows its adapter).
     pub path: String,
     pub baud: u32,
     pub format: SerialFormat,
@@ -316,7 +324,8 @@ pub async fn run_on_stream<R: AsyncRead + Unpin>(
 /// Read the streams `open` hands out, reopening with backoff after every end of file or
 /// error, until shutdown or until the receiver goes away. Status "connected" on every
 /// open (with `reconnects` counted after the first), "reconnecting" on every loss or
-/// failed open, "stopped" at the end. Returns the final counters.
+/// failed open, "stopped" at the end. A failed open is logged as `OutageLog` says, and the
+/// open after an outage at info level. Returns the final counters.
 pub async fn run_with<R, F, Fut>(
     cfg: SerialConfig,
     clock: HostClock,
@@ -332,6 +341,7 @@ where
     let mut src = SerialSource::new(cfg, clock);
     let mut backoff_ms = 0;
     let mut connected_before = false;
+    let mut outage = OutageLog::new();
     loop {
         if *shutdown.borrow() {
             break;
@@ -352,6 +362,9 @@ where
             Err(e) => {
                 backoff_ms = next_backoff_ms(backoff_ms);
                 let detail = format!("{}: {e}", src.cfg.path);
+                if let Some(line) = outage.failed(&detail, clock()) {
+                    tracing::warn!(source = %src.cfg.source, "{line}");
+                }
                 if !src.status(&tx, "reconnecting", detail) {
                     break;
                 }
@@ -360,6 +373,9 @@ where
         };
         if connected_before {
             src.counters.reconnects += 1;
+        }
+        if let Some(line) = outage.opened(&src.cfg.path, clock()) {
+            tracing::info!(source = %src.cfg.source, "{line}");
         }
         connected_before = true;
         let detail = src.cfg.path.clone();
@@ -377,6 +393,7 @@ where
                     _ => format!("{}: end of stream", src.cfg.path),
                 };
                 tracing::warn!(source = %src.cfg.source, "link lost: {detail}");
+                outage.lost(clock());
                 if !open_rx || !src.status(&tx, "reconnecting", detail) {
                     return src.counters();
                 }
@@ -394,12 +411,24 @@ pub fn open_port(cfg: &SerialConfig) -> io::Result<tokio_serial::SerialStream> {
     tokio_serial::new(&cfg.path, cfg.baud).open_native_async().map_err(io::Error::from)
 }
 
-/// The serial transport: open the port named in `cfg`, decode, reconnect with backoff,
-/// stamp host time from the system clock. Runs until `shutdown` turns true or the
-/// receiver is dropped.
+/// `open_port`, while the path leads to the device `guard` admits (`identity`); the first
+/// device opened is remembered.
+pub fn open_same_port(cfg: &SerialConfig, guard: &mut DeviceGuard) -> io::Result<tokio_serial::SerialStream> {
+    let id = DeviceId::of(&cfg.path)?;
+    guard.admit(id).map_err(io::Error::other)?;
+    let port = open_port(cfg)?;
+    guard.opened(id);
+    Ok(port)
+}
+
+/// The serial transport: open the port named in `cfg` (the same device on every reopen,
+/// `open_same_port`), decode, reconnect with backoff, stamp host time from the system
+/// clock. Runs until `shutdown` turns true or the receiver is dropped.
 pub async fn run(cfg: SerialConfig, tx: mpsc::Sender<SourceEvent>, shutdown: watch::Receiver<bool>) -> Counters {
     let port_cfg = cfg.clone();
-    run_with(cfg, system_clock_ns, move || std::future::ready(open_port(&port_cfg)), tx, shutdown).await
+    let mut guard = DeviceGuard::new(cfg.path.clone());
+    run_with(cfg, system_clock_ns, move || std::future::ready(open_same_port(&port_cfg, &mut guard)), tx, shutdown)
+        .await
 }
 
 #[cfg(test)]

@@ -7,10 +7,12 @@
 //! - `ascii`: the `t_s,v0,v1,...` line decoder.
 //! - `stamps`: the time-stamp check of the ASCII lines (next sample, hole, restart, garbage).
 //! - `driver`: the IO (tokio-serial, or any `AsyncRead` for tests and ptys).
+//! - `identity`: which device a path opened, so that a reopen takes only the same one.
 
 pub mod ascii;
 pub mod driver;
 pub mod frame;
+pub mod identity;
 pub mod stamps;
 pub mod tracker;
 
