@@ -1,5 +1,5 @@
 //! Serial transport throughput (issue #4 target: 3 channels at 100 kHz over the binary
-//! framing of CONTRACTS.md §7 use ≤ 10 % of one core, i.e. 300 k samples/s need
+//! framing of docs/interfaces.md §7 use ≤ 10 % of one core, i.e. 300 k samples/s need
 //! ≥ 3 M samples/s of decode). One iteration is 1 s of a 100 kHz 3-channel DAQ: 1000
 //! frames of 100 samples (1.2 kB each), handed to the decoder in 4 KiB reads as a serial
 //! port delivers them, COBS-decoded, CRC-checked and turned into `SampleBatch`es in

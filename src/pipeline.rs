@@ -80,7 +80,7 @@ pub struct Pipeline {
     /// The billet of the last blow judged: the alert memory starts over with each billet.
     billet: u32,
     billets: BilletBook,
-    /// The part's recipe the blows are judged against (CONTRACTS §9), if one is active.
+    /// The part's recipe the blows are judged against (docs/interfaces.md §9), if one is active.
     recipe: Option<Recipe>,
     /// Each complete blow's signature, kept for `forgemon teach` (`keep_signatures`).
     signatures: Option<Vec<(u32, u32, Signature)>>,
@@ -498,7 +498,7 @@ mod tests {
     /// fitted model's peak is the measured one's within 5 % (the simulated hammer is the
     /// model itself, `EffectSet::NONE`; what separates them is the DAQ's filter and noise,
     /// which the fit's analysis low-pass does not see: a bound, not a tuned figure), with the
-    /// phases of CONTRACTS.md §6 in order.
+    /// phases of docs/interfaces.md §6 in order.
     #[test]
     fn the_last_curve_is_the_last_blows_measured_and_fitted_load() {
         let mut feeder =

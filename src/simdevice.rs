@@ -228,7 +228,7 @@ pub struct DeviceStats {
     pub garbage_bursts: u64,
 }
 
-/// Run `sim` to the end through the binary framing of CONTRACTS.md §7 into `writer`.
+/// Run `sim` to the end through the binary framing of docs/interfaces.md §7 into `writer`.
 /// Stops early when `stop` turns true or the reader goes away.
 /// `on_billet(k, device_ns)` is called when the stream reaches billet k (k = 2, 3, ...),
 /// with the device time of the frame that starts it, as a PLC would signal a new billet.
@@ -341,7 +341,7 @@ async fn write_unless_stopped<W: tokio::io::AsyncWrite + Unpin>(
     }
 }
 
-/// Run `sim` to the end, in real time, framing each line's channels (CONTRACTS.md §7) into
+/// Run `sim` to the end, in real time, framing each line's channels (docs/interfaces.md §7) into
 /// its own writer, frames of `frame_samples` samples of the simulated machine.
 /// `on_billet(k, device_ns)` gets the first line's device time where billet k starts.
 pub async fn drive_serial_split<W: tokio::io::AsyncWrite + Unpin>(

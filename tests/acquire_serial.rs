@@ -1,7 +1,7 @@
 //! The serial transport at the IO boundary (issue #4): a simulated hammer's blows, from the
 //! project's own physics and the example configs, quantised to counts and streamed over a
 //! real pty pair (`tokio_serial::SerialStream::pair()`) in the binary framing of
-//! CONTRACTS.md §7 and in the ASCII variant. The driver's events go through the live
+//! docs/interfaces.md §7 and in the ASCII variant. The driver's events go through the live
 //! pipeline, which must find every blow with the simulated efficiency; injected garbage,
 //! corrupt CRCs, dropped frames and a lost link are counted and recorded as gaps.
 
@@ -183,7 +183,7 @@ async fn binary_frames_over_a_pty_with_garbage_corrupt_crcs_and_a_dropped_frame(
     let (truth, rows) = session(41);
     let frames = frames(&rows);
     let dropped = idle_frame(5);
-    // Noise glued to the front of these frames (no delimiter between): CONTRACTS.md §7
+    // Noise glued to the front of these frames (no delimiter between): docs/interfaces.md §7
     // drops the failed segment, so each frame is lost with its noise, a gap like a
     // dropped frame. In the idle stretch, so that no blow is cut.
     let glued = [idle_frame(4), idle_frame(6)];

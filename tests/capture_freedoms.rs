@@ -1,4 +1,4 @@
-//! Every freedom CONTRACTS §1 grants a capture directory, tested (issue 36). One billet's
+//! Every freedom docs/interfaces.md §1 grants a capture directory, tested (issue 36). One billet's
 //! blows are rendered once per rate by the independent renderer (`independent::captures`:
 //! an elastic-plastic billet, velocity Verlet at a fine fixed step, a Butterworth DAQ chain,
 //! machines off the papers'), then written in each freedom: column order and extra columns,
@@ -386,7 +386,7 @@ fn an_encoder_counting_up_set_to_count_down_is_refused_with_its_file_and_the_fix
     }
 }
 
-/// A capture that ends inside a blow (CONTRACTS §5: "cut by the end of the stream"): before
+/// A capture that ends inside a blow (docs/interfaces.md §5: "cut by the end of the stream"): before
 /// the load is back under the segmenter's end level after the forming, the blow is
 /// `incomplete` with no energies and no alert, wherever the cut falls (in the forming, at a
 /// dip of the lower tool's ring, in the spring-back); once the load is back, within the

@@ -257,7 +257,7 @@ fn two_effects_are_both_named() {
 // The press (copper, 20 kHz, constant-speed approach).
 
 /// The library's clearance on a press: its lower die (800 kg) rests across a 0.3 mm gap from
-/// the sensor path and has not been caught up (CONTRACTS.md §6, "the lower mass starts at
+/// the sensor path and has not been caught up (docs/interfaces.md §6, "the lower mass starts at
 /// rest"). Struck by the billet, the die crosses the gap and bounces on the sensor path
 /// while the billet forms: a rectified ring the base press, with no mass there, lacks.
 #[test]

@@ -21,7 +21,7 @@ const HAMMER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/hammer-lg1000.
 const STEEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/steel-16NiCrMo13.process.toml");
 const INSTALL: &str = "python3 -m pip install pandas pyarrow";
 
-/// CONTRACTS.md §5's fields, then the billet, the file and the time, then the additions.
+/// docs/interfaces.md §5's fields, then the billet, the file and the time, then the additions.
 const COLUMNS: [&str; 26] = [
     "file",
     "wall_time",

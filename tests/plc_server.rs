@@ -1,4 +1,4 @@
-//! The PLC result image (CONTRACTS.md §8, issue 19 §2) at the process boundary: a real
+//! The PLC result image (docs/interfaces.md §8, issue 19 §2) at the process boundary: a real
 //! `forgemon demo --plc ADDR` run in real time, read by an independent Modbus client
 //! (`tests/python/plc_client.py`, pymodbus) as a PLC would. Every image it read must show
 //! the blow results the demo recorded (read back from its MCAP recording, another path than

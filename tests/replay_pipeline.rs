@@ -189,7 +189,7 @@ fn a_continuous_stream_with_several_blows_is_cut_into_each_blow() {
     ]);
     assert_eq!(found.len(), 3);
     for (v, t) in found.iter().zip(&truth) {
-        // Without a process sheet plastic_J holds plastic + friction (CONTRACTS.md §5).
+        // Without a process sheet plastic_J holds plastic + friction (docs/interfaces.md §5).
         assert!(v["friction_J"].is_null() && v["h_end_m"].is_null());
         let deform = t.truth.energy.plastic_j + t.truth.energy.friction_j;
         assert!((f(v, "plastic_J") / deform - 1.0).abs() < 0.03, "{v}");

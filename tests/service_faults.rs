@@ -68,7 +68,7 @@ fn inside_blow_3(rows: &[CaptureRow]) -> usize {
     panic!("no third blow");
 }
 
-/// CONTRACTS.md §7, written out here: version, channel count, sample count, sequence,
+/// docs/interfaces.md §7, written out here: version, channel count, sample count, sequence,
 /// device time, period, interleaved i32 counts, CRC-32C, COBS, 0x00.
 fn frame(seq: u32, t_ns: u64, rows: &[CaptureRow]) -> Vec<u8> {
     let mut p = vec![1u8, 3];
@@ -131,7 +131,7 @@ fn binary_stream(rows: &[CaptureRow], fault: Fault, hit: usize) -> Vec<Vec<u8>> 
     out
 }
 
-/// `t_s,load_N,disp_m,acc_mps2` lines (CONTRACTS.md §7, ASCII variant), with faults.
+/// `t_s,load_N,disp_m,acc_mps2` lines (docs/interfaces.md §7, ASCII variant), with faults.
 fn ascii_stream(rows: &[CaptureRow], fault: Fault, hit: usize) -> Vec<Vec<u8>> {
     let mut out = Vec::new();
     let mut chunk = String::new();

@@ -1,5 +1,5 @@
 //! `forgemon simulate` at the process boundary: the built binary, real files, the JSON of
-//! CONTRACTS.md §4, and clear errors with a non-zero exit on bad input.
+//! docs/interfaces.md §4, and clear errors with a non-zero exit on bad input.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -67,12 +67,12 @@ fn contract_json_has_every_field_and_the_ledger_closes() {
         }
         let e = &b["energy"];
         let sum: f64 = ["plastic_J", "friction_J", "damped_J", "elastic_J"].iter().map(|k| f(e, k)).sum();
-        // CONTRACTS.md §4: the five terms add up to kinetic_in_J within 1 %.
+        // docs/interfaces.md §4: the five terms add up to kinetic_in_J within 1 %.
         assert!((sum / f(e, "kinetic_in_J") - 1.0).abs() < 0.01, "{e}");
         assert!((f(b, "efficiency") - f(e, "plastic_J") / f(e, "kinetic_in_J")).abs() < 1e-12);
         assert!((0.0..=1.0).contains(&f(b, "efficiency")));
     }
-    // CONTRACTS.md §4: the final height of blow i is the start height of blow i+1.
+    // docs/interfaces.md §4: the final height of blow i is the start height of blow i+1.
     assert_eq!(f(&blows[1], "h_start_m"), f(&blows[0], "h_end_m"));
     assert_eq!(f(&blows[0], "h_start_m"), 0.112);
     // Kinetic energy in is ½ (m1 + m2) v0² (DESIGN.md §2.4) with the Table 1 masses.

@@ -1,4 +1,4 @@
-//! The Sparkplug B uplink (CONTRACTS §10, issue 21 §1) against a real broker: our own
+//! The Sparkplug B uplink (docs/interfaces.md §10, issue 21 §1) against a real broker: our own
 //! Mosquitto on a free loopback port (persistence on, so that a historian's persistent
 //! session survives the broker's restart), and an independent subscriber
 //! (`tests/python/sparkplug_subscriber.py`: paho-mqtt, the payload decoded with the

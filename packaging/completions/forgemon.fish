@@ -50,11 +50,11 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -l mc-fricti
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -l mc-load-95 -d '95 % bound of the load measurement, N (paper Table 2)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -l trace -d 'Write the simulated time series to this CSV file' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -l trace-dt -d 'Sample period of the trace, s' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -l captures -d 'Also write the blows as a capture directory (blow_01.csv, ..., process.toml), the way a DAQ would have recorded them: approach, sensor offset and noise, 10 µm encoder. With --bare: bare strikes, blow_01.csv, ..., without a process sheet' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -l captures -d 'Also write the blows as a capture directory (blow_01.csv, ..., process.toml), the way a DAQ would have recorded them: approach, sensor offset and noise, 10 µm encoder. Where the sheet lists measured heights, the directory\'s sheet lists the simulated ones instead, after every blow, as a caliper reads them (0.01 mm). With --bare: bare strikes, blow_01.csv, ..., without a process sheet' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -l capture-seed -d 'Seed of the capture noise' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -l rtol -d 'Relative tolerance of the adaptive integrator' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -l rk4-dt -d 'Use the fixed-step RK4 reference at this step, s, instead of the adaptive integrator' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -l json -d 'Print one JSON object (CONTRACTS.md §4) instead of a table'
+complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -l json -d 'Print one JSON object (docs/interfaces.md §4) instead of a table'
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -l bare -d 'Bare strikes: tool on tool, no billet; prints peak load and contact time'
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l kind -d 'Machine kind: hammer | screw_press' -r
@@ -79,9 +79,9 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l machine -d 
 complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l process -d 'The process sheet; defaults to the capture directory\'s process.toml, or the one stored in the recording' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l service -d 'The service configuration whose alert rules (`[alerts]`) and billet detection (`[billets]`) to use; defaults to the one stored in the recording, else the defaults' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l out -d 'Record the replay (samples, blows, results, alerts, billets, configuration) to this MCAP file' -r -F
-complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l recipe -d 'Judge every blow against this recipe (CONTRACTS §9, `forgemon teach`): the §5 `judgement`, and `nok` alerts, as the service would' -r -F
-complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l encoder-direction -d 'Which way the ram encoder counts: `down` (towards the lower die, CONTRACTS §1), `up` (away from it: read negated), or `auto` (each blow\'s approach tells); overrides the service file\'s `[encoder] direction`' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l json -d 'One JSON object per blow (CONTRACTS.md §5) instead of a table'
+complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l recipe -d 'Judge every blow against this recipe (docs/interfaces.md §9, `forgemon teach`): the §5 `judgement`, and `nok` alerts, as the service would' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l encoder-direction -d 'Which way the ram encoder counts: `down` (towards the lower die, docs/interfaces.md §1), `up` (away from it: read negated), or `auto` (each blow\'s approach tells); overrides the service file\'s `[encoder] direction`' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l json -d 'One JSON object per blow (docs/interfaces.md §5) instead of a table'
 complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand import" -s o -l out -d 'The recording to write' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand import" -l machine -d 'A machine model to store in the recording too' -r -F
@@ -98,9 +98,9 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l billets -d 'H
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l interval -d 'Seconds between blows' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l dir -d 'Where to record' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l http -d 'Serve the dashboard and `/status` here (loopback only: the demo has no token); default: a free loopback port' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l plc -d 'Serve the PLC result image (Modbus TCP, CONTRACTS §8) here' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l plc -d 'Serve the PLC result image (Modbus TCP, docs/interfaces.md §8) here' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l foxglove -d 'Serve the Foxglove WebSocket protocol here' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l mqtt -d 'Publish Sparkplug B to this MQTT broker (`mqtt://host:port`, CONTRACTS §10), as group `forge`, node `forgemon`, device `machine`; queued under `--dir` while it is down' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l mqtt -d 'Publish Sparkplug B to this MQTT broker (`mqtt://host:port`, docs/interfaces.md §10), as group `forge`, node `forgemon`, device `machine`; queued under `--dir` while it is down' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l opcua -d 'Serve the OPC UA Metal Forming server here (`opc.tcp://127.0.0.1:4840`; loopback only: the demo\'s sessions are anonymous)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l recipe -d 'Judge every blow against this recipe (`forgemon teach`), OK/NOK' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l target -d 'Run the live blow advisor towards this billet height, m: after each blow it plans the blows left (`[advisor]` in a service file)' -r
@@ -116,7 +116,7 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l he
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l billet-idle -d 'Seconds more the machine stands idle before each billet after the first' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l rate -d 'Sample rate, Hz (up to 100 kHz)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l effect -d 'Unmodelled effects to put into the simulated machine: NAME:param=value (repeatable)' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l wire -d 'The byte format on the pty (`--transport pty`)' -r -f -a "binary\t'COBS frames with CRC-32C (CONTRACTS.md §7)'"
+complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l wire -d 'The byte format on the pty (`--transport pty`)' -r -f -a "binary\t'COBS frames with CRC-32C (docs/interfaces.md §7)'"
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l transport -d 'Where the samples go: a pty, a Modbus TCP server or a candump log file' -r -f -a "pty\t'A pty pair, in real time; the path to open is printed'
 modbus-tcp\t'A Modbus TCP server with the block-mode sample ring at register 0, in real time'
 candump\t'A `candump -L` log file, one CAN frame per sample (fixtures/can/hammer.dbc), or with `--can-fd` one CAN FD frame per 8 samples (config/hammer-canfd.dbc)'"
@@ -134,7 +134,7 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l target -d '
 complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l settings -d 'The machine\'s impact speeds, m/s, comma separated (a hammer\'s drop heights); or give `--v-max` instead' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l v-max -d 'Any impact speed up to this, m/s (a screw press\'s energy setting); or give `--settings` instead. Either supplies the speeds the plan may choose from' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l blows-done -d 'Blows the billet already took (the machine\'s `thermal` effect counts them)' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l json -d 'Print one JSON object (CONTRACTS §9) instead of a table'
+complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -l json -d 'Print one JSON object (docs/interfaces.md §9) instead of a table'
 complete -c forgemon -n "__fish_forgemon_using_subcommand advise" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand teach" -l machine -d 'The machine model (machine.toml)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand teach" -l process -d 'The process sheet; defaults to each reference\'s own (capture directory or recording)' -r -F

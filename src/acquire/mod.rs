@@ -27,7 +27,7 @@ pub enum SourceEvent {
 }
 
 /// How one channel's raw value becomes a physical one: `offset + gain * raw`
-/// (CONTRACTS.md §7), and which role it plays.
+/// (docs/interfaces.md §7), and which role it plays.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ChannelSpec {
     pub role: Role,

@@ -1,4 +1,4 @@
-//! The blow advisor (issue 20, CONTRACTS §9): from the billet's present height, plan the
+//! The blow advisor (issue 20, docs/interfaces.md §9): from the billet's present height, plan the
 //! next blows with the identified machine model (and its effects) so that the billet reaches
 //! a target height within `TARGET_TOLERANCE_M` in the fewest blows, without a hard blow
 //! where that is possible. The hammer paper names it as a use of the model: knowing the
@@ -92,7 +92,7 @@ pub struct PlannedBlow {
     pub class: &'static str,
 }
 
-/// The advice (CONTRACTS §9 `--json`, plus `hard_blows` and `why`).
+/// The advice (docs/interfaces.md §9 `--json`, plus `hard_blows` and `why`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Plan {
     pub h_now_m: f64,
@@ -447,7 +447,7 @@ pub struct Advice {
     pub billet: u32,
     /// Its blows so far; the plan's first blow is the next one.
     pub after_blow: u32,
-    /// The plan (CONTRACTS §9, as `forgemon advise --json` prints it); `None` when it is not
+    /// The plan (docs/interfaces.md §9, as `forgemon advise --json` prints it); `None` when it is not
     /// known, with the reason in `why_not`.
     pub plan: Option<Plan>,
     pub why_not: Option<String>,

@@ -1,4 +1,4 @@
-//! `forgemon advise` (CONTRACTS §9, issue 20): the blows still needed from the billet's
+//! `forgemon advise` (docs/interfaces.md §9, issue 20): the blows still needed from the billet's
 //! present height to a target, and how hard each should be, planned with the identified
 //! machine model (`advise`).
 
@@ -40,7 +40,7 @@ pub struct AdviseArgs {
     /// Blows the billet already took (the machine's `thermal` effect counts them).
     #[arg(long, default_value_t = 0)]
     pub blows_done: usize,
-    /// Print one JSON object (CONTRACTS §9) instead of a table.
+    /// Print one JSON object (docs/interfaces.md §9) instead of a table.
     #[arg(long)]
     pub json: bool,
 }

@@ -1,7 +1,7 @@
 //! `forgemon demo`: the whole service against a simulated hammer, on a fresh machine with no
 //! hardware. A simulated MONTBARD LG1000 (hammer paper, Table 1) forges steel billets and
 //! streams its DAQ samples over an in-process pty pair in the serial framing of
-//! CONTRACTS.md §7; the real service reads the other end, prints one line per blow,
+//! docs/interfaces.md §7; the real service reads the other end, prints one line per blow,
 //! records to `./forgemon-demo/`, and stops after the billets (or on Ctrl-C). On a terminal
 //! its faces (the dashboard, ...) stay up after the last billet until Ctrl-C, so the URL it
 //! printed can still be opened; piped or `--fast`, it ends after the last billet. A reader
@@ -59,13 +59,13 @@ pub struct DemoArgs {
     /// default: a free loopback port.
     #[arg(long, value_name = "ADDR")]
     pub http: Option<std::net::SocketAddr>,
-    /// Serve the PLC result image (Modbus TCP, CONTRACTS §8) here.
+    /// Serve the PLC result image (Modbus TCP, docs/interfaces.md §8) here.
     #[arg(long, value_name = "ADDR")]
     pub plc: Option<std::net::SocketAddr>,
     /// Serve the Foxglove WebSocket protocol here.
     #[arg(long, value_name = "ADDR")]
     pub foxglove: Option<std::net::SocketAddr>,
-    /// Publish Sparkplug B to this MQTT broker (`mqtt://host:port`, CONTRACTS §10), as
+    /// Publish Sparkplug B to this MQTT broker (`mqtt://host:port`, docs/interfaces.md §10), as
     /// group `forge`, node `forgemon`, device `machine`; queued under `--dir` while it is down.
     #[arg(long, value_name = "URL")]
     pub mqtt: Option<String>,

@@ -1,4 +1,4 @@
-//! `forgemon diagnose` (CONTRACTS.md §6): where the model and the measured blows part,
+//! `forgemon diagnose` (docs/interfaces.md §6): where the model and the measured blows part,
 //! which library effect closes the gap on held-out blows, and a verdict; `report.json`
 //! and `report.html` in the output directory.
 

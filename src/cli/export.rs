@@ -1,6 +1,6 @@
 //! `forgemon export RECORDING_OR_DIR... (--csv OUT.csv | --parquet OUT.parquet)`: the blow
 //! results of recordings as one table for the quality department (issue 19 §4), one row per
-//! blow across files and billets: every CONTRACTS.md §5 field, the billet and the blow on
+//! blow across files and billets: every docs/interfaces.md §5 field, the billet and the blow on
 //! it, the file and the wall-clock time the result was recorded at (the MCAP log time).
 //!
 //! The rows are the results the recordings hold, read with the project's reader
@@ -40,7 +40,7 @@ pub struct ExportArgs {
     pub parquet: Option<PathBuf>,
 }
 
-/// One blow as a row. The field names are the columns, CONTRACTS.md §5's names and units
+/// One blow as a row. The field names are the columns, docs/interfaces.md §5's names and units
 /// first; `alert` is the alert's kind, `alert_reason` its words.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ExportRow {

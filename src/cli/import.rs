@@ -1,4 +1,4 @@
-//! `forgemon import`: capture CSV files or capture directories (CONTRACTS.md §1–2) into an
+//! `forgemon import`: capture CSV files or capture directories (docs/interfaces.md §1–2) into an
 //! MCAP recording that `replay` and `inspect` read, with the process sheet (and, if given,
 //! the machine model) stored in it.
 

@@ -108,7 +108,7 @@ pub(crate) fn read_text(path: &Path) -> anyhow::Result<String> {
     std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))
 }
 
-/// Parse a process sheet (CONTRACTS.md §2) and print its warnings (a measured height that
+/// Parse a process sheet (docs/interfaces.md §2) and print its warnings (a measured height that
 /// rises, kept as measured) to stderr as `forgemon: warning: ...`.
 pub(crate) fn parse_process_warn(
     origin: &str,
@@ -123,12 +123,12 @@ pub(crate) fn parse_process_warn(
 
 /// Source name of samples read from capture files, before the file's name: each file is a
 /// capture of its own (`capture/blow_02.csv`), with its own clock origin and encoder offset
-/// (CONTRACTS §1), so a new file ends the stream (`pipeline::Feeder`: another source) in a
+/// (docs/interfaces.md §1), so a new file ends the stream (`pipeline::Feeder`: another source) in a
 /// replay of the directory and of its import alike. The path before the name is left out,
 /// so a directory replays the same wherever it lies.
 pub(crate) const CAPTURE_SOURCE: &str = "capture";
 
-/// The blow files of a capture directory (CONTRACTS.md §1), in blow order.
+/// The blow files of a capture directory (docs/interfaces.md §1), in blow order.
 pub(crate) fn capture_dir_files(dir: &Path) -> anyhow::Result<Vec<std::path::PathBuf>> {
     let names = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot list", dir.display()))?

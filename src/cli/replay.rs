@@ -1,4 +1,4 @@
-//! `forgemon replay` (CONTRACTS.md §5): a recording (or a directory of them: a rotated run,
+//! `forgemon replay` (docs/interfaces.md §5): a recording (or a directory of them: a rotated run,
 //! its unreadable files named and skipped), a capture CSV or a capture directory through
 //! exactly the live pipeline; one JSON line per blow (or a table with a line per
 //! billet); `--out` records the replay. A recording brings its own machine model, process
@@ -45,14 +45,14 @@ pub struct ReplayArgs {
     /// MCAP file.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// One JSON object per blow (CONTRACTS.md §5) instead of a table.
+    /// One JSON object per blow (docs/interfaces.md §5) instead of a table.
     #[arg(long)]
     pub json: bool,
-    /// Judge every blow against this recipe (CONTRACTS §9, `forgemon teach`): the §5
+    /// Judge every blow against this recipe (docs/interfaces.md §9, `forgemon teach`): the §5
     /// `judgement`, and `nok` alerts, as the service would.
     #[arg(long, value_name = "PART.recipe.toml")]
     pub recipe: Option<PathBuf>,
-    /// Which way the ram encoder counts: `down` (towards the lower die, CONTRACTS §1), `up`
+    /// Which way the ram encoder counts: `down` (towards the lower die, docs/interfaces.md §1), `up`
     /// (away from it: read negated), or `auto` (each blow's approach tells); overrides the
     /// service file's `[encoder] direction`.
     #[arg(long, value_name = "auto|down|up", value_parser = parse_direction)]

@@ -1,4 +1,4 @@
-//! `forgemon simulate` (CONTRACTS.md §4): consecutive blows on a billet, bare strikes,
+//! `forgemon simulate` (docs/interfaces.md §4): consecutive blows on a billet, bare strikes,
 //! effects, the Monte Carlo precision study and time-series traces.
 
 use std::io::Write;
@@ -39,7 +39,7 @@ pub struct SimulateArgs {
     /// Impact speed of each blow, m/s, comma separated: one blow per value.
     #[arg(long, value_delimiter = ',', required = true, num_args = 1.., allow_negative_numbers = true)]
     pub v0: Vec<f64>,
-    /// Print one JSON object (CONTRACTS.md §4) instead of a table.
+    /// Print one JSON object (docs/interfaces.md §4) instead of a table.
     #[arg(long)]
     pub json: bool,
     /// Bare strikes: tool on tool, no billet; prints peak load and contact time.

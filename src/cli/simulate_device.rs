@@ -2,7 +2,7 @@
 //! blow, rebound, pause, next blow; a new billet when one is finished) that drives a real
 //! transport, so the service (or any other program) can be pointed at it like a DAQ.
 //! Serial: it opens a pty pair, prints the path of the end to open, and streams the binary
-//! framing of CONTRACTS.md §7 (or the ASCII lines) in real time, with fault switches.
+//! framing of docs/interfaces.md §7 (or the ASCII lines) in real time, with fault switches.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -21,7 +21,7 @@ use crate::synth::CaptureSpec;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Wire {
-    /// COBS frames with CRC-32C (CONTRACTS.md §7).
+    /// COBS frames with CRC-32C (docs/interfaces.md §7).
     Binary,
 }
 

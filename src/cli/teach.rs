@@ -1,4 +1,4 @@
-//! `forgemon teach` (CONTRACTS §9, issue 20): learn a part's recipe from good billets, given
+//! `forgemon teach` (docs/interfaces.md §9, issue 20): learn a part's recipe from good billets, given
 //! as capture directories or recordings. Each runs through the very pipeline `replay` runs
 //! (`replay::replay_into`), which keeps every complete blow's signature; the blows are
 //! grouped by billet and each blow index learnt (`recipe::teach`). Its windows are cut to

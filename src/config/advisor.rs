@@ -1,4 +1,4 @@
-//! `[advisor]` in `service.toml` (issue 20, CONTRACTS §9): the live blow advisor's target
+//! `[advisor]` in `service.toml` (issue 20, docs/interfaces.md §9): the live blow advisor's target
 //! height and the machine's impact speeds, discrete settings (a hammer's drop heights) or a
 //! continuous range up to `v_max` (a screw press's energy setting). Checked once here, so the
 //! service never plans with a speed or a height no machine has.

@@ -75,7 +75,7 @@ pub const EFFICIENCY: Limits = Limits { min: 0.0, max: 1.0, unit: "" };
 pub const ENERGY_J: Limits =
     Limits { min: 0.0, max: 0.5 * MASS_KG.max * IMPACT_SPEED_MPS.max * IMPACT_SPEED_MPS.max, unit: "J" };
 
-/// A peak load, N (compression positive, CONTRACTS conventions): from none to 1e11 N, three
+/// A peak load, N (compression positive, docs/interfaces.md conventions): from none to 1e11 N, three
 /// times the largest flow stress of `FLOW_STRESS_PA` over the largest billet's cross-section
 /// of `BILLET_DIMENSION_M` (π · (1 m)² · 1e10 Pa = 3.1e10 N); the largest forging presses
 /// built make under 1e9 N.

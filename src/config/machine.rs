@@ -1,4 +1,4 @@
-//! `machine.toml` (CONTRACTS.md §3): the identified machine model, plus optional effect
+//! `machine.toml` (docs/interfaces.md §3): the identified machine model, plus optional effect
 //! parameters under `[effects.NAME]`.
 //!
 //! Which keys are read: the kind's parameters, `k_tool_contact_N_per_m`, `[effects.NAME]`,
@@ -308,7 +308,7 @@ mod tests {
         // A press parameter in a hammer file is a mistake, not an extra.
         let e = err(&format!("{HAMMER}m_ram_kg = 1000\n"));
         assert_eq!(e, "m.toml:6:1: key 'm_ram_kg' is a screw_press parameter, but kind = \"hammer\"");
-        // Provenance and uncertainties are allowed (CONTRACTS.md §3).
+        // Provenance and uncertainties are allowed (docs/interfaces.md §3).
         let extra = "operator = \"jd\"\nm1_kg_std_error = 12.5\nk_N_per_m_se = 1e7\n[provenance]\nfrom = \"bench\"\n";
         assert_eq!(
             parse_machine("m.toml", &format!("{HAMMER}{extra}")).unwrap().machine,

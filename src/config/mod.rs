@@ -1,4 +1,4 @@
-//! Reading the TOML files of CONTRACTS.md §2–§3 and the service configuration into typed
+//! Reading the TOML files of docs/interfaces.md §2–§3 and the service configuration into typed
 //! values.
 //!
 //! Each file is parsed with spans (`document.rs`), deserialized by serde into raw structs

@@ -1,4 +1,4 @@
-//! `process.toml` (CONTRACTS.md §2): the billet, its material and interface, and the
+//! `process.toml` (docs/interfaces.md §2): the billet, its material and interface, and the
 //! measured heights after each blow. Every table denies unknown keys.
 //!
 //! Measured heights are hand-measured and noisy: a height that rises from one blow to the

@@ -1,4 +1,4 @@
-//! The recipe file (CONTRACTS §9, `PART.recipe.toml`): read and validated like every other
+//! The recipe file (docs/interfaces.md §9, `PART.recipe.toml`): read and validated like every other
 //! file (errors name the file, line and key), and written by `forgemon teach` in the same
 //! form, readable and editable by hand.
 
@@ -51,7 +51,7 @@ struct RawBlow {
 }
 
 /// The header `write_recipe` puts above the tables.
-const HEADER: &str = "# forgemon recipe (CONTRACTS §9), taught by `forgemon teach`. Per blow: windows [min, max]\n\
+const HEADER: &str = "# forgemon recipe (docs/interfaces.md §9), taught by `forgemon teach`. Per blow: windows [min, max]\n\
 # on efficiency, plastic energy, peak load and travel, and the load's envelope against the\n\
 # compression (the ram's travel since first contact). Each is the good billets' mean\n\
 # ± max(k·sd, tolerance); edit by hand if you like, the service checks the file on load.\n";

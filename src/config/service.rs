@@ -37,7 +37,7 @@ pub const DEFAULT_MIN_FREE_BYTES: u64 = 2 << 30;
 /// Default serial speed.
 pub const DEFAULT_BAUD: u32 = 921_600;
 
-/// Serial line format (CONTRACTS.md §7).
+/// Serial line format (docs/interfaces.md §7).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SerialFormat {
     Binary,
@@ -98,7 +98,7 @@ impl Default for PlcLimits {
 pub struct ServiceConfig {
     pub machine_path: PathBuf,
     pub process_path: Option<PathBuf>,
-    /// `recipe`: the part's recipe file (CONTRACTS §9) every blow is judged against.
+    /// `recipe`: the part's recipe file (docs/interfaces.md §9) every blow is judged against.
     pub recipe_path: Option<PathBuf>,
     pub recording_dir: PathBuf,
     pub rotate_bytes: u64,
@@ -115,7 +115,7 @@ pub struct ServiceConfig {
     pub http_token_file: Option<PathBuf>,
     /// `[http] max_connections`, `header_timeout_s`, `idle_timeout_s` (`server_limits.rs`).
     pub http_limits: HttpLimits,
-    /// `[plc_server] listen`: serve the PLC result image (CONTRACTS §8) here.
+    /// `[plc_server] listen`: serve the PLC result image (docs/interfaces.md §8) here.
     pub plc_listen: Option<SocketAddr>,
     /// `[plc_server] idle_timeout_s`, `max_connections`.
     pub plc_limits: PlcLimits,
@@ -142,7 +142,7 @@ pub struct ServiceConfig {
     pub sources: Vec<SourceSpec>,
     /// `[advisor]`: replan the billet's next blows after each one (issue 20).
     pub advisor: Option<super::advisor::AdvisorConfig>,
-    /// `[uplink.mqtt]`: publish Sparkplug B to this broker (CONTRACTS §10, `uplink.rs`).
+    /// `[uplink.mqtt]`: publish Sparkplug B to this broker (docs/interfaces.md §10, `uplink.rs`).
     pub uplink_mqtt: Option<super::uplink::MqttUplink>,
 }
 
@@ -483,7 +483,7 @@ impl ServiceConfig {
 }
 
 /// `[encoder] direction`: `"auto"` (the default: each blow's approach tells), `"down"` or
-/// `"up"` (CONTRACTS §1: an encoder that counts the other way is a configuration matter).
+/// `"up"` (docs/interfaces.md §1: an encoder that counts the other way is a configuration matter).
 fn parse_encoder(doc: &Document<'_>, encoder: Option<&RawEncoder>) -> Result<EncoderDirection, ConfigError> {
     if encoder.and_then(|e| e.direction.as_ref()).is_none() {
         return Ok(EncoderDirection::Auto);

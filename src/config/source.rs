@@ -178,7 +178,7 @@ fn serial(doc: &Document<'_>, prefix: &str, name: String, raw: RawSerial) -> Res
         Some(RawFormat::Ascii) => SerialFormat::Ascii,
     };
     let channels = channels(doc, &key("channels"), &raw.channels)?;
-    // CONTRACTS.md §7: 1..=16 channels per frame.
+    // docs/interfaces.md §7: 1..=16 channels per frame.
     if !(1..=16).contains(&channels.len()) {
         return Err(doc.invalid(&key("channels"), format!("has {} entries; a frame carries 1 to 16", channels.len())));
     }

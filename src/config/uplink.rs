@@ -1,4 +1,4 @@
-//! The service file's `[uplink.mqtt]` table (CONTRACTS.md §10): the MQTT broker the service
+//! The service file's `[uplink.mqtt]` table (docs/interfaces.md §10): the MQTT broker the service
 //! publishes Sparkplug B to, the node's Sparkplug identity, and the limits of the on-disk
 //! store-and-forward queue kept while the broker is unreachable (`daemon/sparkplug`).
 //! Raw serde struct that denies unknown keys, then validated once into [`MqttUplink`]; every

@@ -1,4 +1,4 @@
-//! The live blow advisor (issue 20, CONTRACTS §9): after each blow the service replans the
+//! The live blow advisor (issue 20, docs/interfaces.md §9): after each blow the service replans the
 //! billet's next blows from its measured height with the identified model (`advise`), and
 //! serves the plan in `/status` (`advice`), on the dashboard and in the PLC image
 //! (registers 17–19). A new billet is planned from its process sheet's height.

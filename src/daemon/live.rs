@@ -19,7 +19,7 @@ pub const LIVE_CHANNEL_EVENTS: usize = 256;
 /// One thing a front end shows.
 #[derive(Debug, Clone)]
 pub enum LiveEvent {
-    /// A blow's result (CONTRACTS §5), with its alert if it raised one.
+    /// A blow's result (docs/interfaces.md §5), with its alert if it raised one.
     Blow(Arc<BlowEstimate>),
     /// A billet's summary (finished, or the run's last).
     Billet(Arc<BilletSummary>),

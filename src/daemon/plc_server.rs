@@ -1,4 +1,4 @@
-//! The PLC result image (CONTRACTS.md §8): the latest results as Modbus TCP holding
+//! The PLC result image (docs/interfaces.md §8): the latest results as Modbus TCP holding
 //! registers, served by tokio-modbus's server on `[plc_server] listen`, unit id 1, so that
 //! the press's or hammer's PLC reads them every cycle; coil 0 acknowledges the latched
 //! alert, coil 1 says a new billet is in the dies.
@@ -42,7 +42,7 @@ use crate::config::service::PlcLimits;
 use crate::estimate::result::AlertKind;
 use crate::estimate::{BlowClass, BlowEstimate};
 
-/// The unit id the image answers (CONTRACTS.md §8).
+/// The unit id the image answers (docs/interfaces.md §8).
 pub const PLC_UNIT_ID: u8 = 1;
 /// Holding registers 0–19.
 pub const IMAGE_WORDS: usize = 20;
@@ -51,7 +51,7 @@ pub const COILS: u16 = 2;
 /// How often the heartbeat (register 0) counts up.
 pub const HEARTBEAT_PERIOD: Duration = Duration::from_secs(1);
 
-/// Register addresses of CONTRACTS.md §8 (a u32 takes its address and the next, high word
+/// Register addresses of docs/interfaces.md §8 (a u32 takes its address and the next, high word
 /// first).
 pub mod reg {
     pub const HEARTBEAT: usize = 0;
@@ -70,7 +70,7 @@ pub mod reg {
     pub const ADVISED_KINETIC_J: usize = 18;
 }
 
-/// Bits of register 1 (CONTRACTS.md §8).
+/// Bits of register 1 (docs/interfaces.md §8).
 pub mod bit {
     pub const RUNNING: u16 = 1 << 0;
     pub const SOURCES_HEALTHY: u16 = 1 << 1;
@@ -79,7 +79,7 @@ pub mod bit {
     pub const LAST_INCOMPLETE: u16 = 1 << 4;
     pub const MODEL_HEALTH: u16 = 1 << 5;
     pub const SENSOR: u16 = 1 << 6;
-    /// The last blow was implausible (issue 36; an addition to CONTRACTS §8's bits 0–6).
+    /// The last blow was implausible (issue 36; an addition to docs/interfaces.md §8's bits 0–6).
     pub const LAST_IMPLAUSIBLE: u16 = 1 << 7;
 }
 
@@ -131,7 +131,7 @@ fn put_u32(words: &mut [u16; IMAGE_WORDS], at: usize, v: u32) {
 }
 
 /// Register 6: 0 none yet, 1 soft, 2 intermediate, 3 hard, 4 incomplete, 5 implausible (an
-/// addition to CONTRACTS §8's codes, issue 36).
+/// addition to docs/interfaces.md §8's codes, issue 36).
 pub fn class_code(class: Option<BlowClass>) -> u16 {
     match class {
         None => 0,
@@ -143,7 +143,7 @@ pub fn class_code(class: Option<BlowClass>) -> u16 {
     }
 }
 
-/// The register image of CONTRACTS.md §8. `last` is the last blow's result as the live feed
+/// The register image of docs/interfaces.md §8. `last` is the last blow's result as the live feed
 /// carried it; the counters, the sources and the latched alert come from `status`. A value
 /// that is not known (an incomplete blow's energies, a height without a process sheet) is
 /// 0; register 16 is the last blow's judgement against the active recipe, registers 17–19

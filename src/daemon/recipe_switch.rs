@@ -1,4 +1,4 @@
-//! Switching the active recipe while the service runs (issue 20, CONTRACTS §9): `POST
+//! Switching the active recipe while the service runs (issue 20, docs/interfaces.md §9): `POST
 //! /recipe` with a recipe file's text as the body makes it the one every following blow is
 //! judged against; `DELETE /recipe` stops judging. The forge changes parts several times a
 //! day, and a restart would cut the recording.

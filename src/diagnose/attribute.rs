@@ -1,4 +1,4 @@
-//! Attribution: each effect of the library (CONTRACTS.md §6) with all its parameters fitted
+//! Attribution: each effect of the library (docs/interfaces.md §6) with all its parameters fitted
 //! on the calibration blows (issue #17: the whole family), then scored on the holdout
 //! blows.
 //!
@@ -105,7 +105,7 @@ const GRID_MONOTONE: usize = 7;
 /// (`strain_hardening`) starts from: the sheet's flow stress within ±25 %.
 const LEVELS: [f64; 5] = [0.8, 0.9, 1.0, 1.12, 1.25];
 /// The rate (1/s) and strain at which `strain_rate`'s and `strain_hardening`'s levels are
-/// taken: the defaults of CONTRACTS.md §6, within the blows' ranges (10–40 /s; 0–0.5).
+/// taken: the defaults of docs/interfaces.md §6, within the blows' ranges (10–40 /s; 0–0.5).
 const RATE_AT_LEVEL_PER_S: f64 = DEFAULT_RATE_REF_PER_S;
 const STRAIN_AT_LEVEL: f64 = DEFAULT_EPS_REF;
 /// Bounds of the references: wide enough that the grid's levels are reached for exponents
@@ -304,7 +304,7 @@ impl BlowSet {
         self.len() == 0
     }
 
-    /// Each blow's nrmse (CONTRACTS.md §6) with `effects`.
+    /// Each blow's nrmse (docs/interfaces.md §6) with `effects`.
     pub fn nrmse(&self, machine: &Machine, effects: &EffectSet) -> Option<Vec<f64>> {
         let sims = self.obj.with_effects(*effects).simulate(machine)?;
         Some(self.obj.refs.iter().zip(&sims).map(|(r, s)| nrmse(r, s)).collect())

@@ -1,4 +1,4 @@
-//! Where a model and a measured blow part (CONTRACTS.md §6): the normalised RMS load error
+//! Where a model and a measured blow part (docs/interfaces.md §6): the normalised RMS load error
 //! over the blow, split by phase and by frequency band.
 //!
 //! - The window runs from the model's first contact until the measured load has returned
@@ -24,7 +24,7 @@ use crate::signal::segment::Blow;
 use super::location::Location;
 pub use super::phases::{IMPACT_FRACTION, Phases};
 
-/// Kept after the load returns to zero, s (CONTRACTS.md §6).
+/// Kept after the load returns to zero, s (docs/interfaces.md §6).
 pub const POST_S: f64 = 5e-3;
 /// The load has returned to zero when it falls below this fraction of the peak.
 pub const ZERO_FRACTION: f64 = 0.02;

@@ -26,7 +26,7 @@
 //! end of `post`) and the peak squared, so the four add up to the blow's mean square error
 //! phase with phase; `share` is each phase's part of their sum, mean over the blows. A
 //! share, not a density: a phase is named for carrying most of the error, not for being
-//! short and wrong (`by_phase` keeps the density, CONTRACTS §6).
+//! short and wrong (`by_phase` keeps the density, docs/interfaces.md §6).
 //!
 //! Pure: fed the loads and the phases.
 

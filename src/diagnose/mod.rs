@@ -1,4 +1,4 @@
-//! The sim-to-real gap (issue #6, CONTRACTS.md §6, DESIGN.md §2.5): where the base model
+//! The sim-to-real gap (issue #6, docs/interfaces.md §6, DESIGN.md §2.5): where the base model
 //! and the measured blows part (`localise`), which library effect closes the gap on blows
 //! it was not fitted on (`attribute`), and a verdict under an explicit rule.
 //!
@@ -195,7 +195,7 @@ fn finite(x: f64) -> Value {
 }
 
 impl Diagnosis {
-    /// `report.json` (CONTRACTS.md §6), with the indicators added to `baseline`.
+    /// `report.json` (docs/interfaces.md §6), with the indicators added to `baseline`.
     pub fn to_json(&self) -> Value {
         let params = |f: &Fitted| -> Value {
             let mut m = serde_json::Map::new();
@@ -341,7 +341,7 @@ mod tests {
         summary.iter().find(|s| s.name == name).unwrap().mean_rel_error
     }
 
-    // CONTRACTS.md §6 / issue #6: where an effect has a clear location, the base model's
+    // docs/interfaces.md §6 / issue #6: where an effect has a clear location, the base model's
     // dominant phase says so.
     #[test]
     fn elastic_recovery_shows_in_the_spring_back() {

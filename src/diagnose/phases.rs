@@ -1,4 +1,4 @@
-//! A blow's phases as `diagnose` splits it (CONTRACTS.md §6): impact, forming, spring-back
+//! A blow's phases as `diagnose` splits it (docs/interfaces.md §6): impact, forming, spring-back
 //! and post, by sample index. `localise` finds them, `location` weighs the error in each.
 //! Pure code.
 

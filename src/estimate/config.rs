@@ -15,7 +15,7 @@ pub struct EstimatorConfig {
     pub intermediate_min: f64,
     /// Length of the approach window of the impact-speed fit, s.
     pub fit_s: f64,
-    /// The ram encoder's resolution, m (CONTRACTS.md §1: "quantised, for example 10 µm").
+    /// The ram encoder's resolution, m (docs/interfaces.md §1: "quantised, for example 10 µm").
     pub encoder_resolution_m: f64,
     /// The resolution of the process sheet's measured heights, m: a digital caliper reads
     /// 0.01 mm and is good to ±0.02 mm over 100 mm (DIN 862).
@@ -31,7 +31,7 @@ pub struct EstimatorConfig {
     /// first contact is measured, the first billet's too; `None`: the first billet is taken
     /// to be the sheet's height and teaches the reference.
     pub encoder_at_die_m: Option<f64>,
-    /// Which way the ram encoder counts (CONTRACTS §1: `disp_m` is positive towards the lower
+    /// Which way the ram encoder counts (docs/interfaces.md §1: `disp_m` is positive towards the lower
     /// die; an encoder mounted the other way is a configuration matter).
     pub encoder_direction: EncoderDirection,
 }
@@ -43,7 +43,7 @@ pub enum EncoderDirection {
     /// contact, so an encoder whose reading falls then counts up and is read negated.
     #[default]
     Auto,
-    /// Positive towards the lower die (CONTRACTS §1).
+    /// Positive towards the lower die (docs/interfaces.md §1).
     Down,
     /// Positive away from the die: read negated.
     Up,

@@ -1,9 +1,9 @@
 //! A blow's load against time for a screen (issue 19, the dashboard): the measured sensor
 //! load and, for a fitted blow, the fitted model's, both from first contact, with the phases
-//! of CONTRACTS.md §6 (impact, forming, spring-back, post). Decimated to a few hundred points
+//! of docs/interfaces.md §6 (impact, forming, spring-back, post). Decimated to a few hundred points
 //! a series, keeping each bucket's minimum and maximum so the peak and the ring survive.
 //! Nothing here is a result: it is what the estimator already had in hand, kept for the
-//! last blow, and never part of the CONTRACTS.md §5 output. Pure code.
+//! last blow, and never part of the docs/interfaces.md §5 output. Pure code.
 
 use serde::Serialize;
 
@@ -15,9 +15,9 @@ use crate::signal::segment::Blow;
 pub const CURVE_BUCKETS: usize = 300;
 /// Measured samples kept before first contact, s.
 pub const CURVE_PRE_CONTACT_S: f64 = 1e-3;
-/// The post phase after the load's return to zero (CONTRACTS.md §6), s.
+/// The post phase after the load's return to zero (docs/interfaces.md §6), s.
 pub const POST_PHASE_S: f64 = 5e-3;
-/// The impact phase's share of the forming time (CONTRACTS.md §6).
+/// The impact phase's share of the forming time (docs/interfaces.md §6).
 pub const IMPACT_SHARE_OF_FORMING: f64 = 0.1;
 
 /// What the estimator knows of a blow's course beyond its §5 figures.

@@ -516,7 +516,7 @@ pub struct ModelResidual {
     pub load_by_phase: PhaseResidual,
 }
 
-/// A residual by phase of the blow, as CONTRACTS §6 splits `diagnose`'s: `impact` the first
+/// A residual by phase of the blow, as docs/interfaces.md §6 splits `diagnose`'s: `impact` the first
 /// 10 % of the forming time, `forming` the rest of it, `spring_back` from the end of forming
 /// to separation. Each is the RMS within the phase over the peak (0 for a phase without a
 /// sample), so a short phase that is badly wrong stands out.
@@ -537,7 +537,7 @@ impl PhaseResidual {
     }
 }
 
-/// `impact` is this fraction of the forming time (CONTRACTS §6).
+/// `impact` is this fraction of the forming time (docs/interfaces.md §6).
 const IMPACT_FRACTION: f64 = 0.10;
 
 /// The residual by channel and the load's by phase, at the evaluation `e` of contact `tau_s`

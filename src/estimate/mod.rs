@@ -99,7 +99,7 @@ pub enum EstimateError {
     /// to down.
     #[error(
         "blow {blow}: the ram encoder's reading falls as the ram approaches the die ({v_mps:.3} m/s before \
-         contact): it counts up, away from the die, where CONTRACTS §1 counts disp_m down towards it. Set \
+         contact): it counts up, away from the die, where docs/interfaces.md §1 counts disp_m down towards it. Set \
          [encoder] direction = \"up\" in the service file (--encoder-direction up for replay), or \"auto\""
     )]
     EncoderCountsUp { blow: u32, v_mps: f64 },
@@ -481,7 +481,7 @@ impl Estimator {
         let (x_contact_m, h_start_m, h_end_m) = at;
         // The stream ended before the load had held quiet (a capture's end, a stop): the blow
         // is whole only if its samples show the spring-back, the load back under the end
-        // level after the blow's own end of forming (CONTRACTS §5: cut by the end of the
+        // level after the blow's own end of forming (docs/interfaces.md §5: cut by the end of the
         // stream, it is incomplete).
         let h_end_m = match blow.open_end_n {
             Some(level) if !self.spring_back_seen(blow, e.t_contact_s, level) => {

@@ -1,5 +1,5 @@
 //! What the estimator reports for each blow: the JSON line of `forgemon replay`
-//! (CONTRACTS.md §5) and the MCAP blow-result message.
+//! (docs/interfaces.md §5) and the MCAP blow-result message.
 
 use std::collections::BTreeMap;
 
@@ -11,7 +11,7 @@ use crate::estimate::billet::BilletCheck;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum AlertKind {
-    /// The blows have turned elastic (CONTRACTS.md §5 `"elastic_blow"`).
+    /// The blows have turned elastic (docs/interfaces.md §5 `"elastic_blow"`).
     ElasticBlow,
     /// The energy balance no longer closes: the model does not describe the machine.
     ModelHealth,
@@ -19,7 +19,7 @@ pub enum AlertKind {
     /// the last `sensor_n` complete blows: a wrong gain, a drifting charge amplifier, a
     /// loose or dead accelerometer.
     Sensor,
-    /// The blow left its recipe's windows or envelope (CONTRACTS §5 `judgement`).
+    /// The blow left its recipe's windows or envelope (docs/interfaces.md §5 `judgement`).
     Nok,
     /// From the service, not a blow: the recording's disk is low or a write failed.
     Storage,
@@ -55,7 +55,7 @@ pub enum BlowClass {
     Intermediate,
     Hard,
     /// Samples were lost inside the blow and it could not be estimated through the hole
-    /// (CONTRACTS.md §5): no energies, no efficiency, never an alert.
+    /// (docs/interfaces.md §5): no energies, no efficiency, never an alert.
     Incomplete,
     /// An input or an output lies outside its physical range (`plausibility`): no energies,
     /// no efficiency, no efficiency alert; `reason` says which.
@@ -103,7 +103,7 @@ impl HeightCheck {
     }
 }
 
-/// Where a blow's start height came from (CONTRACTS §5 `height_source`).
+/// Where a blow's start height came from (docs/interfaces.md §5 `height_source`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum HeightSource {
@@ -152,7 +152,7 @@ pub struct BilletTag {
     pub h_start_off_sheet_m: Option<f64>,
 }
 
-/// One blow as measured and estimated. Field names and units are those of CONTRACTS.md §5;
+/// One blow as measured and estimated. Field names and units are those of docs/interfaces.md §5;
 /// the extra fields are additions the contract allows.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct BlowEstimate {
@@ -160,7 +160,7 @@ pub struct BlowEstimate {
     /// Device time of first contact, s (the recording's own time origin).
     pub t_contact_s: f64,
     pub v_impact_mps: f64,
-    /// The energies and the efficiency are `None` on an incomplete blow (CONTRACTS.md §5).
+    /// The energies and the efficiency are `None` on an incomplete blow (docs/interfaces.md §5).
     #[serde(rename = "kinetic_in_J")]
     pub kinetic_in_j: Option<f64>,
     /// Plastic work; without a process sheet, plastic plus friction work.
@@ -182,7 +182,7 @@ pub struct BlowEstimate {
     pub class: BlowClass,
     /// The alert this blow raised, if any.
     pub alert: Option<Alert>,
-    /// The blow against the active recipe (CONTRACTS §5, §9): `None` without one, and on an
+    /// The blow against the active recipe (docs/interfaces.md §5, §9): `None` without one, and on an
     /// incomplete blow, which is never judged.
     pub judgement: Option<crate::recipe::Judgement>,
     /// Device time at which the blow's end was detected, s.
@@ -193,7 +193,7 @@ pub struct BlowEstimate {
     pub residual: Option<f64>,
     /// Load sensor against accelerometer (`estimate::sensor`): the load's impulse over the
     /// momentum the machine lost, less 1; `None` on an incomplete blow or when the
-    /// accelerometer gave nothing to compare (CONTRACTS.md §5).
+    /// accelerometer gave nothing to compare (docs/interfaces.md §5).
     pub sensor_check: Option<f64>,
     /// How the energies were estimated: `observer` or `model_fit` (`Estimator::method_for`);
     /// `None` on an incomplete blow.
@@ -210,7 +210,7 @@ pub struct BlowEstimate {
     /// The billet the blow forged.
     #[serde(flatten)]
     pub billet: BilletTag,
-    /// Why the blow is `implausible` (CONTRACTS §5 `reason`), `None` otherwise.
+    /// Why the blow is `implausible` (docs/interfaces.md §5 `reason`), `None` otherwise.
     #[serde(rename = "reason", serialize_with = "reason_text")]
     pub implausible: Option<Implausible>,
     /// The scale of the sheet's flow stress the blow's measured work needs under the model:

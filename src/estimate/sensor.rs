@@ -1,4 +1,4 @@
-//! Sensor health per blow (issue 16, CONTRACTS.md §5 `sensor_check`): the load sensor and
+//! Sensor health per blow (issue 16, docs/interfaces.md §5 `sensor_check`): the load sensor and
 //! the ram's accelerometer measure the same blow, so the momentum the machine lost, as the
 //! accelerometer and the model's masses see it, must equal the impulse the load sensor
 //! carried. Their relative disagreement is reported per blow; a wrong gain, a drifting

@@ -1,6 +1,6 @@
 //! The load sensor's chain as the machine file describes it (issue 37): a piezo's charge
 //! amplifier is a first-order high-pass with time constant τ (`[effects.sensor_highpass]`,
-//! CONTRACTS §6), so the measured load y loses its slow part, `y' = x' - y/τ`. The estimator
+//! docs/interfaces.md §6), so the measured load y loses its slow part, `y' = x' - y/τ`. The estimator
 //! undoes it on the measured channel before anything reads the load, `x = y + (1/τ) ∫ y dt`
 //! from the blow's first (quiet) sample, instead of putting the high-pass in the physics.
 //! Pure code.

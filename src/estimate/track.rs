@@ -1,7 +1,7 @@
 //! The billet's height track (issues 15, 22, 36): which billet each contact belongs to, and
 //! where each blow's start height comes from. A billet only gets flatter, so the ram meets
 //! it lower by what the last blow took: the encoder's chain. Across a break in the stream
-//! the encoder's offset may have changed (CONTRACTS §1), so the chain goes on only where
+//! the encoder's offset may have changed (docs/interfaces.md §1), so the chain goes on only where
 //! the next contact shows it (`Continuity`); otherwise the height comes from the sheet's
 //! measured one or the model's. Methods of `Estimator`, apart from its estimate of a blow.
 
@@ -45,7 +45,7 @@ impl Estimator {
     }
 
     /// The samples stopped (the end of a capture, a link lost, a new timeline): when they
-    /// resume, the encoder may have been zeroed again (CONTRACTS §1: the offset may differ
+    /// resume, the encoder may have been zeroed again (docs/interfaces.md §1: the offset may differ
     /// from file to file). The next contact is compared with where the last blow left the
     /// billet: only a match shows the encoder continuous (`Continuity`).
     pub fn stream_break(&mut self) {
@@ -85,7 +85,7 @@ impl Estimator {
             None => (Transition::Same, None),
             // Across a break only a contact where the last blow left the billet shows the
             // encoder continuous. Any other is an offset the encoder cannot tell from a new
-            // billet, so the billet goes on (a capture directory is one billet, CONTRACTS §1;
+            // billet, so the billet goes on (a capture directory is one billet, docs/interfaces.md §1;
             // a stream's next billet after a restart needs its signal).
             Some(end) if unverified => {
                 let rise_m = end.x_m - x_contact_m;

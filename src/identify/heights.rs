@@ -5,7 +5,7 @@
 //!
 //! A sheet off by more than a caliper's scatter (`CALIPER_TOLERANCE_M`) leaves the blow's
 //! start height in doubt: either the sheet is wrong, or the encoder was zeroed anew between
-//! the captures (CONTRACTS §1), and the data cannot tell which. `identify` leaves such a
+//! the captures (docs/interfaces.md §1), and the data cannot tell which. `identify` leaves such a
 //! blow out of the fit (it is still predicted) and names it. A smaller disagreement is the
 //! calipers' scatter on a hot billet: named too, and the fit takes the encoder's height, as
 //! `Heights::Encoder` does, so the sheet's scatter does not enter it.

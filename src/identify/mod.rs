@@ -295,7 +295,7 @@ pub fn identify(
 }
 
 impl Identified {
-    /// `machine.toml` (CONTRACTS.md §3) with the fit's uncertainty and quality as extra
+    /// `machine.toml` (docs/interfaces.md §3) with the fit's uncertainty and quality as extra
     /// keys under `[identify]`.
     pub fn to_toml(&self, provenance: &str) -> String {
         use std::fmt::Write as _;

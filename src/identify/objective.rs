@@ -306,7 +306,7 @@ pub enum Heights {
     /// less how much lower the ram met the billet this time, when the blow before is the
     /// reference before, the chain is plausible (`chained_height`) and it agrees with the
     /// hand-measured height within `CALIPER_TOLERANCE_M` (a capture whose encoder was zeroed
-    /// anew, CONTRACTS §1, breaks it; issue 36). Where the ram met
+    /// anew, docs/interfaces.md §1, breaks it; issue 36). Where the ram met
     /// the billet is the model's first contact placed on the measured clock by the
     /// alignment, read off the encoder's approach (`EncoderApproach::at`): a load-level
     /// contact comes late where the load rises from nothing (a fresh copper billet on the
@@ -501,7 +501,7 @@ impl Objective {
                         n.checked_sub(2).and_then(|k| p.measured_final_heights_m.get(k).copied()).unwrap_or(h_start);
                     let measured = !p.measured_final_heights_m.is_empty();
                     // The chain where it agrees with the hand-measured height: each capture may
-                    // carry its own encoder offset (CONTRACTS §1), and a link it breaks is a
+                    // carry its own encoder offset (docs/interfaces.md §1), and a link it breaks is a
                     // jump the calipers do not see.
                     let encoder = match (self.heights, prev, r.approach) {
                         (Heights::Encoder, Some((k, h_prev, Some(x_prev))), Some(a)) if measured && k + 1 == n => {

@@ -20,7 +20,7 @@ pub const STRAIN_FLOOR: f64 = 1e-4;
 /// power laws finite there. Blows run at 1–100 /s.
 pub const STRAIN_RATE_FLOOR_PER_S: f64 = 1e-2;
 
-/// The billet as the process sheet describes it (CONTRACTS.md §2).
+/// The billet as the process sheet describes it (docs/interfaces.md §2).
 #[derive(Debug, Clone, PartialEq)]
 pub struct BilletGeometry {
     /// Diameter before the first blow of the sheet, m.
@@ -46,7 +46,7 @@ impl BilletGeometry {
     }
 }
 
-/// Flow-stress law of the material (CONTRACTS.md §2 `[material]`).
+/// Flow-stress law of the material (docs/interfaces.md §2 `[material]`).
 #[derive(Debug, Clone, PartialEq)]
 pub enum FlowStress {
     /// Constant flow stress, Pa (the hammer paper's sigma_0).
@@ -69,7 +69,7 @@ impl FlowStress {
     }
 }
 
-/// Load-side effect parameters (CONTRACTS.md §6). Neutral values leave the base law as is.
+/// Load-side effect parameters (docs/interfaces.md §6). Neutral values leave the base law as is.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LoadEffects {
     /// `friction_rise`: mu(h) = mu0 (h0/h)^p. Neutral 0.

@@ -12,7 +12,7 @@ mod sensor;
 use recorder::{Record, Recorder, Trace, forming_indicators};
 pub use sensor::{FitBlow, simulate_blow_sensor, simulate_blow_sensor_until};
 
-/// Simulated time after the contact ends that a blow keeps running (CONTRACTS.md §6 `post`).
+/// Simulated time after the contact ends that a blow keeps running (docs/interfaces.md §6 `post`).
 pub const POST_WINDOW_S: f64 = 5e-3;
 /// Default relative tolerance of the step control. On the hammer paper's blow 1 it is
 /// within 0.15 µm of the converged final height and 0.1 % of the converged final load,
@@ -30,7 +30,7 @@ pub const MAX_STEPS: u64 = 5_000_000;
 /// More switching events than this in one blow means the contact chatters.
 pub const MAX_EVENTS: u32 = 20_000;
 
-/// Indicators of a blow on a billet (hammer paper §3.1.3 and CONTRACTS.md §4).
+/// Indicators of a blow on a billet (hammer paper §3.1.3 and docs/interfaces.md §4).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Forming {
     /// Billet height at the end of forming, m.
@@ -68,7 +68,7 @@ pub struct BlowResult {
 }
 
 impl BlowResult {
-    /// Plastic energy over kinetic energy in (CONTRACTS.md §4).
+    /// Plastic energy over kinetic energy in (docs/interfaces.md §4).
     pub fn efficiency(&self) -> f64 {
         self.energy.efficiency()
     }
@@ -423,7 +423,7 @@ mod tests {
         let small = machine("kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n");
         // Below these nothing a capture records can tell the blows apart: 1e-3 of the 10 µm
         // encoder step (seed 001 §2.1), a tenth of a 100 kHz sample, a tenth of the hammer
-        // captures' 2 kN load noise (`synth::CaptureSpec::hammer`), 1e-3 of CONTRACTS.md §4's
+        // captures' 2 kN load noise (`synth::CaptureSpec::hammer`), 1e-3 of docs/interfaces.md §4's
         // 1 % ledger closure.
         let physical = [1e-8, 1e-6, 200.0, 1e-5, 200.0];
         for (m, v0s, opts, at_fits) in [

@@ -1,5 +1,5 @@
 //! The effect library: unmodelled physical effects that can be switched on top of either
-//! machine model (CONTRACTS.md §6). Diagnosis fits them; simulated devices and tests
+//! machine model (docs/interfaces.md §6). Diagnosis fits them; simulated devices and tests
 //! generate data with them.
 //!
 //! Each effect has a neutral parameter value at which the model is exactly the base model.
@@ -75,7 +75,7 @@ pub enum EffectError {
     Malformed { spec: String },
 }
 
-/// The library's names, in CONTRACTS.md order.
+/// The library's names, in docs/interfaces.md §6 order.
 pub const EFFECT_NAMES: [&str; 8] = [
     "clearance",
     "elastic_recovery",
@@ -88,7 +88,7 @@ pub const EFFECT_NAMES: [&str; 8] = [
 ];
 
 impl Effect {
-    /// The library name (CONTRACTS.md §6).
+    /// The library name (docs/interfaces.md §6).
     pub fn name(&self) -> &'static str {
         match self {
             Effect::Clearance { .. } => "clearance",

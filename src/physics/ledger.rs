@@ -1,4 +1,4 @@
-//! The energy ledger of one blow (CONTRACTS.md §4): kinetic energy in must equal plastic +
+//! The energy ledger of one blow (docs/interfaces.md §4): kinetic energy in must equal plastic +
 //! friction + damped + elastic. Its closure is the simulator's honesty check and, on
 //! measured blows, the model-health figure.
 
@@ -40,7 +40,7 @@ mod tests {
 
     #[test]
     fn closure_of_the_contract_example() {
-        // CONTRACTS.md §4 example: 5320 + 226 + 150 + 15 = 5711.
+        // docs/interfaces.md §4 example: 5320 + 226 + 150 + 15 = 5711.
         let l = Ledger { kinetic_in_j: 5711.0, plastic_j: 5320.0, friction_j: 226.0, damped_j: 150.0, elastic_j: 15.0 };
         assert!(l.closure_error().abs() < 1e-12);
         assert!((l.efficiency() - 0.9315).abs() < 1e-4);

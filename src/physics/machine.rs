@@ -1,4 +1,4 @@
-//! The identified machine models (DESIGN.md §2.1–2.2, CONTRACTS.md §3).
+//! The identified machine models (DESIGN.md §2.1–2.2, docs/interfaces.md §3).
 //!
 //! Hammer: the BIM model of seed 000 (ram m1 strikes the billet; lower tool m2 on the
 //! frame spring k and damper c, which carry the sensor load). Screw press: seed 001 with
@@ -13,7 +13,7 @@ use std::f64::consts::PI;
 /// the series anyway, so the bare peak is insensitive to this value within a factor of 3.
 pub const DEFAULT_HAMMER_TOOL_CONTACT_N_PER_M: f64 = 6.0e10;
 
-/// The two machine kinds of CONTRACTS.md §3.
+/// The two machine kinds of docs/interfaces.md §3.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MachineKind {
     Hammer,

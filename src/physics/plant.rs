@@ -38,7 +38,7 @@ const NODE_MIN_TAU_S: f64 = 3e-6;
 /// Length of the state vector.
 pub const N: usize = 14;
 
-// State layout. Positions and velocities point down (CONTRACTS.md conventions) and start
+// State layout. Positions and velocities point down (docs/interfaces.md, Conventions) and start
 // at 0 at first contact.
 const XU: usize = 0; // upper body: hammer ram m1 / press tool
 pub(super) const VU: usize = 1;

@@ -1,4 +1,4 @@
-//! The process sheet as the physics uses it (CONTRACTS.md §2): one billet, blow after blow.
+//! The process sheet as the physics uses it (docs/interfaces.md §2): one billet, blow after blow.
 
 use super::billet::{BilletGeometry, BilletLaw, FlowStress, LoadEffects};
 use super::machine::MachineKind;

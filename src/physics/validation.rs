@@ -171,7 +171,7 @@ fn ledger_closes_on_every_blow_with_and_without_each_effect() {
         blows.push(simulate_bare(&press(), set, V_BARE, &SimOptions::default()).unwrap());
         blows.extend(copper_ten(set));
         for (i, b) in blows.iter().enumerate() {
-            // CONTRACTS.md §4: the five terms add up to the kinetic energy within 1 %.
+            // docs/interfaces.md §4: the five terms add up to the kinetic energy within 1 %.
             let c = b.energy.closure_error();
             assert!(c.abs() < 0.01, "effect {name}, run {i}: ledger closes to {c:e} ({:?})", b.energy);
         }
@@ -503,7 +503,7 @@ fn press_clearance_with_its_die_starts_it_at_rest_and_it_bounces() {
     let t_end = base.forming.unwrap().forming_time_s;
     let first = base.trace.iter().position(|q| q.out.sensor_n > 0.0).unwrap();
     assert!(base.trace[first..].iter().take_while(|q| q.t_s < t_end).all(|q| q.out.sensor_n > 0.0));
-    // The ledger closes (CONTRACTS.md §4, 1 %) over the ten copper blows and a bare strike.
+    // The ledger closes (docs/interfaces.md §4, 1 %) over the ten copper blows and a bare strike.
     let bare = simulate_bare(&press(), &set, V_BARE, &SimOptions::default()).unwrap();
     for (i, blow) in copper_ten(&set).iter().chain([&bare]).enumerate() {
         let c = blow.energy.closure_error();

@@ -1,4 +1,4 @@
-//! Teach-in recipes and OK/NOK per blow (issue 20, CONTRACTS §9). A recipe is learnt from
+//! Teach-in recipes and OK/NOK per blow (issue 20, docs/interfaces.md §9). A recipe is learnt from
 //! good billets: per blow index, windows on the efficiency, the plastic energy and the peak
 //! load, and an envelope of the load against the billet's compression (the ram's travel
 //! since first contact, on the loading branch). Each window and each envelope point is the
@@ -107,7 +107,7 @@ pub struct Recipe {
     pub blows: Vec<BlowWindows>,
 }
 
-/// The judgement of one blow (CONTRACTS §5 `judgement`).
+/// The judgement of one blow (docs/interfaces.md §5 `judgement`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Judgement {
     pub ok: bool,

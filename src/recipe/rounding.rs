@@ -13,7 +13,7 @@ use super::{BlowWindows, Window};
 /// measurement; the widening, at most 1e-4 a side, is 1/300 of the default tolerance.
 pub const EFFICIENCY_DECIMALS: i32 = 4;
 
-/// Travel and compression, m: 1 µm, a tenth of the encoder's 10 µm count (CONTRACTS §1)
+/// Travel and compression, m: 1 µm, a tenth of the encoder's 10 µm count (docs/interfaces.md §1)
 /// and a hundredth of the 0.1 mm default compression tolerance.
 pub const LENGTH_DECIMALS_M: i32 = 6;
 

@@ -1,4 +1,4 @@
-//! Capture CSV files (CONTRACTS.md §1): `t_s,load_N,disp_m,acc_mps2` in any column order,
+//! Capture CSV files (docs/interfaces.md §1): `t_s,load_N,disp_m,acc_mps2` in any column order,
 //! extra columns ignored, constant sample period. The reader streams any `BufRead` into
 //! `SampleBatch`es (a 10-minute capture at 100 kHz is gigabytes), and every error names the
 //! file, the line and the column. It opens no file itself.
@@ -7,7 +7,7 @@ use std::io::{BufRead, Write};
 
 use super::sample::{Role, SampleBatch};
 
-/// Sample-period jitter allowed by CONTRACTS.md §1: each time stamp within 1 % of a period
+/// Sample-period jitter allowed by docs/interfaces.md §1: each time stamp within 1 % of a period
 /// of the uniform grid. A step spans two stamps, so it may differ from the period by twice
 /// that (`MAX_STEP_DEVIATION`).
 pub const MAX_PERIOD_JITTER: f64 = 0.01;
@@ -152,7 +152,7 @@ impl<R: BufRead> CaptureReader<R> {
                 }
                 let dt = t - prev;
                 // The period is the mean step so far; each stamp may sit 1 % of it off the
-                // grid (CONTRACTS.md §1), so a step may differ by 2 %, and the mean by its
+                // grid (docs/interfaces.md §1), so a step may differ by 2 %, and the mean by its
                 // own ends' jitter over the steps it spans. That also covers the
                 // rounding of the printed times (7 decimals at 100 kHz, as in the contract's
                 // example, is ±0.5 % a stamp).
@@ -246,7 +246,7 @@ impl<R: BufRead> CaptureReader<R> {
     }
 }
 
-/// One sample of a capture, in CONTRACTS.md §1 units.
+/// One sample of a capture, in docs/interfaces.md §1 units.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CaptureRow {
     pub t_s: f64,
@@ -322,7 +322,7 @@ mod tests {
 
     #[test]
     fn timestamps_rounded_to_the_contract_example_resolution_are_accepted() {
-        // CONTRACTS.md §1 prints t_s with 7 decimals; at 100 kHz a step is 10 µs ± 0.1 µs.
+        // docs/interfaces.md §1 prints t_s with 7 decimals; at 100 kHz a step is 10 µs ± 0.1 µs.
         let mut text = String::from("t_s,load_N,disp_m,acc_mps2\n");
         for i in 0..1000 {
             text.push_str(&format!("{:.7},0,0,0\n", 79.9620978 + i as f64 * 1e-5));
@@ -338,7 +338,7 @@ mod tests {
     }
 
     /// Stamps off the grid by up to 0.95 % of a period either way (a DAQ's jitter within
-    /// CONTRACTS §1's 1 %), in the worst order: a step 1.9 % long right after one 1.9 %
+    /// docs/interfaces.md §1's 1 %), in the worst order: a step 1.9 % long right after one 1.9 %
     /// short. Accepted, on the grid's period; a stamp 2.5 % off is refused.
     #[test]
     fn stamps_jittered_within_the_contract_are_accepted() {

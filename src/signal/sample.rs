@@ -5,7 +5,7 @@
 
 use std::fmt;
 
-/// What a channel measures (CONTRACTS.md §1, §7).
+/// What a channel measures (docs/interfaces.md §1, §7).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Role {
     /// Load at the machine's sensor, N, compressive positive.

@@ -201,7 +201,7 @@ pub fn with_flow_stress(mut p: Process, factor: f64) -> Process {
     p
 }
 
-/// What in the blow lines `blows` (CONTRACTS §5 JSON, in order) lies outside its physical
+/// What in the blow lines `blows` (docs/interfaces.md §5 JSON, in order) lies outside its physical
 /// range (issue 36): energies below 0, an efficiency outside [0, 1], a non-positive impact
 /// speed, a height at or below 0, a start height above the billet's first (the billet only
 /// gets flatter), an end height above the start; an incomplete or implausible blow with any

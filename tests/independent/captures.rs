@@ -1,6 +1,6 @@
 //! Capture directories rendered by the independent renderer (issue 36): one billet's blows as
 //! a DAQ would record them on one continuous clock and one continuous encoder, with the truth
-//! beside them, so that a test can express the same blows in every freedom CONTRACTS §1
+//! beside them, so that a test can express the same blows in every freedom docs/interfaces.md §1
 //! grants (column order, time origin and encoder offset per file, direction, rate, jitter,
 //! several blows per file, sheets with or without measured heights) and compare.
 //!

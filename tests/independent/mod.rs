@@ -212,7 +212,7 @@ struct Fine {
     ram_acc: Vec<f64>,
     h_end_m: f64,
     /// The work of the frictionless part of the yield load over the plastic compression, J
-    /// (CONTRACTS §4's plastic energy).
+    /// (docs/interfaces.md §4's plastic energy).
     plastic_j: f64,
 }
 
@@ -361,7 +361,7 @@ fn blow_over(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64, pr
         if k_eff * delta > fy {
             let p_new = s.xu - x_low - fy / k_eff;
             // The plastic energy is the frictionless part of the load, π r² σ, over the
-            // compression (CONTRACTS §4), taken at the step's mid height.
+            // compression (docs/interfaces.md §4), taken at the step's mid height.
             let h_mid = h0 - 0.5 * (s.p + p_new);
             out.plastic_j += frictionless_load(process, hidden, h_mid, rate) * (p_new - s.p).max(0.0);
             s.p = p_new;
@@ -377,7 +377,7 @@ fn blow_over(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64, pr
         s.vl += 0.5 * dt * al;
         s.v3 += 0.5 * dt * a3;
         out.load_n.push(f_s);
-        // The encoder and the accelerometer ride on the ram (CONTRACTS §1, DESIGN §2.4): the
+        // The encoder and the accelerometer ride on the ram (docs/interfaces.md §1, DESIGN §2.4): the
         // hammer's upper mass, the press's heavy mass behind the link, not its tool.
         let (x_ram, a_ram) = if rig.ram.is_some() { (s.xr, ar) } else { (s.xu, au) };
         out.ram_m.push(x_ram);

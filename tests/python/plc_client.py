@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Read forgemon's PLC result image (CONTRACTS.md §8) as a PLC would, with pymodbus.
+"""Read forgemon's PLC result image (docs/interfaces.md §8) as a PLC would, with pymodbus.
 
 The independent client of issue 19 §2: it polls holding registers 0-19 of unit 1 while a
 `forgemon demo --plc ADDR` runs, keeps every image it saw twice in a row (so a half-updated

@@ -5,7 +5,7 @@ CanutilsLogWriter writes the lines. tests/acquire_canfd.rs decodes the result wi
 
 usage: write_canfd.py ROWS.csv DBC OUT.log [--drop-frame K ...] [--bad-line K ...]
 
-ROWS.csv has the header t_s,load_N,disp_m,acc_mps2 (CONTRACTS.md section 1). A block is
+ROWS.csv has the header t_s,load_N,disp_m,acc_mps2 (docs/interfaces.md §1). A block is
 stamped with its last sample's time; Seq is the index of its first sample. --drop-frame K
 leaves out frame K (0-based); --bad-line K replaces line K (1-based) of the log by a
 malformed line (an odd number of hex digits).

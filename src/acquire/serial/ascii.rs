@@ -1,4 +1,4 @@
-//! The ASCII variant of the serial DAQ stream (CONTRACTS.md §7), sans-IO: lines of
+//! The ASCII variant of the serial DAQ stream (docs/interfaces.md §7), sans-IO: lines of
 //! `t_s,v0,v1,...\n` with the values already in physical units, in the configured channel
 //! order. `LineDecoder` is fed byte chunks, drops and counts malformed lines, checks every
 //! time stamp against the source's period (`stamps.rs`: a corrupt stamp is dropped and

@@ -1,4 +1,4 @@
-//! The binary serial DAQ framing of CONTRACTS.md §7, sans-IO: `FrameDecoder` is fed byte
+//! The binary serial DAQ framing of docs/interfaces.md §7, sans-IO: `FrameDecoder` is fed byte
 //! chunks of any size and hands back whole frames, resyncing after garbage at the next
 //! `0x00` (a frame glued to garbage with no `0x00` between them is lost with it, as §7
 //! says); `encode_frame` builds the wire bytes (the simulated device uses it). The
@@ -13,7 +13,7 @@
 
 use crc::{CRC_32_ISCSI, Crc, Table};
 
-/// The only framing version (CONTRACTS.md §7).
+/// The only framing version (docs/interfaces.md §7).
 pub const FRAME_VERSION: u8 = 1;
 /// Channel count limits.
 pub const MAX_CHANNELS: u8 = 16;
@@ -32,7 +32,7 @@ pub const MAX_ENCODED_LEN: usize = cobs::max_encoding_length(MAX_PAYLOAD_LEN + C
 /// CRC-32C (Castagnoli), the iSCSI polynomial; slice-by-16 tables (16 KiB, built at compile time).
 pub static CRC32C: Crc<u32, Table<16>> = Crc::<u32, Table<16>>::new(&CRC_32_ISCSI);
 
-/// One decoded frame (CONTRACTS.md §7).
+/// One decoded frame (docs/interfaces.md §7).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Frame {
     pub channel_count: u8,
@@ -151,7 +151,7 @@ fn parse_decoded(bytes: &[u8]) -> Result<Frame, FrameError> {
 ///
 /// - Every `0x00` ends a segment; a segment that fails COBS, the limits, its length or its
 ///   CRC is returned as an error, counted, and decoding resumes after that `0x00`
-///   (CONTRACTS.md §7). Garbage glued in front of a frame, with no `0x00` between them,
+///   (docs/interfaces.md §7). Garbage glued in front of a frame, with no `0x00` between them,
 ///   makes one failed segment with the frame: the frame is dropped with it, and the
 ///   tracker reports the sequence jump as a gap. The decoder does not search a failed
 ///   segment for a frame inside it.
@@ -428,7 +428,7 @@ mod tests {
         assert_eq!(dec.stats().crc_errors, 0);
     }
 
-    /// CONTRACTS.md §7: a segment that fails to decode is dropped and decoding resumes
+    /// docs/interfaces.md §7: a segment that fails to decode is dropped and decoding resumes
     /// after the next `0x00`, so a frame glued to garbage (no `0x00` between them) is lost
     /// with it; the frame after the next delimiter decodes.
     #[test]

@@ -1,4 +1,4 @@
-//! The serial DAQ transport (CONTRACTS.md §7, DESIGN.md §4): the binary COBS/CRC-32C
+//! The serial DAQ transport (docs/interfaces.md §7, DESIGN.md §4): the binary COBS/CRC-32C
 //! framing and the ASCII line variant, each a sans-IO decoder, plus the tokio driver that
 //! opens the port, reconnects with backoff and reports status, gaps and counters.
 //!

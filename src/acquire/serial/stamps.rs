@@ -1,5 +1,5 @@
 //! The time-stamp check of a source whose samples carry their own time and no sequence
-//! number (the ASCII lines of CONTRACTS.md §7): which stamps are the next sample, which
+//! number (the ASCII lines of docs/interfaces.md §7): which stamps are the next sample, which
 //! reveal a hole, which are a device restart, and which are garbage to drop. A corrupt
 //! stamp must never become a sample, a blow or a lost-sample count, so every stamp that
 //! does not continue the timeline is held until the stamp after it confirms it. Pure code.

@@ -1,4 +1,4 @@
-//! Frames into samples (CONTRACTS.md §7): `FrameTracker` turns decoded frames into
+//! Frames into samples (docs/interfaces.md §7): `FrameTracker` turns decoded frames into
 //! `SampleBatch`es in physical units with the configured channels (`offset + gain *
 //! count`), and records every hole in the stream as a `Gap`: a jump in the wrapping u32
 //! sequence, and a frame whose sequence continues but whose `device_time_ns` does not
@@ -39,7 +39,7 @@ pub struct TrackStats {
 /// Turns frames into `SampleBatch`es with the configured channels (`offset + gain * count`)
 /// and checks each frame against the one before it:
 ///
-/// - Sequence: a jump of `j` (wrapping u32) loses `(j − 1) × N` samples (CONTRACTS.md §7).
+/// - Sequence: a jump of `j` (wrapping u32) loses `(j − 1) × N` samples (docs/interfaces.md §7).
 ///   A backwards jump (more than 2³¹ ahead) or a repeat is a device restart: no gap, the
 ///   count starts over.
 /// - Device time: the frame should start where the previous one ended, plus the samples

@@ -1,5 +1,5 @@
 //! What the dashboard shows beyond `/status`, kept by the status snapshot as the service's
-//! events come (no second computation): the last `RECENT_BLOWS` blows' results (CONTRACTS.md
+//! events come (no second computation): the last `RECENT_BLOWS` blows' results (docs/interfaces.md
 //! §5) with the time of day each struck, the blows of the billet in the dies (the efficiency
 //! bars), the last acknowledged alert, the last blow's curve (`estimate::curve`), and each
 //! source's measured sample rate. A page that loads or reconnects reads it whole from

@@ -25,7 +25,7 @@ pub struct BlowCompletedEvent {
     /// The billet's number and the blow's number on it.
     pub billet_number: u32,
     pub billet_blow: u32,
-    /// `soft`, `intermediate`, `hard` or `incomplete` (CONTRACTS §5 `class`).
+    /// `soft`, `intermediate`, `hard` or `incomplete` (docs/interfaces.md §5 `class`).
     pub blow_class: UAString,
     /// m/s.
     pub impact_velocity: f64,

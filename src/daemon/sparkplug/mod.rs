@@ -1,4 +1,4 @@
-//! The Sparkplug B uplink (CONTRACTS.md §10): the service as a Sparkplug B 3.0 edge node
+//! The Sparkplug B uplink (docs/interfaces.md §10): the service as a Sparkplug B 3.0 edge node
 //! publishing each blow to a standard MQTT broker, with store-and-forward.
 //!
 //! Two tasks share one [`Shared`] state. The *feeder* takes each blow from the live feed
@@ -214,7 +214,7 @@ mod tests {
         crate::estimate::result::examples::soft(blow)
     }
 
-    /// The metric names are the replay's JSON keys (CONTRACTS §5): a renamed field fails here.
+    /// The metric names are the replay's JSON keys (docs/interfaces.md §5): a renamed field fails here.
     #[test]
     fn every_blow_metric_is_a_key_of_the_replay_json() {
         let json = serde_json::to_value(estimate(1)).expect("serialises");

@@ -1,6 +1,6 @@
 //! Sparkplug B 3.0 topics and payloads for one forgemon edge node (pure, no IO, no clock):
 //! the NBIRTH with the node's metrics and `bdSeq`, the DBIRTH declaring every blow and
-//! alert metric with its type, one DDATA per blow (CONTRACTS §5 fields as `blow/<field>`,
+//! alert metric with its type, one DDATA per blow (docs/interfaces.md §5 fields as `blow/<field>`,
 //! the blow's alert as `alert/<kind>`), the NDEATH will, and reading an NCMD rebirth.
 //! Times are passed in as ms since the Unix epoch.
 
@@ -32,7 +32,7 @@ pub enum DataType {
     String = 12,
 }
 
-/// The CONTRACTS §5 fields published as `blow/<field>`, with their Sparkplug types. Values
+/// The docs/interfaces.md §5 fields published as `blow/<field>`, with their Sparkplug types. Values
 /// are taken from the blow's JSON by these names, so they are the replay's names exactly.
 pub const BLOW_FIELDS: &[(&str, DataType)] = &[
     ("blow", DataType::UInt32),
@@ -56,7 +56,7 @@ pub const BLOW_FIELDS: &[(&str, DataType)] = &[
     ("billet_blow", DataType::UInt32),
 ];
 
-/// The alert kinds of CONTRACTS §5, published as `alert/<kind>` holding the alert's reason.
+/// The alert kinds of docs/interfaces.md §5, published as `alert/<kind>` holding the alert's reason.
 pub const ALERT_KINDS: &[&str] = &["elastic_blow", "low_efficiency", "model_health", "sensor", "nok"];
 
 /// Which of a node's messages a topic carries (specification §4.1.2).

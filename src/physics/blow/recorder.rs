@@ -384,7 +384,7 @@ fn peak_inside(peak: &mut f64, sa: f64, r0: f64, sb: f64, r1: f64) {
 
 /// The end of forming is the first exit from plastic flow after which the billet loses less
 /// than `FORMING_CREEP_M` more height: near the end the stick force can hover at the flow
-/// load, and a sub-micrometre re-entry must not move the end of forming (CONTRACTS.md §4:
+/// load, and a sub-micrometre re-entry must not move the end of forming (docs/interfaces.md §4:
 /// "numerical creep after that instant does not move it").
 pub(super) fn forming_indicators(exits: &[(f64, f64, f64)], zeros: &[f64], h_start_m: f64, t_sep: f64) -> Forming {
     let Some(&(_, h_final, _)) = exits.last() else {
