@@ -465,6 +465,54 @@ async fn rtu_polling_over_a_pty_pair() {
     assert_eq!(detail_count(&last.detail, "timeouts"), Some(0), "{}", last.detail);
 }
 
+/// Issue 40: a device that exits leaves its pty path to whoever the system gives it next;
+/// an RTU source, like the serial source, reopens the path only while it is the device it
+/// first opened (`serial::identity`). The path is a link to the pty, re-pointed at another
+/// process's pty (often the very same /dev/pts number) with other values in its registers.
+#[tokio::test]
+async fn an_rtu_path_given_to_another_process_is_not_reopened() {
+    use tokio_serial::SerialPort;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let link = dir.path().join("ttyDAQ");
+    let (master, slave) = tokio_serial::SerialStream::pair().expect("a pty pair");
+    std::os::unix::fs::symlink(slave.name().expect("a path"), &link).expect("link");
+    let bank = shared_bank();
+    fill_poll_bank(&bank, 250_000.0);
+    let server = serve_rtu(master, BankService { bank, faults: Arc::new(Faults::default()), unit: Some(7) });
+    let cfg = ModbusConfig {
+        source: "rtu".into(),
+        transport: Transport::Rtu { path: link.display().to_string(), baud: 115_200 },
+        unit_id: 7,
+        poll_interval: Duration::from_millis(20),
+        timeout: Duration::from_millis(200),
+        map: poll_map(),
+        mode: Mode::Poll,
+    };
+    let driver = Running::start(cfg);
+    let log = driver.log.clone();
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    assert!(!batches(&log).is_empty(), "no poll over the first pty");
+    // The device exits, and another process's pty takes the path.
+    server.abort();
+    drop(slave);
+    let (other_master, other_slave) = tokio_serial::SerialStream::pair().expect("another pty pair");
+    std::fs::remove_file(&link).expect("unlink");
+    std::os::unix::fs::symlink(other_slave.name().expect("a path"), &link).expect("link again");
+    let other = shared_bank();
+    fill_poll_bank(&other, -7_500.0);
+    let other_server =
+        serve_rtu(other_master, BankService { bank: other, faults: Arc::new(Faults::default()), unit: Some(7) });
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    driver.stop().await;
+    other_server.abort();
+    drop(other_slave);
+    // Nothing was read from the other process's device, and the source says why.
+    assert!(batches(&log).iter().all(|(_, v)| v == &vec![250_000.0]), "values read from the other pty");
+    // (the status detail writes the error's spaces as underscores)
+    let refused = statuses(&log).iter().any(|(_, s)| s.detail.contains("not_the_device_first_opened"));
+    assert!(refused, "{:?}", statuses(&log).last().map(|(_, s)| s.detail.clone()));
+}
+
 #[tokio::test]
 async fn the_coil_write_reaches_the_server_coil_bank() {
     let bank = shared_bank();

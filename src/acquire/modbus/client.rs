@@ -18,6 +18,7 @@ use tokio_modbus::{ExceptionCode, Slave};
 use super::block::{BlockError, BlockHeader, BlockPlan, BlockTracker, HEADER_REGISTERS, decode_slots};
 use super::registers::{DecodeError, RegisterKind, RegisterSpec, Signal, decode_one, plan_reads};
 use crate::acquire::outage::OutageLog;
+use crate::acquire::serial::identity::DeviceGuard;
 use crate::acquire::{ChannelSpec, Counters, SourceEvent, next_backoff_ms, offer};
 use crate::signal::sample::Gap;
 use crate::signal::sample::{Role, SampleBatch};
@@ -104,14 +105,26 @@ async fn call<T>(limit: Duration, request: impl Future<Output = tokio_modbus::Re
     }
 }
 
-async fn connect(transport: &Transport, unit_id: u8, limit: Duration) -> Result<Context, ModbusError> {
+/// Connect over `transport`. An RTU port is opened through `guard` when there is one: a
+/// reopen reads the device first opened at the path, as the serial source does
+/// (`serial::identity`).
+async fn connect(
+    transport: &Transport,
+    unit_id: u8,
+    limit: Duration,
+    guard: Option<&mut DeviceGuard>,
+) -> Result<Context, ModbusError> {
     let slave = Slave(unit_id);
     let connecting = async {
         match transport {
             Transport::Tcp { addr } => tokio_modbus::client::tcp::connect_slave(*addr, slave).await,
             Transport::Rtu { path, baud } => {
-                let port = tokio_serial::SerialStream::open(&tokio_serial::new(path.as_str(), *baud))
-                    .map_err(io::Error::from)?;
+                let open =
+                    |p: &str| tokio_serial::SerialStream::open(&tokio_serial::new(p, *baud)).map_err(io::Error::from);
+                let port = match guard {
+                    Some(g) => g.open(open)?,
+                    None => open(path)?,
+                };
                 Ok(tokio_modbus::client::rtu::attach_slave(port, slave))
             }
         }
@@ -131,7 +144,7 @@ pub async fn write_coil(
     value: bool,
     limit: Duration,
 ) -> Result<(), ModbusError> {
-    let mut ctx = connect(&Transport::Tcp { addr }, unit, limit).await?;
+    let mut ctx = connect(&Transport::Tcp { addr }, unit, limit, None).await?;
     let written = call(limit, ctx.write_single_coil(coil, value)).await;
     let _ = timeout(limit, tokio_modbus::client::Client::disconnect(&mut ctx)).await;
     written
@@ -414,13 +427,17 @@ pub async fn run(cfg: ModbusConfig, tx: mpsc::Sender<SourceEvent>, mut shutdown:
         Transport::Tcp { addr } => addr.to_string(),
         Transport::Rtu { path, .. } => path.clone(),
     };
+    let mut guard = match &cfg.transport {
+        Transport::Tcp { .. } => None,
+        Transport::Rtu { path, .. } => Some(DeviceGuard::new(path.clone())),
+    };
     loop {
         if *shutdown.borrow() {
             break;
         }
         // `down`: the link itself failed (connect refused, connection reset), as opposed
         // to a request that timed out on a live link.
-        let (e, down) = match connect(&cfg.transport, cfg.unit_id, cfg.timeout).await {
+        let (e, down) = match connect(&cfg.transport, cfg.unit_id, cfg.timeout, guard.as_mut()).await {
             Ok(mut ctx) => {
                 if !first {
                     d.counters.reconnects += 1;

@@ -17,7 +17,7 @@ use tokio::sync::{mpsc, watch};
 
 use super::ascii::{AsciiEvent, DEFAULT_ASCII_BATCH_S, LineDecoder};
 use super::frame::FrameDecoder;
-use super::identity::{DeviceGuard, DeviceId};
+use super::identity::DeviceGuard;
 use super::tracker::FrameTracker;
 use crate::acquire::outage::OutageLog;
 use crate::acquire::{BACKOFF_START_MS, Backpressure, ChannelSpec, Counters, SourceEvent, next_backoff_ms, offer};
@@ -414,11 +414,7 @@ pub fn open_port(cfg: &SerialConfig) -> io::Result<tokio_serial::SerialStream> {
 /// `open_port`, while the path leads to the device `guard` admits (`identity`); the first
 /// device opened is remembered.
 pub fn open_same_port(cfg: &SerialConfig, guard: &mut DeviceGuard) -> io::Result<tokio_serial::SerialStream> {
-    let id = DeviceId::of(&cfg.path)?;
-    guard.admit(id).map_err(io::Error::other)?;
-    let port = open_port(cfg)?;
-    guard.opened(id);
-    Ok(port)
+    guard.open(|_| open_port(cfg))
 }
 
 /// The serial transport: open the port named in `cfg` (the same device on every reopen,

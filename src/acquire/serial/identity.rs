@@ -97,6 +97,17 @@ impl DeviceGuard {
     pub fn opened(&mut self, id: DeviceId) {
         self.first.get_or_insert(id);
     }
+
+    /// Open the path with `open` while it leads to a device the rule admits (else the
+    /// error is `DeviceChanged`); the first device opened is remembered. The serial source
+    /// and a Modbus RTU source open their ports through it.
+    pub fn open<T>(&mut self, open: impl FnOnce(&str) -> std::io::Result<T>) -> std::io::Result<T> {
+        let id = DeviceId::of(&self.path)?;
+        self.admit(id).map_err(std::io::Error::other)?;
+        let port = open(&self.path)?;
+        self.opened(id);
+        Ok(port)
+    }
 }
 
 #[cfg(test)]
