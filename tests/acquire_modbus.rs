@@ -428,6 +428,19 @@ async fn slow_replies_and_exceptions_are_counted_and_not_fatal() {
     assert!(last.detail.contains("setpoint_J=5200") && last.detail.contains("temperature_C=1100.5"), "{}", last.detail);
 }
 
+/// Polling unit 7 over RTU at `path` every 20 ms (`poll_map`).
+fn rtu_poll(path: String) -> ModbusConfig {
+    ModbusConfig {
+        source: "rtu".into(),
+        transport: Transport::Rtu { path, baud: 115_200 },
+        unit_id: 7,
+        poll_interval: Duration::from_millis(20),
+        timeout: Duration::from_millis(200),
+        map: poll_map(),
+        mode: Mode::Poll,
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn rtu_polling_over_a_pty_pair() {
     use tokio_serial::SerialPort;
@@ -438,16 +451,7 @@ async fn rtu_polling_over_a_pty_pair() {
     let faults = Arc::new(Faults::default());
     // An RTU slave answers its own address only.
     let server = serve_rtu(master, BankService { bank: bank.clone(), faults: faults.clone(), unit: Some(7) });
-    let cfg = ModbusConfig {
-        source: "rtu".into(),
-        transport: Transport::Rtu { path, baud: 115_200 },
-        unit_id: 7,
-        poll_interval: Duration::from_millis(20),
-        timeout: Duration::from_millis(200),
-        map: poll_map(),
-        mode: Mode::Poll,
-    };
-    let driver = Running::start(cfg);
+    let driver = Running::start(rtu_poll(path));
     let log = driver.log.clone();
     tokio::time::sleep(Duration::from_millis(400)).await;
     fill_poll_bank(&bank, -7_500.0);
@@ -479,16 +483,7 @@ async fn an_rtu_path_given_to_another_process_is_not_reopened() {
     let bank = shared_bank();
     fill_poll_bank(&bank, 250_000.0);
     let server = serve_rtu(master, BankService { bank, faults: Arc::new(Faults::default()), unit: Some(7) });
-    let cfg = ModbusConfig {
-        source: "rtu".into(),
-        transport: Transport::Rtu { path: link.display().to_string(), baud: 115_200 },
-        unit_id: 7,
-        poll_interval: Duration::from_millis(20),
-        timeout: Duration::from_millis(200),
-        map: poll_map(),
-        mode: Mode::Poll,
-    };
-    let driver = Running::start(cfg);
+    let driver = Running::start(rtu_poll(link.display().to_string()));
     let log = driver.log.clone();
     tokio::time::sleep(Duration::from_millis(400)).await;
     assert!(!batches(&log).is_empty(), "no poll over the first pty");
