@@ -106,8 +106,9 @@ fn independent_table() {
                 .as_ref()
                 .map_or(("none".to_string(), 0.0), |f| (f.name.clone(), 1.0 - f.holdout / d.baseline_holdout));
             let s = d.location.share();
+            let c = &d.confidence;
             println!(
-                "| {name} | {renderer} | {seed}/{} | {verdict} (hidden {}) | {shrink:.2} | {:.4} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.0} s |",
+                "| {name} | {renderer} | {seed}/{} | {verdict} (hidden {}) | {shrink:.2} | {:.4} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.0} s | agreement {:.2} runner-up {} | acts {} |",
                 seed + 1,
                 hidden.library_name(),
                 d.baseline_holdout,
@@ -116,8 +117,12 @@ fn independent_table() {
                 s.forming,
                 s.spring_back,
                 s.post,
-                t.elapsed().as_secs_f64()
+                t.elapsed().as_secs_f64(),
+                c.agreement,
+                c.runner_up.as_ref().map_or("-".to_string(), |r| format!("{} ({:.2}): {}", r.name, r.share, r.why)),
+                d.acts.map_or("-".to_string(), |a| format!("{} {} {:?}", a.phase(), a.band(), a.removed_by_phase)),
             );
+            println!("  {}", forgemon::diagnose::words::opening(&d));
         }
     }
 }

@@ -88,6 +88,7 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<ExitCode> {
         json["verdict"]["effect"].as_str().unwrap_or("none"),
         started.elapsed().as_secs_f64()
     );
+    println!("{}", crate::diagnose::words::opening(&d));
     eprintln!("forgemon: wrote {} and {}", path.display(), html.display());
     write_adopted(&args, &machine_text, &machine, &effects, &d)?;
     Ok(ExitCode::SUCCESS)
@@ -165,6 +166,7 @@ fn read_dir(dir: &Path, machine: &Machine) -> anyhow::Result<(Vec<crate::identif
 fn write_html(d: &Diagnosis, machine: &Machine, path: &Path, elapsed_s: f64) -> anyhow::Result<()> {
     let mut page = Page::new("forgemon diagnose: the sim-to-real gap");
     page.section("Conclusion");
+    page.paragraph(crate::diagnose::words::opening(d));
     page.paragraph(conclusion(d, elapsed_s));
     page.paragraph(rule(d));
     page.section("Where the gap lies (calibration blows, base model)");

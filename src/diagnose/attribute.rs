@@ -226,11 +226,18 @@ impl BlowSet {
     /// Residuals of the model with `effects`: over each blow's window, error over the
     /// peak, weighted so the sum of squares is the mean over blows of nrmse².
     pub fn residuals(&self, machine: &Machine, effects: &EffectSet) -> Option<Vec<f64>> {
+        self.residuals_weighted(machine, effects, &vec![1.0; self.obj.refs.len()])
+    }
+
+    /// `residuals` with blow `i` counted `weights[i]` times (a bootstrap resample's
+    /// multiplicities, `confidence.rs`): its residuals scaled by √weight, so the sum of
+    /// squares is the weighted mean over blows of nrmse².
+    pub fn residuals_weighted(&self, machine: &Machine, effects: &EffectSet, weights: &[f64]) -> Option<Vec<f64>> {
         let sims = self.obj.with_effects(*effects).simulate(machine)?;
-        let nb = self.obj.refs.len() as f64;
+        let nb: f64 = weights.iter().sum();
         let mut out = Vec::new();
-        for ((r, s), (a, b)) in self.obj.refs.iter().zip(&sims).zip(&self.windows) {
-            let w = 1.0 / (r.peak_n * (((b - a).max(1) as f64) * nb).sqrt());
+        for (((r, s), (a, b)), wt) in self.obj.refs.iter().zip(&sims).zip(&self.windows).zip(weights) {
+            let w = (wt / nb).sqrt() / (r.peak_n * ((b - a).max(1) as f64).sqrt());
             out.extend((*a..*b).map(|i| w * (r.load_n[i] - s.load_n.get(i).copied().unwrap_or(0.0))));
         }
         Some(out)
@@ -386,6 +393,37 @@ pub fn fit_candidates(
         holdout: mean(&hold_n),
         holdout_per_blow: hold_n,
     })
+}
+
+/// `effects` (a fitted candidate's, each a library effect) fitted again on `calib` with
+/// blow `i` counted `weights[i]` times, by Levenberg–Marquardt from their own values: a
+/// bootstrap resample's fit (`confidence.rs`). The global stage is not run again: a
+/// resample of the same blows moves the optimum within its valley. None when an effect is
+/// not the library's or a simulation fails.
+pub fn refit(
+    machine: &Machine,
+    base: &EffectSet,
+    effects: &[Effect],
+    calib: &BlowSet,
+    weights: &[f64],
+) -> Option<Vec<Effect>> {
+    let lib = library(machine.kind());
+    let cands: Vec<&Candidate> =
+        effects.iter().map(|e| lib.iter().find(|c| c.name == e.name())).collect::<Option<_>>()?;
+    let params: Vec<Param> = cands.iter().flat_map(|c| c.params.iter().copied()).collect();
+    let start: Vec<f64> = effects
+        .iter()
+        .zip(&cands)
+        .flat_map(|(e, c)| {
+            let given = e.params();
+            c.params
+                .iter()
+                .map(move |p| given.iter().find(|(k, _)| *k == p.key).map_or(p.lo, |(_, v)| *v).clamp(p.lo, p.hi))
+        })
+        .collect();
+    let f = |v: &[f64]| calib.residuals_weighted(machine, &set_of(base, &cands, v), weights);
+    let run = bounded_fit(&params, calib.len(), &f, &start);
+    run.cost.is_finite().then(|| effects_of(&cands, &run.values))
 }
 
 /// The effects of `cands` at the parameter vector `v` (their parameters in order).

@@ -7,6 +7,7 @@
 
 pub mod adopt;
 pub mod attribute;
+pub mod confidence;
 pub mod evidence;
 pub mod indicators;
 pub mod localise;
@@ -15,17 +16,19 @@ pub mod phases;
 #[cfg(test)]
 mod rates;
 pub mod verdict;
+pub mod words;
 
 use rayon::prelude::*;
 use serde_json::{Value, json};
 
 use crate::identify::objective::{Heights, Objective, Reference, Setting};
-use crate::physics::effects::EffectSet;
+use crate::physics::effects::{Effect, EffectSet};
 use crate::physics::machine::Machine;
 use attribute::{BlowSet, Candidate, Fitted, library, mean};
+use confidence::Confidence;
 use indicators::{Indicators, Summary, indicators, summarise};
 use localise::{ByBand, ByPhase, Localised, localise};
-use location::Location;
+use location::{Acts, Location, Split};
 
 pub use verdict::{MIN_PAIR_SHRINK, MIN_SHRINK, NOISE_FACTOR};
 
@@ -50,6 +53,11 @@ pub struct Diagnosis {
     /// Sensor noise over the peak, mean over the holdout blows.
     pub noise_nrmse: f64,
     pub why: String,
+    /// The verdict's bootstrap agreement, intervals and runner-up (`confidence`).
+    pub confidence: Confidence,
+    /// Where the verdict's effect acts: what it removes of the base model's error, phase
+    /// with phase and band by band, on the holdout blows (None for "none").
+    pub acts: Option<Acts>,
     pub calib: BlowSet,
     pub holdout: BlowSet,
 }
@@ -119,6 +127,10 @@ pub fn diagnose(
     let baseline_holdout = mean(&base_hold);
     let singles: Vec<Fitted> = ranked.iter().map(|(_, f)| f.clone()).collect();
     let v = verdict::decide(machine, &base_hold, noise_nrmse, &singles, &pairs);
+    let scores = confidence::Scores { machine, base_hold: &base_hold, noise_nrmse, singles: &singles, pairs: &pairs };
+    let inputs = confidence::Inputs { scores, base: effects, calib: &calib, holdout: &holdout };
+    let confidence = confidence::confidence(&inputs, v.chosen.as_ref(), &v.equivalent);
+    let acts = v.chosen.as_ref().and_then(|f| acts(machine, effects, &f.effects, &holdout));
     Some(Diagnosis {
         baseline_calib: base_calib,
         baseline_holdout,
@@ -133,9 +145,38 @@ pub fn diagnose(
         equivalent: v.equivalent,
         noise_nrmse,
         why: v.why,
+        confidence,
+        acts,
         calib,
         holdout,
     })
+}
+
+/// Where `chosen` acts on the holdout blows: the base model's residual there against the
+/// model's with `chosen`'s effects, on the measured blows' phases.
+fn acts(machine: &Machine, effects: &EffectSet, chosen: &[Effect], holdout: &BlowSet) -> Option<Acts> {
+    let mut set = *effects;
+    for e in chosen {
+        set.apply(e);
+    }
+    let split = |set: EffectSet| -> Option<Vec<Split>> {
+        let sims = holdout.obj.with_effects(set).simulate(machine)?;
+        Some(
+            holdout
+                .obj
+                .refs
+                .iter()
+                .zip(&sims)
+                .map(|(r, s)| {
+                    let l = localise(r, s, holdout.mode2_hz);
+                    let bands = [l.by_band.low, l.by_band.mode2, l.by_band.high];
+                    let ring = ((1.0 / (holdout.mode2_hz * r.dt_s)).round() as usize).max(1);
+                    Split::of(&r.load_n, &s.load_n, &l.measured, &l.model, l.window, r.peak_n, ring, bands)
+                })
+                .collect(),
+        )
+    };
+    Some(Acts::of(&split(*effects)?, &split(set)?))
 }
 
 /// The pairs worth fitting, fitted: each single effect the holdout cannot tell from the
@@ -229,11 +270,18 @@ impl Diagnosis {
             })).collect::<Vec<_>>(),
             "verdict": match &self.verdict {
                 Some(f) => json!({"effect": f.name, "holdout_before": self.baseline_holdout, "holdout_after": f.holdout,
+                                  "confidence": self.confidence.to_json(),
+                                  "acts": self.acts.map(|a| json!({
+                                      "phase": a.phase(), "band": a.band(), "method": location::ACTS_METHOD,
+                                      "removed_by_phase": location::PHASE_NAMES.iter().zip(a.removed_by_phase).map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
+                                      "removed_by_band": location::BAND_NAMES.iter().zip(a.removed_by_band).map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
+                                  })),
                                   "holdout_shrink": shrink(f.holdout), "params": params(f),
                                   "equivalent": self.equivalent.iter().map(|(n, _)| n).collect::<Vec<_>>(),
                                   "equivalent_why": self.equivalent.iter().filter_map(|(n, w)| w.as_ref().map(|w| (n.clone(), json!(w))))
                                       .collect::<serde_json::Map<_, _>>()}),
                 None => json!({"effect": "none", "holdout_before": self.baseline_holdout, "holdout_after": self.baseline_holdout,
+                               "confidence": self.confidence.to_json(),
                                "holdout_shrink": 0.0, "equivalent": [], "equivalent_why": {}}),
             },
             "rule": {

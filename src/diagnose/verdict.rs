@@ -17,7 +17,10 @@
 //! 4. A pair that contains the winner replaces it when the pair improves on it by the same
 //!    test with a shrink of at least `MIN_PAIR_SHRINK`: the second effect must remove most
 //!    of what the first leaves, since any extra parameter takes up some of a misfit.
-//! 5. Otherwise: "none".
+//! 5. When no single effect is real, a pair is named on its own evidence: it improves on the
+//!    base model by the test of rule 2 and on each of its two effects alone by the same test
+//!    and `MIN_SHRINK` (issue 41: two effects that each explain too little alone).
+//! 6. Otherwise: "none".
 
 use crate::physics::effects::Effect;
 use crate::physics::machine::Machine;
@@ -77,6 +80,18 @@ pub fn decide(machine: &Machine, base_hold: &[f64], noise_nrmse: f64, singles: &
         singles.iter().filter(|f| improves(base_hold, &f.holdout_per_blow, MIN_SHRINK)).collect();
     real.sort_by(|a, b| a.holdout.total_cmp(&b.holdout));
     let Some(best) = real.first() else {
+        if let Some(p) = pair_on_its_own(base_hold, singles, pairs) {
+            return Verdict {
+                chosen: Some(p.clone()),
+                equivalent: Vec::new(),
+                why: format!(
+                    "No single effect passes the test, but the pair {} lowers the holdout errors significantly, shrinks them by {:.0} %, and lowers each of its effects' alone by the same test and at least {:.0} %: the two act together.",
+                    p.name,
+                    (1.0 - p.holdout / base) * 100.0,
+                    MIN_SHRINK * 100.0
+                ),
+            };
+        }
         return none(format!(
             "No effect lowers the holdout errors significantly (paired log-ratio or difference t-test over the blows, one-sided {:.0} % each) and by at least {:.0} % overall.",
             ALPHA * 100.0,
@@ -128,6 +143,24 @@ pub fn decide(machine: &Machine, base_hold: &[f64], noise_nrmse: f64, singles: &
             equivalent,
         },
     }
+}
+
+/// The best pair that passes on its own evidence when no single effect does (issue 41): it
+/// improves on the base model by the rule's test and shrink, and on each of its effects
+/// alone by the same test and `MIN_SHRINK`, so that neither rides on the other.
+fn pair_on_its_own<'a>(base_hold: &[f64], singles: &[Fitted], pairs: &'a [Fitted]) -> Option<&'a Fitted> {
+    pairs
+        .iter()
+        .filter(|p| {
+            improves(base_hold, &p.holdout_per_blow, MIN_SHRINK)
+                && p.name.split('+').all(|n| {
+                    singles
+                        .iter()
+                        .find(|s| s.name == n)
+                        .is_some_and(|s| improves(&s.holdout_per_blow, &p.holdout_per_blow, MIN_SHRINK))
+                })
+        })
+        .min_by(|a, b| a.holdout.total_cmp(&b.holdout))
 }
 
 #[cfg(test)]
@@ -213,6 +246,22 @@ mod tests {
         let v = decide(&hammer(), &BASE, 0.005, &[elastic, found], &[]);
         assert_eq!(v.chosen.unwrap().name, "foundation");
         assert!(v.equivalent.is_empty());
+    }
+
+    // Issue 41: no single effect passes (each removes a tenth), the pair removes most of the
+    // error on every blow: the pair is named. A pair no better than its better half is not.
+    #[test]
+    fn a_pair_is_named_on_its_own_evidence_when_no_single_effect_passes() {
+        let a = fitted("elastic_recovery", vec![], &BASE.map(|x| 0.9 * x));
+        let b = fitted("friction_rise", vec![], &BASE.map(|x| 0.92 * x));
+        let mut pair = fitted("elastic_recovery+friction_rise", vec![], &BASE.map(|x| 0.2 * x));
+        pair.n_params = 2;
+        let v = decide(&hammer(), &BASE, 0.005, &[a.clone(), b.clone()], &[pair]);
+        assert_eq!(v.chosen.map(|f| f.name).as_deref(), Some("elastic_recovery+friction_rise"), "{}", v.why);
+        let mut lame = fitted("elastic_recovery+friction_rise", vec![], &BASE.map(|x| 0.85 * x));
+        lame.n_params = 2;
+        let v = decide(&hammer(), &BASE, 0.005, &[a, b], &[lame]);
+        assert!(v.chosen.is_none(), "{v:?}");
     }
 
     #[test]
