@@ -3,13 +3,18 @@
 //! machines and effects checked against their stated ranges, and a few full diagnoses on
 //! `report` seeds (`drawn::REPORT`), which nothing in the diagnosis was tuned on.
 //!
-//! The rates over many seeds are the `#[ignore]`d `tests/diagnose_family_rates.rs`.
+//! The diagnosis cases (`diagnosed`) are the issue's misses on machines never seen, one
+//! machine per kind (`CASE_SEED`): a none case per renderer, a clear compliant contact on the
+//! press (called `foundation` before) and a 0.3 mm press clearance (called `none`). A case the
+//! current diagnosis fails is `#[ignore]`d with what it gave. The rates over many seeds are the
+//! `#[ignore]`d `tests/diagnose_family_rates.rs`.
 
 #[path = "independent/mod.rs"]
 mod independent;
 
 use independent::drawn::{self, Drawn, EFFECTS};
 use independent::family::{self, Contact, Friction, RENDERERS, Renderer};
+use independent::verdict::{names, own_shrink, strength, verdict_of};
 use independent::{Hidden, Kind, speeds};
 
 const KINDS: [Kind; 2] = [Kind::Hammer, Kind::Press];
@@ -203,4 +208,91 @@ fn the_drawn_blows_forge_sensibly() {
             assert!(before >= h0 / 3.0, "seed {s} {kind:?}: {:?} from {h0}", b.heights_m);
         }
     }
+}
+
+/// The report seed of the diagnosis cases' machines and noise.
+const CASE_SEED: u64 = drawn::REPORT;
+
+/// Diagnose `renderer`'s blows of `hidden` (from the machine) on machine `kind` drawn for
+/// `CASE_SEED`, and assert the verdict names `expected`. The machine file with its `[daq]`
+/// filter, as `forgemon diagnose` takes it.
+fn diagnosed(renderer: Renderer, kind: Kind, hidden: impl Fn(&Drawn) -> Hidden, expected: &str) {
+    let t = std::time::Instant::now();
+    let m = drawn::draw(kind, CASE_SEED);
+    let h = hidden(&m);
+    let c = drawn::case_with(renderer, m, h, CASE_SEED).unwrap_or_else(|e| panic!("{e}"));
+    let d = forgemon::diagnose::diagnose(
+        &c.machine.file.machine,
+        &c.machine.file.effect_set(),
+        (c.calib.refs, c.calib.setting),
+        (c.holdout.refs, c.holdout.setting),
+        &|| {},
+    )
+    .expect("the base model simulates the blows");
+    let v = verdict_of(&d);
+    let what = format!(
+        "{} {kind:?} {h:?} seed {CASE_SEED}: verdict {v}, own shrink {:.2}, strength {:.1}, {:.1} s",
+        renderer.name(),
+        own_shrink(&d, expected),
+        strength(&d),
+        t.elapsed().as_secs_f64()
+    );
+    let best: Vec<String> = d
+        .candidates
+        .iter()
+        .take(3)
+        .map(|f| format!("{} {:.2}", f.name, 1.0 - f.holdout / d.baseline_holdout))
+        .collect();
+    eprintln!("DIAGNOSED {what}; best shrinks {best:?}; {}", d.why);
+    assert!(if expected == "none" { v == "none" } else { names(&v, expected) }, "{what}");
+}
+
+/// A clear compliant contact: half the support's stiffness in series.
+fn compliant(m: &Drawn) -> Hidden {
+    Hidden::Compliant { k_n_per_m: 0.5 * m.k_support_n_per_m }
+}
+
+/// The issue's press clearance: 0.3 mm under a lower die of a quarter of the tool's mass.
+fn clearance(m: &Drawn) -> Hidden {
+    Hidden::Clearance { gap_m: 0.3e-3, die_kg: 0.25 * m.m_upper_kg }
+}
+
+#[test]
+fn rigid_eq3_hammer_none_is_none() {
+    diagnosed(RENDERERS[0], Kind::Hammer, |_| Hidden::None, "none");
+}
+
+#[test]
+fn rigid_eq3_press_clearance_is_clearance() {
+    diagnosed(RENDERERS[0], Kind::Press, clearance, "clearance");
+}
+
+/// Siebel's law is eq. 3 to first order; at the fifth blow's d/h ≈ 1.5 (A = μ d/h ≈ 0.08 on
+/// copper, 0.3 on steel) the second-order term A²/12 is a load difference of up to 0.75 %.
+#[test]
+#[ignore = "issue 41: elastic-siebel press none seed 4900 gives strain_rate (shrink 0.29; strain_hardening, foundation equivalent), strength 3.6"]
+fn elastic_siebel_press_none_is_none() {
+    diagnosed(RENDERERS[1], Kind::Press, |_| Hidden::None, "none");
+}
+
+#[test]
+fn elastic_siebel_press_compliant_is_elastic_recovery() {
+    diagnosed(RENDERERS[1], Kind::Press, compliant, "elastic_recovery");
+}
+
+#[test]
+#[ignore = "issue 41: hertz-tresca hammer none seed 4900 gives strain_rate (shrink 0.25; foundation 0.33 not significant), strength 3.3"]
+fn hertz_tresca_hammer_none_is_none() {
+    diagnosed(RENDERERS[2], Kind::Hammer, |_| Hidden::None, "none");
+}
+
+#[test]
+fn hertz_tresca_press_compliant_is_elastic_recovery() {
+    diagnosed(RENDERERS[2], Kind::Press, compliant, "elastic_recovery");
+}
+
+#[test]
+#[ignore = "issue 41: hertz-tresca press clearance 0.3 mm (42 kg die) seed 4900 gives none: clearance shrinks 0.17, best pair clearance+foundation 0.27, strength 54.6"]
+fn hertz_tresca_press_clearance_is_clearance() {
+    diagnosed(RENDERERS[2], Kind::Press, clearance, "clearance");
 }

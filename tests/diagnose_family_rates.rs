@@ -8,7 +8,7 @@
 //! from that seed on (to look at one case again).
 //!
 //! Run: `cargo test --release --test diagnose_family_rates -- --ignored --nocapture`, with
-//! - `FORGEMON_FAMILY_SEEDS=2` seeds per cell (the default);
+//! - `FORGEMON_FAMILY_SEEDS=8` seeds per cell (the default);
 //! - `FORGEMON_FAMILY_RENDERERS=rigid-eq3,elastic-siebel,hertz-tresca` (the default; any
 //!   contact `rigid|elastic|hertz` with any friction `eq3|siebel|tresca`);
 //! - `FORGEMON_FAMILY_KINDS=hammer,press`, `FORGEMON_FAMILY_EFFECTS=none,clearance,…`;
@@ -27,35 +27,18 @@ use std::io::Write as _;
 use forgemon::diagnose::{Diagnosis, diagnose};
 use independent::drawn::{self, EFFECTS};
 use independent::family::{RENDERERS, Renderer};
+use independent::verdict::{UNCERTAIN, names, own_shrink, strength, verdict_of};
 use independent::{Hidden, Kind};
 
-/// Seeds per cell by default: 3 renderers × 2 kinds × 6 effects × 2 = 72 diagnoses, about
-/// 25 min on 2 cores.
-const DEFAULT_SEEDS: u64 = 2;
+/// Seeds per cell by default: 3 renderers × 2 kinds × 6 effects × 8 = 288 diagnoses, about
+/// 5 s each on 2 cores.
+const DEFAULT_SEEDS: u64 = 8;
 /// A case counts as strong above this baseline holdout error over the noise (twice the
 /// verdict rule's `NOISE_FACTOR` of 2).
 const STRONG: f64 = 4.0;
 /// The columns of the confusion matrix beyond `EFFECTS`.
 const OTHER: &str = "other";
-const UNCERTAIN: &str = "uncertain";
 const ERROR: &str = "error";
-
-/// The verdict as the table counts it: `uncertain` when the report says the verdict is
-/// uncertain between effects (`verdict.confidence.uncertain_between`, not empty), else the
-/// effect's name (`a+b` for a pair), `none` without one.
-fn verdict_of(d: &Diagnosis) -> String {
-    let json = d.to_json();
-    let uncertain = json["verdict"]["confidence"]["uncertain_between"].as_array().is_some_and(|a| !a.is_empty());
-    if uncertain {
-        return UNCERTAIN.to_string();
-    }
-    d.verdict.as_ref().map_or("none".to_string(), |f| f.name.clone())
-}
-
-/// Whether `verdict` names `effect` (alone or in a pair).
-fn names(verdict: &str, effect: &str) -> bool {
-    verdict.split('+').any(|v| v == effect)
-}
 
 /// One case's outcome.
 #[derive(Debug, Clone)]
@@ -117,12 +100,8 @@ fn run_case(renderer: Renderer, kind: Kind, effect: &'static str, seed: u64) -> 
         Ok(Ok((hidden, d))) => {
             o.hidden = hidden;
             o.verdict = verdict_of(&d);
-            o.strength = d.baseline_holdout / d.noise_nrmse;
-            o.own_shrink = d
-                .candidates
-                .iter()
-                .find(|f| f.name == effect)
-                .map_or(f64::NAN, |f| 1.0 - f.holdout / d.baseline_holdout);
+            o.strength = strength(&d);
+            o.own_shrink = own_shrink(&d, effect);
             Some(d)
         }
         Ok(Err(e)) => {

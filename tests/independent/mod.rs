@@ -32,6 +32,7 @@
 pub mod captures;
 pub mod drawn;
 pub mod family;
+pub mod verdict;
 
 use forgemon::config::{parse_machine, parse_process};
 use forgemon::identify::objective::{Reference, Setting};
