@@ -31,8 +31,8 @@ use independent::drawn::{self, EFFECTS};
 use independent::family::{RENDERERS, Renderer};
 use independent::verdict::{UNCERTAIN, names, own_shrink, strength, verdict_of};
 
-/// Seeds per cell by default: 3 renderers × 2 kinds × 6 effects × 8 = 288 diagnoses, about
-/// 5 s each on 2 cores.
+/// Seeds per cell by default: 3 renderers × 2 kinds × 6 effects × 8 = 288 diagnoses, a median
+/// of 3–4 s each on 2 cores (40 min in all, beside another engineer's builds).
 const DEFAULT_SEEDS: u64 = 8;
 /// A case counts as strong above this baseline holdout error over the noise (twice the
 /// verdict rule's `NOISE_FACTOR` of 2).
@@ -163,7 +163,7 @@ fn document(all: &[Outcome], set: &str, seeds: u64, renderer_names: &[String]) -
          machine (five blows leave about half its height), one hidden effect at a strength drawn log-uniform, and a \
          calibration and a holdout billet of five blows each.\n\
          - Strength: the base model's holdout nrmse over the sensor noise (`baseline_holdout / noise_nrmse`).\n\
-         - Seeds: set `{set}`, {seeds} per cell (renderer × kind × effect): a cell's rate moves in steps of {:.0} %.\n\
+         - Seeds: set `{set}`, {seeds} per cell (renderer × kind × effect): a cell's rate moves in steps of {:.1} %.\n\
          - Goals: false positives on `none` ≤ 5 %; each effect found in ≥ 95 % of its cases with strength ≥ {STRONG}.\n\
          - A pair verdict `a+b` counts as finding a and b; `uncertain` is a verdict the report marks uncertain.\n\
          - Siebel and Tresca part from the library's eq. 3 at second order in μ d/h: on the steel hammer that alone \
@@ -267,8 +267,13 @@ fn document(all: &[Outcome], set: &str, seeds: u64, renderer_names: &[String]) -
             let _ = writeln!(s);
         }
     }
-    let _ =
-        writeln!(s, "## Time per case (render and diagnosis), s\n\n| kind | cases | median | max |\n|---|---|---|---|");
+    let total: f64 = all.iter().map(|o| o.secs).sum();
+    let _ = writeln!(
+        s,
+        "## Time per case (render and diagnosis), s\n\nAll {} cases: {:.0} min, one after the other.\n\n| kind | cases | median | max |\n|---|---|---|---|",
+        all.len(),
+        total / 60.0
+    );
     for kind in [Kind::Hammer, Kind::Press] {
         let t: Vec<f64> = all.iter().filter(|o| o.kind == kind).map(|o| o.secs).collect();
         if !t.is_empty() {
