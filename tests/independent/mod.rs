@@ -30,6 +30,9 @@
 #![allow(dead_code)]
 
 pub mod captures;
+pub mod drawn;
+pub mod family;
+pub mod verdict;
 
 use forgemon::config::{parse_machine, parse_process};
 use forgemon::identify::objective::{Reference, Setting};
@@ -140,6 +143,7 @@ impl Hidden {
 }
 
 /// The machine's parameters as the renderer uses them.
+#[derive(Debug, Clone)]
 struct Rig {
     kind: Kind,
     /// Upper body (hammer ram, press tool), kg.
