@@ -291,7 +291,9 @@ fn hertz_tresca_press_compliant_is_elastic_recovery() {
 }
 
 #[test]
-#[ignore = "issue 41: hertz-tresca press clearance 0.3 mm (42 kg die) seed 4900 gives none: clearance shrinks 0.14, best pair clearance+foundation 0.25, strength 13.3"]
+// Ignored until the press's lower die was scanned finely at the closure's gaps
+// (src/diagnose/attribute.rs `closure_points`, chosen on tune seeds 4100–4105): it gave none
+// (clearance shrinking 0.14), now clearance.
 fn hertz_tresca_press_clearance_is_clearance() {
     diagnosed(RENDERERS[2], Kind::Press, clearance, "clearance");
 }
