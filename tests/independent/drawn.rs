@@ -29,16 +29,11 @@
 
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
-use rand_distr::{Distribution, Normal};
 
 use super::family::{self, FamilyBlow, Renderer};
-use super::{ADC_LSB_N, Billet, CALIPER_M, ENCODER_STEP_M, Hidden, Kind, Rig, daq, speeds};
+use super::{ADC_LSB_N, Billet, Hidden, Kind, Rig, read_billet, speeds};
 use forgemon::config::{MachineFile, parse_machine, parse_process};
-use forgemon::identify::objective::Setting;
 use forgemon::physics::process::Process;
-use forgemon::signal::capture::CaptureRow;
-use forgemon::signal::segment::{SegmentConfig, Segmenter};
-use forgemon::synth::rows_batch;
 
 /// The first case seed of the set the diagnosis may be tuned on.
 pub const TUNE: u64 = 4100;
@@ -313,40 +308,9 @@ pub fn billet(
     let rig = m.rig(hidden);
     let mut process = m.process();
     process.billet.height_m *= height_scale;
-    let machine = &m.file.machine;
-    let mut rng = StdRng::seed_from_u64(seed);
-    let load_noise = Normal::new(0.0, rig.load_sd_n).expect("finite sd");
-    let acc_noise = Normal::new(0.0, rig.acc_sd_mps2).expect("finite sd");
-    let dt = 1.0 / rig.sample_rate_hz;
     let lsb = ADC_LSB_N * m.adc_range_scale();
-    let mut h = process.billet.height_m;
-    let (mut refs, mut heights, mut measured) = (Vec::new(), Vec::new(), Vec::new());
-    for (i, &v0) in v0s.iter().enumerate() {
-        let fine = family::blow(&rig, renderer, &process, hidden, v0, h);
-        let (load, ram, acc) = (daq(&fine.load_n, &rig), daq(&fine.ram_m, &rig), daq(&fine.ram_acc, &rig));
-        let offset = rng.random_range(-5e3..5e3);
-        let encoder_zero = 0.5 - h;
-        let rows: Vec<CaptureRow> = (0..load.len())
-            .map(|k| CaptureRow {
-                t_s: 100.0 * i as f64 + k as f64 * dt,
-                load_n: ((load[k] + offset + load_noise.sample(&mut rng)) / lsb).round() * lsb,
-                disp_m: ((encoder_zero + ram[k]) / ENCODER_STEP_M).round() * ENCODER_STEP_M,
-                acc_mps2: acc[k] + acc_noise.sample(&mut rng),
-            })
-            .collect();
-        let batch = rows_batch("family", 0, 0, 1e9 / rig.sample_rate_hz, &rows);
-        let kind_m = machine.kind();
-        let cut = Segmenter::cut_all(SegmentConfig::for_kind(kind_m), [&batch]);
-        let fit_s = forgemon::estimate::EstimatorConfig::for_kind(kind_m).fit_s;
-        let b = cut.first().ok_or_else(|| format!("seed {seed}, blow {}: not segmented", i + 1))?;
-        refs.push(
-            forgemon::diagnose::localise::reference("b", b, Some(i + 1), fit_s, machine)
-                .map_err(|e| format!("seed {seed}, blow {}: {e}", i + 1))?,
-        );
-        h = fine.h_end_m;
-        heights.push(h);
-        measured.push(h + rng.random_range(-CALIPER_M..=CALIPER_M));
-    }
-    process.measured_final_heights_m = measured;
-    Ok(Billet { refs, setting: Setting::Billet(process), heights_m: heights })
+    read_billet(&rig, &m.file.machine, process, v0s, lsb, seed, "family", |p, v0, h| {
+        let f = family::blow(&rig, renderer, p, hidden, v0, h);
+        (f.load_n, f.ram_m, f.ram_acc, f.h_end_m)
+    })
 }

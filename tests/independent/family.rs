@@ -207,14 +207,8 @@ pub(super) fn blow(rig: &Rig, renderer: Renderer, process: &Process, hidden: &Hi
         (Contact::ElasticPlastic, None) => Law::Spring(K_BILLET_STIFF),
         (Contact::HertzSeries, k) => Law::Hertz(hertz_k(k.unwrap_or(K_BILLET_STIFF), f_typ)),
     };
-    let gap = match hidden {
-        Hidden::Clearance { gap_m, .. } => *gap_m,
-        _ => 0.0,
-    };
-    let foundation = match *hidden {
-        Hidden::Foundation { m_kg, k_n_per_m, c_ns_per_m } => Some((m_kg, k_n_per_m, c_ns_per_m)),
-        _ => None,
-    };
+    let gap = hidden.gap_m();
+    let foundation = hidden.foundation();
     let massless = rig.m_lower == 0.0;
     let gravity = if rig.kind == Kind::Hammer { G } else { 0.0 };
     let pre = (PRE_S / dt).round() as usize;

@@ -126,6 +126,22 @@ pub enum Hidden {
 }
 
 impl Hidden {
+    /// The clearance's gap, m (0 without one).
+    pub fn gap_m(&self) -> f64 {
+        match self {
+            Hidden::Clearance { gap_m, .. } => *gap_m,
+            _ => 0.0,
+        }
+    }
+
+    /// The foundation's mass, spring and damper, if one is hidden.
+    pub fn foundation(&self) -> Option<(f64, f64, f64)> {
+        match *self {
+            Hidden::Foundation { m_kg, k_n_per_m, c_ns_per_m } => Some((m_kg, k_n_per_m, c_ns_per_m)),
+            _ => None,
+        }
+    }
+
     /// The library's name of the effect this stands for.
     pub fn library_name(&self) -> &'static str {
         match self {
@@ -273,14 +289,8 @@ fn blow_over(rig: &Rig, process: &Process, hidden: &Hidden, v0: f64, h0: f64, pr
         Hidden::Compliant { k_n_per_m } => *k_n_per_m,
         _ => K_BILLET_STIFF,
     };
-    let gap = match hidden {
-        Hidden::Clearance { gap_m, .. } => *gap_m,
-        _ => 0.0,
-    };
-    let foundation = match *hidden {
-        Hidden::Foundation { m_kg, k_n_per_m, c_ns_per_m } => Some((m_kg, k_n_per_m, c_ns_per_m)),
-        _ => None,
-    };
+    let gap = hidden.gap_m();
+    let foundation = hidden.foundation();
     let gravity = if rig.kind == Kind::Hammer { G } else { 0.0 };
     let pre = (pre_s / dt).round() as usize;
     // Start `pre_s` before contact, the ram falling (hammer) or driven (press) onto the billet.
@@ -449,6 +459,28 @@ pub fn try_billet(kind: Kind, hidden: &Hidden, v0s: &[f64], height_scale: f64, s
     process.measured_final_heights_m.clear();
     process.billet.height_m *= height_scale;
     let m = machine(kind);
+    read_billet(&rig, &m, process, v0s, ADC_LSB_N, seed, "independent", |p, v0, h| {
+        let f = blow(&rig, p, hidden, v0, h);
+        (f.load_n, f.ram_m, f.ram_acc, f.h_end_m)
+    })
+}
+
+/// One billet struck at `v0s`, each blow rendered at the fine step by `render` (the sensor's
+/// load, the ram's position and acceleration, and the height after it), through the DAQ
+/// (`daq`, a load ADC of `lsb`, the encoder's steps, noise from `seed`), cut by the project's
+/// segmenter and read by `localise::reference` as a real capture directory would be. The
+/// heights after each blow are measured by caliper (`CALIPER_M`) into the sheet.
+#[allow(clippy::too_many_arguments)]
+fn read_billet(
+    rig: &Rig,
+    m: &Machine,
+    mut process: Process,
+    v0s: &[f64],
+    lsb: f64,
+    seed: u64,
+    source: &str,
+    render: impl Fn(&Process, f64, f64) -> (Vec<f64>, Vec<f64>, Vec<f64>, f64),
+) -> Result<Billet, String> {
     let mut rng = StdRng::seed_from_u64(seed);
     let load_noise = Normal::new(0.0, rig.load_sd_n).expect("finite sd");
     let acc_noise = Normal::new(0.0, rig.acc_sd_mps2).expect("finite sd");
@@ -456,28 +488,28 @@ pub fn try_billet(kind: Kind, hidden: &Hidden, v0s: &[f64], height_scale: f64, s
     let mut h = process.billet.height_m;
     let (mut refs, mut heights, mut measured) = (Vec::new(), Vec::new(), Vec::new());
     for (i, &v0) in v0s.iter().enumerate() {
-        let fine = blow(&rig, &process, hidden, v0, h);
-        let (load, ram, acc) = (daq(&fine.load_n, &rig), daq(&fine.ram_m, &rig), daq(&fine.ram_acc, &rig));
+        let (load_n, ram_m, ram_acc, h_end_m) = render(&process, v0, h);
+        let (load, ram, acc) = (daq(&load_n, rig), daq(&ram_m, rig), daq(&ram_acc, rig));
         let offset = rng.random_range(-5e3..5e3);
         let encoder_zero = 0.5 - h;
         let rows: Vec<CaptureRow> = (0..load.len())
             .map(|k| CaptureRow {
                 t_s: 100.0 * i as f64 + k as f64 * dt,
-                load_n: ((load[k] + offset + load_noise.sample(&mut rng)) / ADC_LSB_N).round() * ADC_LSB_N,
+                load_n: ((load[k] + offset + load_noise.sample(&mut rng)) / lsb).round() * lsb,
                 disp_m: ((encoder_zero + ram[k]) / ENCODER_STEP_M).round() * ENCODER_STEP_M,
                 acc_mps2: acc[k] + acc_noise.sample(&mut rng),
             })
             .collect();
-        let batch = rows_batch("independent", 0, 0, 1e9 / rig.sample_rate_hz, &rows);
+        let batch = rows_batch(source, 0, 0, 1e9 / rig.sample_rate_hz, &rows);
         let kind_m = m.kind();
         let cut = Segmenter::cut_all(SegmentConfig::for_kind(kind_m), [&batch]);
         let fit_s = forgemon::estimate::EstimatorConfig::for_kind(kind_m).fit_s;
         let b = cut.first().ok_or_else(|| format!("seed {seed}, blow {}: not segmented", i + 1))?;
         refs.push(
-            forgemon::diagnose::localise::reference("b", b, Some(i + 1), fit_s, &m)
+            forgemon::diagnose::localise::reference("b", b, Some(i + 1), fit_s, m)
                 .map_err(|e| format!("seed {seed}, blow {}: {e}", i + 1))?,
         );
-        h = fine.h_end_m;
+        h = h_end_m;
         heights.push(h);
         measured.push(h + rng.random_range(-CALIPER_M..=CALIPER_M));
     }
