@@ -9,12 +9,14 @@ use super::confidence::ParamInterval;
 
 /// `value` of `key` in engineering units, with `±` its interval's larger half-width.
 fn value(key: &str, params: &[ParamInterval], v: f64) -> String {
-    let pm = params
-        .iter()
-        .find(|p| p.key == key)
-        .map(|p| p.rel_half_width())
-        .filter(|w| *w > 0.0 && w.is_finite())
-        .map_or(String::new(), |w| format!(" ± {:.0} %", (w * 100.0).max(1.0)));
+    let pm =
+        params.iter().find(|p| p.key == key).map(|p| p.rel_half_width()).filter(|w| *w > 0.0 && w.is_finite()).map_or(
+            String::new(),
+            |w| {
+                // Under half a per cent the interval is stated as such, not rounded up to 1 %.
+                if w < 0.005 { " (± under 1 %)".to_string() } else { format!(" ± {:.0} %", w * 100.0) }
+            },
+        );
     let unit = match key {
         "gap_m" => format!("{:.2} mm", v * 1e3),
         "k_contact_N_per_m" | "k3_N_per_m" => format!("{:.2} GN/m", v / 1e9),
