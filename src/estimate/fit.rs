@@ -25,7 +25,7 @@ use crate::physics::billet::{BilletLaw, FlowStress};
 use crate::physics::blow::{BlowResult, SimOptions, simulate_blow_traced_from};
 use crate::physics::effects::EffectSet;
 use crate::physics::integrator::Method;
-use crate::physics::load_filter::{self, LoadFilter};
+use crate::physics::load_filter::LoadFilter;
 use crate::physics::machine::Machine;
 use crate::physics::plant::Plant;
 use crate::physics::process::Process;
@@ -175,10 +175,9 @@ struct Setup<'a> {
 impl<'a> Setup<'a> {
     fn new(p: &'a FitProblem<'a>, encoder_resolution_m: f64) -> Result<Self, FitError> {
         let b = p.blow;
-        // A declared filter is integrated on a step of at most `load_filter::MAX_STEP_S`.
-        let filtered = p.effects.load_filter != LoadFilter::None;
-        let os =
-            if filtered { OVERSAMPLE.max((b.period_s / load_filter::MAX_STEP_S).ceil() as usize) } else { OVERSAMPLE };
+        // A declared filter is integrated on a step fine enough for it
+        // (`LoadFilter::steps_per_sample`).
+        let os = OVERSAMPLE.max(p.effects.load_filter.steps_per_sample(b.period_s));
         let aa = LowPass::design(NOMINAL_ANTI_ALIAS_CUTOFF / os as f64, NOMINAL_ANTI_ALIAS_TRANSITION / os as f64);
         let lp = LowPass::design(ANALYSIS_CUTOFF, ANALYSIS_TRANSITION);
         let needed = PRE_SAMPLES + lp.half();

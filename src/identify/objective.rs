@@ -18,7 +18,6 @@ use crate::identify::model::default_prior;
 use crate::physics::blow::{SimOptions, TraceEnd, simulate_blow_sensor_until};
 use crate::physics::effects::EffectSet;
 use crate::physics::integrator::Method;
-use crate::physics::load_filter::{self, LoadFilter};
 use crate::physics::machine::{Machine, MachineKind};
 use crate::physics::plant::Plant;
 use crate::physics::process::{CALIPER_TOLERANCE_M, Process};
@@ -29,9 +28,6 @@ use crate::signal::spectrum::{Mode, Spectrum, SpectrumPlanner, blow_modes};
 
 /// Fraction of the measured peak where the two blows are aligned.
 pub const ALIGN_FRACTION: f64 = 0.10;
-/// And at least this many steps to a sample: a filter at 0.4 of the rate then sees ten
-/// steps to its cut-off's period.
-const FILTER_STEPS: f64 = 4.0;
 /// Floor of the relative errors' denominators, fraction of the peak (load or spectrum).
 pub const RELATIVE_FLOOR: f64 = 0.05;
 /// The paper's weight of the load against the spectrum.
@@ -517,9 +513,8 @@ impl Objective {
                 _ => Plant::new(machine, &self.effects, None, 0.0),
             };
             // Through a declared anti-alias filter, the trace on a step fine enough for the
-            // filter (`load_filter::MAX_STEP_S`); else read at the samples.
-            let filtered = self.effects.load_filter != LoadFilter::None;
-            let over = if filtered { (r.dt_s / load_filter::MAX_STEP_S).max(FILTER_STEPS).ceil() as usize } else { 1 };
+            // filter (`LoadFilter::steps_per_sample`); else read at the samples.
+            let over = self.effects.load_filter.steps_per_sample(r.dt_s);
             let fine_dt = r.dt_s / over as f64;
             let opts = SimOptions {
                 method: Method::Dopri5 { rtol: FIT_RTOL },
