@@ -111,6 +111,8 @@ const STRAIN_AT_LEVEL: f64 = DEFAULT_EPS_REF;
 /// Bounds of the references: wide enough that the grid's levels are reached for exponents
 /// down to about 0.02 (rate) and 0.1 (strain); below, the level is held nearer 1.
 const RATE_REF: Param = Param { key: "rate_ref_per_s", lo: 1e-3, hi: 1e5 };
+/// The floor of the rate and hardening exponents' search (`verdict::level_only` reads it).
+pub const EXPONENT_FLOOR: f64 = 1e-3;
 const EPS_REF: Param = Param { key: "eps_ref", lo: 1e-3, hi: 1e2 };
 /// The foundation's damping ratio at the grid's points: the local search moves it either
 /// way (from a start at 0 it could not: the log transform's gradient vanishes at a bound).
@@ -177,14 +179,14 @@ pub fn library(kind: MachineKind) -> Vec<Candidate> {
         monotone("friction_rise", p("exponent", 1e-3, 3.0), |v| Effect::FrictionRise { exponent: v[0] }),
         Candidate {
             name: "strain_rate",
-            params: vec![p("m", 1e-3, 0.5), RATE_REF],
+            params: vec![p("m", EXPONENT_FLOOR, 0.5), RATE_REF],
             grid: vec![Axis::Log(GRID_MONOTONE), Axis::At(&LEVELS)],
             from_grid: |v| v[1] = reference_at_level(RATE_AT_LEVEL_PER_S, v[1], v[0], &RATE_REF),
             build: |v| Effect::StrainRate { m: v[0], rate_ref_per_s: v[1] },
         },
         Candidate {
             name: "strain_hardening",
-            params: vec![p("n", 1e-3, 1.0), EPS_REF],
+            params: vec![p("n", EXPONENT_FLOOR, 1.0), EPS_REF],
             grid: vec![Axis::Log(GRID_MONOTONE), Axis::At(&LEVELS)],
             from_grid: |v| v[1] = reference_at_level(STRAIN_AT_LEVEL, v[1], v[0], &EPS_REF),
             build: |v| Effect::StrainHardening { n: v[0], eps_ref: v[1] },

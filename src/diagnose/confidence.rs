@@ -30,7 +30,7 @@ use crate::physics::machine::Machine;
 
 use super::attribute::{BlowSet, Fitted, mean, refit};
 use super::evidence::{ALPHA, equivalent, improves};
-use super::verdict::{MIN_SHRINK, NOISE_FACTOR, decide};
+use super::verdict::{MIN_SHRINK, NOISE_FACTOR, decide, level_only};
 
 /// Holdout resamples: the agreement's standard error is at most 0.5/√400 = 2.5 points.
 pub const RESAMPLES: usize = 400;
@@ -273,6 +273,9 @@ fn why_lost(inp: &Scores, chosen: Option<&Fitted>, equivalent_to: &[(String, Opt
         return format!(
             "the base model's holdout error ({base:.4}) is within {NOISE_FACTOR}× the sensor noise: there is no gap for it to explain"
         );
+    }
+    if let Some(why) = level_only(r) {
+        return why;
     }
     if !improves(inp.base_hold, &r.holdout_per_blow, MIN_SHRINK) {
         return if shrink < MIN_SHRINK {
