@@ -111,40 +111,12 @@ pub fn decide(machine: &Machine, base_hold: &[f64], noise_nrmse: f64, singles: &
         .filter(|f| level_only(f).is_none() && improves(base_hold, &f.holdout_per_blow, MIN_SHRINK))
         .collect();
     real.sort_by(|a, b| a.holdout.total_cmp(&b.holdout));
-    // The best flow-stress level that explains part of the gap: an effect must beat it.
-    let level = singles
-        .iter()
-        .filter(|f| level_only(f).is_some() && improves(base_hold, &f.holdout_per_blow, MIN_SHRINK))
-        .min_by(|a, b| a.holdout.total_cmp(&b.holdout));
-    let no_better = |f: &Fitted| level.filter(|l| !improves(&l.holdout_per_blow, &f.holdout_per_blow, MIN_SHRINK));
-    if let Some(l) = real.first().and_then(|b| no_better(b)) {
-        return none(format!(
-            "{} at its exponent's floor, a change of the flow stress's level and no effect, lowers the holdout errors as well as any effect (by {:.0} %; {} by {:.0} %, not significantly and {:.0} % lower): the gap is not one of the library's effects.",
-            l.name,
-            (1.0 - l.holdout / base) * 100.0,
-            real[0].name,
-            (1.0 - real[0].holdout / base) * 100.0,
-            MIN_SHRINK * 100.0
-        ));
+    let level = Level::best(base_hold, singles);
+    if let Some(why) = real.first().and_then(|b| level.rivals(b, base)) {
+        return none(why);
     }
     let Some(best) = real.first() else {
-        if let Some(p) = pair_on_its_own(base_hold, singles, pairs).filter(|p| no_better(p).is_none()) {
-            return Verdict {
-                chosen: Some(p.clone()),
-                equivalent: Vec::new(),
-                why: format!(
-                    "No single effect passes the test, but the pair {} lowers the holdout errors significantly, shrinks them by {:.0} %, and lowers each of its effects' alone by the same test and at least {:.0} %: the two act together.",
-                    p.name,
-                    (1.0 - p.holdout / base) * 100.0,
-                    MIN_SHRINK * 100.0
-                ),
-            };
-        }
-        return none(format!(
-            "No effect lowers the holdout errors significantly (paired log-ratio or difference t-test over the blows, one-sided {:.0} % each) and by at least {:.0} % overall.",
-            ALPHA * 100.0,
-            MIN_SHRINK * 100.0
-        ));
+        return no_single(base, base_hold, singles, pairs, &level);
     };
     let ties: Vec<&Fitted> =
         real.iter().copied().filter(|f| equivalent(&best.holdout_per_blow, &f.holdout_per_blow)).collect();
@@ -191,6 +163,65 @@ pub fn decide(machine: &Machine, base_hold: &[f64], noise_nrmse: f64, singles: &
             ),
             equivalent,
         },
+    }
+}
+
+/// The best flow-stress level (`level_only`) that explains part of the gap: a rival every
+/// named effect must beat.
+struct Level<'a>(Option<&'a Fitted>);
+
+impl<'a> Level<'a> {
+    fn best(base_hold: &[f64], singles: &'a [Fitted]) -> Level<'a> {
+        Level(
+            singles
+                .iter()
+                .filter(|f| level_only(f).is_some() && improves(base_hold, &f.holdout_per_blow, MIN_SHRINK))
+                .min_by(|a, b| a.holdout.total_cmp(&b.holdout)),
+        )
+    }
+
+    /// Why `f` is no better than the level, if it is not: its errors are not significantly
+    /// and `MIN_SHRINK` lower than the level's.
+    fn rivals(&self, f: &Fitted, base: f64) -> Option<String> {
+        let l = self.0.filter(|l| !improves(&l.holdout_per_blow, &f.holdout_per_blow, MIN_SHRINK))?;
+        Some(format!(
+            "{} at its exponent's floor, a change of the flow stress's level and no effect, lowers the holdout errors as well as any effect (by {:.0} %; {} by {:.0} %, not significantly and {:.0} % lower): the gap is not one of the library's effects.",
+            l.name,
+            (1.0 - l.holdout / base) * 100.0,
+            f.name,
+            (1.0 - f.holdout / base) * 100.0,
+            MIN_SHRINK * 100.0
+        ))
+    }
+}
+
+/// The verdict when no single effect passes: a pair on its own evidence that beats the
+/// level, or none.
+fn no_single(base: f64, base_hold: &[f64], singles: &[Fitted], pairs: &[Fitted], level: &Level) -> Verdict {
+    let pair = pair_on_its_own(base_hold, singles, pairs);
+    if let Some(why) = pair.and_then(|p| level.rivals(p, base)) {
+        return Verdict { chosen: None, equivalent: Vec::new(), why };
+    }
+    if let Some(p) = pair {
+        return Verdict {
+            chosen: Some(p.clone()),
+            equivalent: Vec::new(),
+            why: format!(
+                "No single effect passes the test, but the pair {} lowers the holdout errors significantly, shrinks them by {:.0} %, and lowers each of its effects' alone by the same test and at least {:.0} %: the two act together.",
+                p.name,
+                (1.0 - p.holdout / base) * 100.0,
+                MIN_SHRINK * 100.0
+            ),
+        };
+    }
+    Verdict {
+        chosen: None,
+        equivalent: Vec::new(),
+        why: format!(
+            "No effect lowers the holdout errors significantly (paired log-ratio or difference t-test over the blows, one-sided {:.0} % each) and by at least {:.0} % overall.",
+            ALPHA * 100.0,
+            MIN_SHRINK * 100.0
+        ),
     }
 }
 
