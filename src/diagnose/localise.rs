@@ -624,4 +624,38 @@ mod tests {
         // With the load back at zero the billet's permanent set is measured.
         assert!(r.measured.and_then(|m| m.set_m).is_some(), "{:?}", r.measured);
     }
+
+    /// A long record before the contact (a press's drive triggers the cut early) with one
+    /// noise sample over the alignment's 10 % there: the alignment stays at the load's rise.
+    #[test]
+    fn a_noise_spike_long_before_the_contact_does_not_take_the_alignment() {
+        use crate::config::{parse_machine, parse_process};
+        use crate::identify::objective::PRE_S;
+        use crate::physics::effects::EffectSet;
+        use crate::signal::segment::{SegmentConfig, Segmenter};
+        use crate::synth::{CaptureSpec, rows_batch, synth_blows};
+        let m = parse_machine(
+            "m",
+            "kind = \"screw_press\"\nm_tool_kg = 2500\nm_ram_kg = 90000\nk_link_N_per_m = 2.1e9\n\
+             c_link_Ns_per_m = 2.8e5\nk_frame_N_per_m = 8.0e9\nc_frame_Ns_per_m = 5.0e4\nk_sensor_N_per_m = 3.39e10\n",
+        )
+        .unwrap()
+        .machine;
+        let p = parse_process("p", include_str!("../../config/copper-cu99.process.toml")).unwrap();
+        let spec = CaptureSpec::press(3);
+        let b = &synth_blows(&m, &EffectSet::NONE, &p, &[0.30], &spec).unwrap()[0];
+        let cut = Segmenter::cut_all(
+            SegmentConfig::SCREW_PRESS,
+            [&rows_batch("c", 0, 0, 1e9 / spec.sample_rate_hz, &b.rows)],
+        );
+        let fit_s = crate::estimate::EstimatorConfig::for_kind(m.kind()).fit_s;
+        let clean = Reference::from_blow("b", &cut[0], Some(1), fit_s).unwrap();
+        let mut spiked = cut[0].clone();
+        let pre = (PRE_S / spiked.period_s).round() as usize;
+        let at = spiked.i_contact.checked_sub(2 * pre).filter(|&i| i > 1).expect("a record before the contact");
+        spiked.samples[at].load_n += 0.3 * clean.peak_n;
+        let r = Reference::from_blow("b", &spiked, Some(1), fit_s).unwrap();
+        let t = |r: &Reference| r.i_window_start as f64 * r.dt_s + r.t_align_s;
+        assert!((t(&r) - t(&clean)).abs() < 1e-9, "aligned at {} s, clean {} s", t(&r), t(&clean));
+    }
 }
