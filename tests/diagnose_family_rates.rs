@@ -188,7 +188,9 @@ fn document(all: &[Outcome], set: &str, seeds: u64, renderer_names: &[String]) -
          Siebel and Tresca renderers the none case is already off the base model.\n\
          - Seeds: set `{set}`, {seeds} per cell (renderer × kind × effect): a cell's rate moves in steps of {:.1} %.\n\
          - Goals: false positives on `none` ≤ 5 %; each effect found in ≥ 95 % of its cases with effect strength ≥ {STRONG}.\n\
-         - A pair verdict `a+b` counts as finding a and b; `uncertain` is a verdict the report marks uncertain.\n\
+         - A pair verdict `a+b` counts as finding a and b; `uncertain` is a verdict the report marks uncertain \
+         and settles on no effect. A verdict uncertain only in what goes with an effect that ≥ 80 % of the \
+         bootstrap resamples name (`verdict.confidence.settled`) counts as that effect.\n\
          - Siebel and Tresca (m = √3 μ makes them one law) part from the library's eq. 3 at second order in \
          μ d/h, up to 1 % of the load on the steel hammer's flattest billets: a real gap of the base model, which \
          no library effect is, and which shows as the none cases' strength on those renderers.\n\

@@ -83,6 +83,13 @@ pub struct Confidence {
     pub uncertain_between: Option<(String, String)>,
     /// Every verdict the resamples reached, with its share, most often first.
     pub verdicts: Vec<(String, f64)>,
+    /// Every effect the resamples' verdicts named, alone or in a pair, with the share of
+    /// resamples that named it, most often first.
+    pub effects: Vec<(String, f64)>,
+    /// The verdict's effects that at least `MIN_AGREEMENT` of the resamples name: an
+    /// uncertain verdict whose doubt is only about the others (clearance against
+    /// clearance+foundation) still finds these.
+    pub settled: Vec<String>,
 }
 
 /// What the verdict is decided from: the baseline's and every candidate's per-blow holdout
@@ -211,6 +218,14 @@ fn summarise(
     let runner_up = runner.map(|(r, s)| RunnerUp { why: why_lost(inp, chosen, equivalent_to, &r), name: r, share: s });
     let uncertain_between =
         runner_up.as_ref().filter(|_| agreement < MIN_AGREEMENT).map(|r| (name.clone(), r.name.clone()));
+    let effects = effect_shares(&counts);
+    let settled = chosen.map_or(Vec::new(), |f| {
+        f.name
+            .split('+')
+            .filter(|e| effects.iter().any(|(k, s)| k == e && *s >= MIN_AGREEMENT))
+            .map(str::to_string)
+            .collect()
+    });
     Confidence {
         resamples: RESAMPLES,
         refits,
@@ -220,7 +235,26 @@ fn summarise(
         runner_up,
         uncertain_between,
         verdicts: counts.into_iter().map(|(k, c)| (k, share(c))).collect(),
+        effects,
+        settled,
     }
+}
+
+/// Each effect's share of the resamples whose verdict names it, alone or in a pair, most
+/// often first ("none" names no effect).
+fn effect_shares(counts: &[(String, usize)]) -> Vec<(String, f64)> {
+    let mut shares: Vec<(String, f64)> = Vec::new();
+    for (verdict, c) in counts.iter().filter(|(v, _)| v != "none") {
+        for e in verdict.split('+') {
+            let s = *c as f64 / RESAMPLES as f64;
+            match shares.iter_mut().find(|(k, _)| k == e) {
+                Some(x) => x.1 += s,
+                None => shares.push((e.to_string(), s)),
+            }
+        }
+    }
+    shares.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    shares
 }
 
 /// Each fitted value of `f` with its 5–95 % over the refits.
@@ -328,6 +362,8 @@ impl Confidence {
             "runner_up": self.runner_up.as_ref().map(|r| json!({"effect": r.name, "share": r.share, "why": r.why})),
             "uncertain_between": self.uncertain_between.as_ref().map(|(a, b)| json!([a, b])),
             "verdicts": self.verdicts.iter().map(|(k, s)| (k.clone(), json!(s))).collect::<serde_json::Map<_, _>>(),
+            "effects": self.effects.iter().map(|(k, s)| (k.clone(), json!(s))).collect::<serde_json::Map<_, _>>(),
+            "settled": self.settled,
         })
     }
 }
@@ -407,6 +443,30 @@ mod tests {
         assert_eq!(c.verdicts, vec![("none".to_string(), 1.0)]);
         assert!(c.shrink_interval.is_none());
         assert!(c.runner_up.unwrap().why.contains("no gap"));
+    }
+
+    // The family's hammer clearance (elastic-siebel, seed 4902): the resamples split between
+    // clearance and clearance+foundation, so the verdict is uncertain, but nearly all of them
+    // name clearance: it is settled. Split three ways with none, it is not.
+    #[test]
+    fn an_effect_every_split_verdict_names_is_settled() {
+        let m = hammer();
+        let clearance = fitted("clearance", 1, &BASE.map(|x| 0.3 * x));
+        let scores = Scores { machine: &m, base_hold: &BASE, noise_nrmse: 0.005, singles: &[], pairs: &[] };
+        let counts = |v: &[(&str, usize)]| v.iter().map(|(k, c)| (k.to_string(), *c)).collect::<Vec<_>>();
+        let split = counts(&[("clearance", 249), ("clearance+foundation", 150), ("none", 1)]);
+        let c = summarise(&scores, Some(&clearance), &[], split, &[], Vec::new(), 0);
+        assert!(c.uncertain_between.is_some(), "{c:?}");
+        assert_eq!(c.settled, vec!["clearance".to_string()]);
+        assert_eq!(c.effects[0].0, "clearance");
+        assert!((c.effects[0].1 - 399.0 / 400.0).abs() < 1e-12, "{c:?}");
+        assert_eq!(c.to_json()["settled"], serde_json::json!(["clearance"]));
+        let three = counts(&[("none", 135), ("clearance", 133), ("clearance+foundation", 132)]);
+        let c = summarise(&scores, Some(&clearance), &[], three, &[], Vec::new(), 0);
+        assert!(c.settled.is_empty(), "{c:?}");
+        // "none" settles on nothing, however sure.
+        let c = summarise(&scores, None, &[], counts(&[("none", 400)]), &[], Vec::new(), 0);
+        assert!(c.settled.is_empty() && c.effects.is_empty(), "{c:?}");
     }
 
     #[test]

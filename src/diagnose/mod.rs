@@ -253,6 +253,7 @@ impl Diagnosis {
             "baseline": {
                 "calib": self.baseline_calib,
                 "holdout": self.baseline_holdout,
+                "holdout_per_blow": self.baseline_holdout_per_blow.iter().copied().map(finite).collect::<Vec<_>>(),
                 "by_phase": self.by_phase,
                 "dominant_phase": self.by_phase.dominant(),
                 "by_band": self.by_band,
@@ -267,6 +268,7 @@ impl Diagnosis {
             "candidates": self.candidates.iter().map(|f| json!({
                 "effect": f.name, "params": params(f), "calib": f.calib, "holdout": f.holdout,
                 "holdout_shrink": shrink(f.holdout),
+                "holdout_per_blow": f.holdout_per_blow.iter().copied().map(finite).collect::<Vec<_>>(),
             })).collect::<Vec<_>>(),
             "verdict": match &self.verdict {
                 Some(f) => json!({"effect": f.name, "holdout_before": self.baseline_holdout, "holdout_after": f.holdout,

@@ -99,6 +99,20 @@ pub fn opening(d: &Diagnosis) -> String {
         )
     });
     let head = match &c.uncertain_between {
+        Some((a, b)) if !c.settled.is_empty() => {
+            let shares: Vec<String> = c
+                .settled
+                .iter()
+                .map(|e| {
+                    let s = c.effects.iter().find(|(k, _)| k == e).map_or(0.0, |x| x.1);
+                    format!("{e} ({:.0} % of the resamples name it)", s * 100.0)
+                })
+                .collect();
+            format!(
+                "Uncertain between {a} and {b}, but settled on {}: the doubt is only about what goes with it. The rule's choice is ",
+                shares.join(" and ")
+            )
+        }
         Some((a, b)) => format!("Uncertain between {a} and {b}. The rule's choice is "),
         None => String::new(),
     };

@@ -7,14 +7,18 @@ use forgemon::diagnose::Diagnosis;
 /// A verdict the report marks uncertain.
 pub const UNCERTAIN: &str = "uncertain";
 
-/// The verdict as counted: `uncertain` when the report says it is uncertain between effects
-/// (`verdict.confidence.uncertain_between` not empty, where the report has it), else the
-/// effect's name (`a+b` for a pair), `none` without one.
+/// The verdict as counted: when the report says it is uncertain between effects
+/// (`verdict.confidence.uncertain_between` not empty), the effects it is settled on
+/// (`verdict.confidence.settled`, `a+b` for two) or else `uncertain`; otherwise the effect's
+/// name (`a+b` for a pair), `none` without one.
 pub fn verdict_of(d: &Diagnosis) -> String {
     let json = d.to_json();
-    let uncertain = json["verdict"]["confidence"]["uncertain_between"].as_array().is_some_and(|a| !a.is_empty());
+    let c = &json["verdict"]["confidence"];
+    let uncertain = c["uncertain_between"].as_array().is_some_and(|a| !a.is_empty());
     if uncertain {
-        return UNCERTAIN.to_string();
+        let settled: Vec<&str> =
+            c["settled"].as_array().map_or(Vec::new(), |a| a.iter().filter_map(|v| v.as_str()).collect());
+        return if settled.is_empty() { UNCERTAIN.to_string() } else { settled.join("+") };
     }
     d.verdict.as_ref().map_or("none".to_string(), |f| f.name.clone())
 }
