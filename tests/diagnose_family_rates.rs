@@ -167,6 +167,41 @@ fn column(o: &Outcome) -> String {
     o.verdict.split('+').next().unwrap_or("").to_string()
 }
 
+/// Bands of effect strength for `by_strength`: from `STRONG` up.
+const BANDS: [(f64, f64); 3] = [(STRONG, 10.0), (10.0, 30.0), (30.0, f64::INFINITY)];
+
+/// Each effect found, per machine kind over the renderers, in bands of effect strength:
+/// how the rate grows with the effect's size.
+fn by_strength(all: &[Outcome]) -> String {
+    let mut s = String::new();
+    let band = |(lo, hi): (f64, f64)| if hi.is_finite() { format!("{lo}–{hi}") } else { format!("≥ {lo}") };
+    let _ = writeln!(
+        s,
+        "## Found by effect strength\n\nEach effect found, over the renderers, in bands of its effect strength.\n\n\
+         | kind | hidden | {} |\n|---|---|{}",
+        BANDS.map(band).join(" | "),
+        "---|".repeat(BANDS.len())
+    );
+    for kind in [Kind::Hammer, Kind::Press] {
+        for e in &EFFECTS[1..] {
+            let cells: Vec<String> = BANDS
+                .iter()
+                .map(|&(lo, hi)| {
+                    let in_band: Vec<&Outcome> = all
+                        .iter()
+                        .filter(|o| o.kind == kind && o.effect == *e && o.error.is_none())
+                        .filter(|o| (lo..hi).contains(&effect_strength(all, o)))
+                        .collect();
+                    pct(in_band.iter().filter(|o| names(&o.verdict, e)).count(), in_band.len())
+                })
+                .collect();
+            let _ = writeln!(s, "| {} | {e} | {} |", kind_name(kind), cells.join(" | "));
+        }
+    }
+    let _ = writeln!(s);
+    s
+}
+
 /// The document: header, rates per renderer and kind, confusion matrices, times, misses.
 fn document(all: &[Outcome], set: &str, seeds: u64, renderer_names: &[String]) -> String {
     let mut s = String::new();
@@ -236,6 +271,7 @@ fn document(all: &[Outcome], set: &str, seeds: u64, renderer_names: &[String]) -
         }
     }
     let _ = writeln!(s);
+    s.push_str(&by_strength(all));
     for r in renderer_names {
         for kind in [Kind::Hammer, Kind::Press] {
             let cell: Vec<&Outcome> = all.iter().filter(|o| &o.renderer == r && o.kind == kind).collect();
