@@ -6,8 +6,8 @@
 //! 1. There is a gap to explain only if the baseline's holdout nrmse exceeds
 //!    `NOISE_FACTOR` times the sensor noise over the peak (measured before contact).
 //! 2. An effect is real when its holdout errors are significantly lower than the
-//!    baseline's by the paired tests of `evidence.rs` (log-ratio or difference over the
-//!    blows, one-sided 5 % each) and the
+//!    baseline's by the paired tests of `evidence.rs` (log-ratio or difference t-tests, or
+//!    the sign test, over the blows, one-sided 5 % each) and the
 //!    holdout shrink is at least `MIN_SHRINK`.
 //! 3. Ties and parsimony: the real effects whose errors the same test cannot tell from the
 //!    lowest one's are equivalent; of those, the one with the fewest fitted parameters wins
@@ -156,7 +156,7 @@ pub fn decide(machine: &Machine, base_hold: &[f64], noise_nrmse: f64, singles: &
         None => Verdict {
             chosen: Some(winner.clone()),
             why: format!(
-                "{} lowers the holdout errors significantly (paired log-ratio or difference t-test, one-sided {:.0} % each) and shrinks the holdout error by {:.0} %; no pair improves on it by the pair test.{tie_note}",
+                "{} lowers the holdout errors significantly (paired log-ratio or difference t-test or sign test, one-sided {:.0} % each) and shrinks the holdout error by {:.0} %; no pair improves on it by the pair test.{tie_note}",
                 winner.name,
                 ALPHA * 100.0,
                 shrink(winner)
@@ -218,7 +218,7 @@ fn no_single(base: f64, base_hold: &[f64], singles: &[Fitted], pairs: &[Fitted],
         chosen: None,
         equivalent: Vec::new(),
         why: format!(
-            "No effect lowers the holdout errors significantly (paired log-ratio or difference t-test over the blows, one-sided {:.0} % each) and by at least {:.0} % overall.",
+            "No effect lowers the holdout errors significantly (paired log-ratio or difference t-test or sign test over the blows, one-sided {:.0} % each) and by at least {:.0} % overall.",
             ALPHA * 100.0,
             MIN_SHRINK * 100.0
         ),
