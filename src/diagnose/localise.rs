@@ -588,9 +588,9 @@ mod tests {
     }
 
     /// The withheld-effect suite's press on the copper sheet's first blow, cut from its
-    /// capture as `diagnose` cuts it.
-    #[test]
-    fn a_press_blow_is_compared_until_its_load_is_back_at_zero_and_5_ms_on() {
+    /// capture as `diagnose` cuts it: the machine, the blow as cut and the approach fit's
+    /// window.
+    fn press_first_blow() -> (Machine, Blow, f64) {
         use crate::config::{parse_machine, parse_process};
         use crate::physics::effects::EffectSet;
         use crate::signal::segment::{SegmentConfig, Segmenter};
@@ -610,15 +610,21 @@ mod tests {
             [&rows_batch("c", 0, 0, 1e9 / spec.sample_rate_hz, &b.rows)],
         );
         let fit_s = crate::estimate::EstimatorConfig::for_kind(m.kind()).fit_s;
+        (m, cut.into_iter().next().expect("one blow"), fit_s)
+    }
+
+    #[test]
+    fn a_press_blow_is_compared_until_its_load_is_back_at_zero_and_5_ms_on() {
+        let (m, blow, fit_s) = press_first_blow();
         let zero_after_peak = |r: &Reference| {
             let i_peak = r.load_n.iter().enumerate().fold(0, |b, (i, v)| if *v > r.load_n[b] { i } else { b });
             (i_peak..r.load_n.len()).find(|&i| r.load_n[i] < ZERO_FRACTION * r.peak_n)
         };
         // The segmenter ends the blow where the load stays below its 30 kN: above the zero
         // (2 % of the peak), so the blow as cut never gets back to zero.
-        let as_cut = Reference::from_blow("b", &cut[0], Some(1), fit_s).unwrap();
+        let as_cut = Reference::from_blow("b", &blow, Some(1), fit_s).unwrap();
         assert_eq!(zero_after_peak(&as_cut), None, "peak {} N", as_cut.peak_n);
-        let r = reference("b", &cut[0], Some(1), fit_s, &m).unwrap();
+        let r = reference("b", &blow, Some(1), fit_s, &m).unwrap();
         let zero = zero_after_peak(&r).expect("back at zero");
         assert_eq!(r.load_n.len(), zero + (POST_S / r.dt_s).round() as usize);
         // With the load back at zero the billet's permanent set is measured.
@@ -629,28 +635,10 @@ mod tests {
     /// noise sample over the alignment's 10 % there: the alignment stays at the load's rise.
     #[test]
     fn a_noise_spike_long_before_the_contact_does_not_take_the_alignment() {
-        use crate::config::{parse_machine, parse_process};
         use crate::identify::objective::PRE_S;
-        use crate::physics::effects::EffectSet;
-        use crate::signal::segment::{SegmentConfig, Segmenter};
-        use crate::synth::{CaptureSpec, rows_batch, synth_blows};
-        let m = parse_machine(
-            "m",
-            "kind = \"screw_press\"\nm_tool_kg = 2500\nm_ram_kg = 90000\nk_link_N_per_m = 2.1e9\n\
-             c_link_Ns_per_m = 2.8e5\nk_frame_N_per_m = 8.0e9\nc_frame_Ns_per_m = 5.0e4\nk_sensor_N_per_m = 3.39e10\n",
-        )
-        .unwrap()
-        .machine;
-        let p = parse_process("p", include_str!("../../config/copper-cu99.process.toml")).unwrap();
-        let spec = CaptureSpec::press(3);
-        let b = &synth_blows(&m, &EffectSet::NONE, &p, &[0.30], &spec).unwrap()[0];
-        let cut = Segmenter::cut_all(
-            SegmentConfig::SCREW_PRESS,
-            [&rows_batch("c", 0, 0, 1e9 / spec.sample_rate_hz, &b.rows)],
-        );
-        let fit_s = crate::estimate::EstimatorConfig::for_kind(m.kind()).fit_s;
-        let clean = Reference::from_blow("b", &cut[0], Some(1), fit_s).unwrap();
-        let mut spiked = cut[0].clone();
+        let (_, blow, fit_s) = press_first_blow();
+        let clean = Reference::from_blow("b", &blow, Some(1), fit_s).unwrap();
+        let mut spiked = blow;
         let pre = (PRE_S / spiked.period_s).round() as usize;
         let at = spiked.i_contact.checked_sub(2 * pre).filter(|&i| i > 1).expect("a record before the contact");
         spiked.samples[at].load_n += 0.3 * clean.peak_n;
