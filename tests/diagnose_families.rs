@@ -22,7 +22,8 @@
 
 use forgemon::config::{parse_machine, parse_process};
 use forgemon::daq::{DaqSpec, daq_blows};
-use forgemon::diagnose::attribute::{BlowSet, Fitted, fit_candidates, library};
+use forgemon::diagnose::attribute::{Fitted, fit_candidates, library};
+use forgemon::diagnose::blowset::BlowSet;
 use forgemon::diagnose::localise::{localise, reference};
 use forgemon::diagnose::verdict::decide;
 use forgemon::estimate::EstimatorConfig;

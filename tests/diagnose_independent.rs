@@ -16,7 +16,7 @@
 #[path = "independent/mod.rs"]
 mod independent;
 
-use forgemon::diagnose::attribute::BlowSet;
+use forgemon::diagnose::blowset::BlowSet;
 use forgemon::diagnose::localise::localise;
 use forgemon::diagnose::location::Location;
 use forgemon::identify::objective::{Heights, Objective};

@@ -8,7 +8,8 @@
 
 use nalgebra::DMatrix;
 
-use super::attribute::{BlowSet, library};
+use super::attribute::library;
+use super::blowset::BlowSet;
 use crate::physics::effects::{Effect, EffectSet};
 use crate::physics::machine::Machine;
 

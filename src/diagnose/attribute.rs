@@ -14,13 +14,11 @@
 
 use crate::identify::fit::bounded_fit;
 use crate::identify::model::Param;
-use crate::identify::objective::{Objective, Setting};
-use crate::physics::billet::{BilletLaw, LoadEffects};
 use crate::physics::effects::{DEFAULT_EPS_REF, DEFAULT_RATE_REF_PER_S, Effect, EffectSet};
 use crate::physics::machine::{Machine, MachineKind};
 
+use super::blowset::{BlowSet, mean};
 use super::evidence::MIN_PAIR_SHRINK;
-use super::localise::nrmse;
 
 /// One library effect: all its parameters fitted (issue #17 item 5: the whole family),
 /// with their bounds, the coarse grid the global stage searches, and the effect they give.
@@ -223,111 +221,6 @@ fn foundation_damper(v: &[f64]) -> f64 {
 /// integrator 207 s over one fit (tests/independent/drawn.rs, a rigid-eq3 hammer with no
 /// hidden effect, seed 4904), the other fits 3 s together.
 const ZETA_MAX: f64 = 2.0;
-
-/// Blows to fit or score: the objective (references, process, kind) and each blow's
-/// baseline window.
-#[derive(Debug, Clone)]
-pub struct BlowSet {
-    pub obj: Objective,
-    pub windows: Vec<(usize, usize)>,
-    pub mode2_hz: f64,
-}
-
-impl BlowSet {
-    /// Residuals of the model with `effects`: over each blow's window, error over the
-    /// peak, weighted so the sum of squares is the mean over blows of nrmse².
-    pub fn residuals(&self, machine: &Machine, effects: &EffectSet) -> Option<Vec<f64>> {
-        self.residuals_weighted(machine, effects, &vec![1.0; self.obj.refs.len()])
-    }
-
-    /// `residuals` with blow `i` counted `weights[i]` times (a bootstrap resample's
-    /// multiplicities, `confidence.rs`): its residuals scaled by √weight, so the sum of
-    /// squares is the weighted mean over blows of nrmse².
-    pub fn residuals_weighted(&self, machine: &Machine, effects: &EffectSet, weights: &[f64]) -> Option<Vec<f64>> {
-        let sims = self.obj.with_effects(*effects).simulate(machine)?;
-        let nb: f64 = weights.iter().sum();
-        let mut out = Vec::new();
-        for (((r, s), (a, b)), wt) in self.obj.refs.iter().zip(&sims).zip(&self.windows).zip(weights) {
-            let w = (wt / nb).sqrt() / (r.peak_n * ((b - a).max(1) as f64).sqrt());
-            out.extend((*a..*b).map(|i| w * (r.load_n[i] - s.load_n.get(i).copied().unwrap_or(0.0))));
-        }
-        Some(out)
-    }
-
-    /// Sensor noise over the peak, mean over the blows: the load's spread before each
-    /// window (less 10 samples), where nothing touches the sensor.
-    pub fn noise_nrmse(&self) -> f64 {
-        let v: Vec<f64> = self
-            .obj
-            .refs
-            .iter()
-            .zip(&self.windows)
-            .map(|(r, w)| {
-                let pre = &r.load_n[..w.0.saturating_sub(10).min(r.load_n.len())];
-                if pre.len() < 5 {
-                    return 0.0;
-                }
-                let m = pre.iter().sum::<f64>() / pre.len() as f64;
-                (pre.iter().map(|x| (x - m).powi(2)).sum::<f64>() / pre.len() as f64).sqrt() / r.peak_n
-            })
-            .collect();
-        mean(&v)
-    }
-
-    /// The gap a clearance's closure shows on these blows, m: the distance the lower tool
-    /// crosses in the lead `T` of the ram's own contact (`Reference::t_ram_contact_s`, its
-    /// accelerometer) over the load's rise, median over the blows where the lead is longer
-    /// than a sample (the contact's own uncertainty). None when no blow shows one.
-    ///
-    /// On a hammer the lower tool (`m2`) starts at rest under the gap (the library's
-    /// `clearance`), pushed across by the billet's load `F` (eq. 3 at the blow's start height,
-    /// the sheet's, and its impact strain rate): `F T² / (2 m2)` until it has caught up with
-    /// the ram (`T = v0 m2 / F`), `v0 T - v0² m2 / (2 F)` after. Elsewhere (a press, whose die
-    /// under a clearance is a fitted mass, and a bare strike) the ram's travel `v0 T`.
-    pub fn closure_gap_m(&self, machine: &Machine) -> Option<f64> {
-        let pushed = match (machine, &self.obj.setting) {
-            (Machine::Hammer(h), Setting::Billet(p)) if h.m2_kg > 0.0 => Some((h.m2_kg, p)),
-            _ => None,
-        };
-        let mut gaps: Vec<f64> = self
-            .obj
-            .refs
-            .iter()
-            .filter_map(|r| {
-                let lead = r.measured?.contact_s - r.t_ram_contact_s?;
-                if lead.is_nan() || lead <= r.dt_s {
-                    return None;
-                }
-                let (v0, ram) = (r.v0_mps, r.v0_mps * lead);
-                let Some(((m2, p), n)) = pushed.zip(r.blow_index) else { return Some(ram) };
-                let h = n.checked_sub(2).and_then(|k| p.measured_final_heights_m.get(k).copied());
-                let h = h.unwrap_or(p.billet.height_m);
-                let law = BilletLaw::of(p, LoadEffects::NEUTRAL, n);
-                let f = law.load(h, v0 / h).total_n;
-                if !(f.is_finite() && f > 0.0) {
-                    return Some(ram);
-                }
-                Some(if lead < v0 * m2 / f { 0.5 * f / m2 * lead * lead } else { ram - 0.5 * v0 * v0 * m2 / f })
-            })
-            .collect();
-        gaps.sort_by(f64::total_cmp);
-        gaps.get(gaps.len() / 2).copied()
-    }
-
-    pub fn len(&self) -> usize {
-        self.windows.iter().map(|(a, b)| b - a).sum()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    /// Each blow's nrmse (docs/interfaces.md §6) with `effects`.
-    pub fn nrmse(&self, machine: &Machine, effects: &EffectSet) -> Option<Vec<f64>> {
-        let sims = self.obj.with_effects(*effects).simulate(machine)?;
-        Some(self.obj.refs.iter().zip(&sims).map(|(r, s)| nrmse(r, s)).collect())
-    }
-}
 
 /// A fitted candidate (or pair).
 #[derive(Debug, Clone, PartialEq)]
@@ -683,10 +576,6 @@ fn closure_points(
         first += c.params.len();
     }
     out
-}
-
-pub fn mean(v: &[f64]) -> f64 {
-    if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 }
 }
 
 #[cfg(test)]

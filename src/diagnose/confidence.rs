@@ -28,7 +28,8 @@ use serde_json::{Value, json};
 use crate::physics::effects::{Effect, EffectSet};
 use crate::physics::machine::Machine;
 
-use super::attribute::{BlowSet, Fitted, mean, refit};
+use super::attribute::{Fitted, refit};
+use super::blowset::{BlowSet, mean};
 use super::evidence::{ALPHA, equivalent, improves};
 use super::verdict::{MIN_SHRINK, NOISE_FACTOR, decide, level_only};
 

@@ -7,6 +7,7 @@
 
 pub mod adopt;
 pub mod attribute;
+pub mod blowset;
 pub mod confidence;
 pub mod evidence;
 pub mod indicators;
@@ -24,7 +25,8 @@ use serde_json::{Value, json};
 use crate::identify::objective::{Heights, Objective, Reference, Setting};
 use crate::physics::effects::{Effect, EffectSet};
 use crate::physics::machine::Machine;
-use attribute::{BlowSet, Candidate, Fitted, library, mean};
+use attribute::{Candidate, Fitted, library};
+use blowset::{BlowSet, mean};
 use confidence::Confidence;
 use indicators::{Indicators, Summary, indicators, summarise};
 use localise::{ByBand, ByPhase, Localised, localise};

@@ -25,8 +25,9 @@ use crate::physics::machine::Machine;
 use crate::signal::segment::{SegmentConfig, Segmenter};
 use crate::synth::{CaptureSpec, rows_batch, synth_blows};
 
-use super::attribute::{Fitted, fit_candidates, library, mean};
+use super::attribute::{Fitted, fit_candidates, library};
 use super::blow_set;
+use super::blowset::mean;
 use super::verdict::decide;
 
 const HAMMER: &str = "kind = \"hammer\"\nm1_kg = 910\nm2_kg = 26\nk_N_per_m = 2.6e9\nc_Ns_per_m = 24000\n";
