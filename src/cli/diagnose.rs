@@ -228,13 +228,14 @@ fn rule(d: &Diagnosis) -> String {
     };
     format!(
         "The rule: a gap exists only when the baseline holdout error exceeds {}× the sensor noise ({:.4} of the peak); an effect \
-         is real when its holdout errors are significantly lower than the base model's, blow by blow (paired one-sided t-tests \
-         on ln(after/before) or on before − after, or an exact sign test on the blows it lowers, 5 % each), and the holdout error shrinks by at least {:.0} %; effects the same test cannot tell apart \
+         is real when its holdout errors are significantly lower than the base model's, blow by blow ({}, \
+         5 % each), and the holdout error shrinks by at least {:.0} %; effects the same test cannot tell apart \
          are equivalent and the one with the fewest fitted parameters wins{equivalent}; a pair replaces its single effect only when it \
          removes at least {:.0} % of what that effect leaves, by the same test. Effect parameters are fitted on the calibration \
          billet only.",
         crate::diagnose::NOISE_FACTOR,
         d.noise_nrmse,
+        crate::diagnose::evidence::TESTS,
         crate::diagnose::MIN_SHRINK * 100.0,
         crate::diagnose::MIN_PAIR_SHRINK * 100.0
     )

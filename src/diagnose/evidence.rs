@@ -31,6 +31,9 @@
 /// One-sided level of the test.
 pub const ALPHA: f64 = 0.05;
 
+/// The tests in words, for the rule the report and the command print.
+pub const TESTS: &str = "paired one-sided tests over the holdout blows: t-tests on ln(after/before) or on before - after, or an exact sign test on the blows lowered; any suffices";
+
 /// One-sided 95 % quantiles of Student's t for 1..=30 degrees of freedom (any table, e.g.
 /// NIST/SEMATECH e-Handbook §1.3.6.7.2); beyond 30, the normal's 1.645.
 const T95: [f64; 30] = [

@@ -291,7 +291,7 @@ impl Diagnosis {
             "rule": {
                 "noise_nrmse": self.noise_nrmse, "noise_factor": NOISE_FACTOR, "min_shrink": MIN_SHRINK,
                 "min_pair_shrink": MIN_PAIR_SHRINK,
-                "test": "paired one-sided t-tests over the holdout blows on ln(after/before) or on before - after, or an exact sign test on the blows lowered; any suffices",
+                "test": evidence::TESTS,
                 "test_level": evidence::ALPHA,
                 "explanation": self.why,
             },

@@ -36,7 +36,7 @@ use crate::physics::effects::Effect;
 use crate::physics::machine::Machine;
 
 use super::attribute::{EXPONENT_FLOOR, Fitted};
-use super::evidence::{ALPHA, equivalent, improves};
+use super::evidence::{ALPHA, TESTS, equivalent, improves};
 
 /// The baseline error must exceed this many times the noise for a gap to exist.
 pub const NOISE_FACTOR: f64 = 2.0;
@@ -156,7 +156,7 @@ pub fn decide(machine: &Machine, base_hold: &[f64], noise_nrmse: f64, singles: &
         None => Verdict {
             chosen: Some(winner.clone()),
             why: format!(
-                "{} lowers the holdout errors significantly (paired log-ratio or difference t-test or sign test, one-sided {:.0} % each) and shrinks the holdout error by {:.0} %; no pair improves on it by the pair test.{tie_note}",
+                "{} lowers the holdout errors significantly ({TESTS}, {:.0} % each) and shrinks the holdout error by {:.0} %; no pair improves on it by the pair test.{tie_note}",
                 winner.name,
                 ALPHA * 100.0,
                 shrink(winner)
@@ -218,7 +218,7 @@ fn no_single(base: f64, base_hold: &[f64], singles: &[Fitted], pairs: &[Fitted],
         chosen: None,
         equivalent: Vec::new(),
         why: format!(
-            "No effect lowers the holdout errors significantly (paired log-ratio or difference t-test or sign test over the blows, one-sided {:.0} % each) and by at least {:.0} % overall.",
+            "No effect lowers the holdout errors significantly ({TESTS}, {:.0} % each) and by at least {:.0} % overall.",
             ALPHA * 100.0,
             MIN_SHRINK * 100.0
         ),
