@@ -176,9 +176,12 @@ fn demo_into_head_ends_quietly_with_the_recording_closed() {
 }
 
 /// Run `args` with its stdout already closed by the reader; its status and stderr.
+/// The read end is closed before the child starts: dropped after `spawn`, a fast verb
+/// (simulate, two blows) could fill the pipe's buffer and exit 0 before the drop.
 fn into_closed_pipe(args: &[&str], paths: &[&Path]) -> (Option<i32>, String) {
-    let mut child = forgemon(args).args(paths).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
-    drop(child.stdout.take());
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let mut child = forgemon(args).args(paths).stdout(writer).stderr(Stdio::piped()).spawn().unwrap();
     let status = wait_within(&mut child, Duration::from_secs(60));
     (status.code(), stderr_of(&mut child))
 }
