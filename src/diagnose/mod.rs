@@ -88,7 +88,7 @@ fn blow_set(
 
 /// How many fits `diagnose` runs (and tells `progress` of) on a machine of `kind` when one
 /// single effect is best: every library effect alone, then the best one paired with each
-/// other. Each single the holdout cannot tell from the best adds its own pairs.
+/// other. Each further single that anchors pairs (`verdict::pair_anchors`) adds its own.
 pub fn fit_count(kind: crate::physics::machine::MachineKind) -> usize {
     let n = library(kind).len();
     n + n.saturating_sub(1)
@@ -122,12 +122,14 @@ pub fn diagnose(
         .collect();
     let mut ranked = singles.clone();
     ranked.sort_by(|a, b| a.1.holdout.total_cmp(&b.1.holdout));
-    let pairs = fit_pairs(machine, effects, &lib, &ranked, &calib, &holdout, progress);
-    let mut candidates: Vec<Fitted> = ranked.iter().map(|(_, f)| f.clone()).chain(pairs.iter().cloned()).collect();
+    let singles: Vec<Fitted> = ranked.iter().map(|(_, f)| f.clone()).collect();
+    let anchor_names = verdict::pair_anchors(&base_hold, &singles);
+    let anchors: Vec<&(usize, Fitted)> = ranked.iter().filter(|r| anchor_names.contains(&r.1.name)).collect();
+    let pairs = fit_pairs(machine, effects, &anchors, &ranked, &calib, &holdout, progress);
+    let mut candidates: Vec<Fitted> = singles.iter().chain(&pairs).cloned().collect();
     candidates.sort_by(|a, b| a.holdout.total_cmp(&b.holdout));
     let noise_nrmse = holdout.noise_nrmse();
     let baseline_holdout = mean(&base_hold);
-    let singles: Vec<Fitted> = ranked.iter().map(|(_, f)| f.clone()).collect();
     let v = verdict::decide(machine, &base_hold, noise_nrmse, &singles, &pairs);
     let scores = confidence::Scores { machine, base_hold: &base_hold, noise_nrmse, singles: &singles, pairs: &pairs };
     let inputs = confidence::Inputs { scores, base: effects, calib: &calib, holdout: &holdout };
@@ -181,30 +183,20 @@ fn acts(machine: &Machine, effects: &EffectSet, chosen: &[Effect], holdout: &Blo
     Some(Acts::of(&split(*effects)?, &split(set)?))
 }
 
-/// The pairs worth fitting, fitted: each single effect the holdout cannot tell from the
-/// best (`ranked[0]`), with each other one.
+/// The pairs worth fitting, fitted: each of `anchors` (`verdict::pair_anchors`) with each
+/// other single of `ranked` (a second effect that only shows once the first is in place
+/// need not rank high alone).
 fn fit_pairs(
     machine: &Machine,
     effects: &EffectSet,
-    lib: &[Candidate],
+    anchors: &[&(usize, Fitted)],
     ranked: &[(usize, Fitted)],
     calib: &BlowSet,
     holdout: &BlowSet,
     progress: &(dyn Fn() + Sync),
 ) -> Vec<Fitted> {
-    // Pairs: each single effect the holdout cannot tell from the best (the ties the verdict
-    // settles by parsimony, so the winner is among them) with each other one (a second
-    // effect that only shows once the first is in place need not rank high alone).
     type Ranked<'a> = &'a (usize, Fitted);
-    let anchors: Vec<Ranked> = ranked
-        .first()
-        .map(|best| {
-            ranked
-                .iter()
-                .filter(|r| r.0 == best.0 || evidence::equivalent(&best.1.holdout_per_blow, &r.1.holdout_per_blow))
-                .collect()
-        })
-        .unwrap_or_default();
+    let lib = library(machine.kind());
     let is_anchor = |i: usize| anchors.iter().position(|a| a.0 == i);
     let pairs_in: Vec<(Ranked, Ranked)> = anchors
         .iter()

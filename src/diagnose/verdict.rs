@@ -106,11 +106,7 @@ pub fn decide(machine: &Machine, base_hold: &[f64], noise_nrmse: f64, singles: &
             "The base model's holdout error ({base:.4}) is within {NOISE_FACTOR}× the sensor noise ({noise_nrmse:.4}): there is no gap for an effect to explain."
         ));
     }
-    let mut real: Vec<&Fitted> = singles
-        .iter()
-        .filter(|f| level_only(f).is_none() && improves(base_hold, &f.holdout_per_blow, MIN_SHRINK))
-        .collect();
-    real.sort_by(|a, b| a.holdout.total_cmp(&b.holdout));
+    let real = real(base_hold, singles);
     let level = Level::best(base_hold, singles);
     if let Some(why) = real.first().and_then(|b| level.rivals(b, base)) {
         return none(why);
@@ -192,6 +188,39 @@ impl<'a> Level<'a> {
             (1.0 - f.holdout / base) * 100.0,
             MIN_SHRINK * 100.0
         ))
+    }
+}
+
+/// The single effects that are real by rule 2, lowest holdout error first.
+fn real<'a>(base_hold: &[f64], singles: &'a [Fitted]) -> Vec<&'a Fitted> {
+    let mut real: Vec<&Fitted> = singles
+        .iter()
+        .filter(|f| level_only(f).is_none() && improves(base_hold, &f.holdout_per_blow, MIN_SHRINK))
+        .collect();
+    real.sort_by(|a, b| a.holdout.total_cmp(&b.holdout));
+    real
+}
+
+/// The names of the single effects whose pairs the rule can name: when some effect is
+/// real, those the test cannot tell from the best real one (rule 4: the winner is among
+/// them); when none is, the one with the lowest holdout error that is not a level (rule 5:
+/// a pair of two effects that each explain too little, the better of which leads). Pairs
+/// anchored elsewhere cannot be named: when no effect helps every single one ties, and
+/// their pairs (28 on the hammer) took three quarters of such a case's time.
+pub fn pair_anchors(base_hold: &[f64], singles: &[Fitted]) -> Vec<String> {
+    let real = real(base_hold, singles);
+    match real.first() {
+        Some(best) => real
+            .iter()
+            .filter(|f| equivalent(&best.holdout_per_blow, &f.holdout_per_blow))
+            .map(|f| f.name.clone())
+            .collect(),
+        None => singles
+            .iter()
+            .filter(|f| level_only(f).is_none())
+            .min_by(|a, b| a.holdout.total_cmp(&b.holdout))
+            .map(|f| vec![f.name.clone()])
+            .unwrap_or_default(),
     }
 }
 
@@ -327,6 +356,31 @@ mod tests {
         let v = decide(&hammer(), &BASE, 0.005, &[elastic, found], &[]);
         assert_eq!(v.chosen.unwrap().name, "foundation");
         assert!(v.equivalent.is_empty());
+    }
+
+    // Issue 41 (speed): pairs are fitted only where the rule can name them. With real
+    // effects, their ties with the best real one anchor pairs (a weaker real one and a
+    // level do not); with none real, the best effect that is not a level anchors alone,
+    // however many tie with it.
+    #[test]
+    fn pairs_are_anchored_where_the_rule_can_name_them() {
+        let scaled = |k: f64| BASE.map(|x| k * x);
+        let level =
+            fitted("strain_rate", vec![Effect::StrainRate { m: EXPONENT_FLOOR, rate_ref_per_s: 100.0 }], &scaled(0.3));
+        let found = fitted("foundation", vec![], &[0.050, 0.062, 0.070, 0.101, 0.099]);
+        let elastic = fitted("elastic_recovery", vec![], &[0.051, 0.060, 0.071, 0.100, 0.101]);
+        let weaker = fitted("clearance", vec![], &scaled(0.7));
+        let anchors = pair_anchors(&BASE, &[level.clone(), found, elastic, weaker]);
+        assert_eq!(anchors, ["foundation", "elastic_recovery"]);
+        // None real: each removes a tenth or less, and all tie.
+        let small: Vec<Fitted> = ["thermal", "friction_rise", "sensor_highpass"]
+            .iter()
+            .zip([0.90, 0.92, 0.95])
+            .map(|(n, k)| fitted(n, vec![], &scaled(k)))
+            .collect();
+        let with_level: Vec<Fitted> = std::iter::once(level).chain(small.iter().cloned()).collect();
+        assert_eq!(pair_anchors(&BASE, &with_level), ["thermal"]);
+        assert!(pair_anchors(&BASE, &[]).is_empty());
     }
 
     // Issue 41: no single effect passes (each removes a tenth), the pair removes most of the

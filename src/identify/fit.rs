@@ -131,15 +131,21 @@ pub struct Run {
 /// Levenberg–Marquardt from `start` (parameter values) on an identification objective.
 pub fn local_fit(obj: &Objective, set: &ParamSet, start: &[f64]) -> Run {
     let f = machine_residuals(obj, set);
-    bounded_fit(&set.params, obj.len(), &f, start)
+    bounded_fit(&set.params, obj.len(), &f, start, PATIENCE)
 }
 
-/// Levenberg–Marquardt on any `len` residuals of the bounded `params`, from `start`.
-pub fn bounded_fit(params: &[Param], len: usize, f: &ResidualFn<'_>, start: &[f64]) -> Run {
+/// Levenberg–Marquardt's evaluation budget per parameter (plus one) for identification:
+/// `patience` in the `levenberg-marquardt` crate.
+pub const PATIENCE: usize = 60;
+
+/// Levenberg–Marquardt on any `len` residuals of the bounded `params`, from `start`, with at
+/// most `patience`·(n + 1) evaluations of the residuals (n parameters).
+pub fn bounded_fit(params: &[Param], len: usize, f: &ResidualFn<'_>, start: &[f64], patience: usize) -> Run {
     let u0: Vec<f64> = params.iter().zip(start).map(|(p, v)| p.to_u(*v)).collect();
     let r0 = eval(params, f, len, &u0);
     let problem = Problem { params, f, len, u: DVector::from_vec(u0), r: r0 };
-    let (p, report) = LevenbergMarquardt::new().with_ftol(1e-10).with_xtol(1e-9).with_patience(60).minimize(problem);
+    let (p, report) =
+        LevenbergMarquardt::new().with_ftol(1e-10).with_xtol(1e-9).with_patience(patience).minimize(problem);
     let cost = p.r.norm_squared();
     Run {
         start: start.to_vec(),
