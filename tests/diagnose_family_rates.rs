@@ -53,6 +53,8 @@ struct Outcome {
     /// Baseline holdout nrmse over the noise; the hidden effect's own candidate's shrink.
     strength: f64,
     own_shrink: f64,
+    /// The bootstrap's share of resamples with the case's verdict (`verdict.confidence`).
+    agreement: f64,
     secs: f64,
     /// The hidden effect with its drawn parameters (`Debug`).
     hidden: String,
@@ -82,6 +84,7 @@ fn run_case(renderer: Renderer, kind: Kind, effect: &'static str, seed: u64) -> 
         error: None,
         strength: f64::NAN,
         own_shrink: f64::NAN,
+        agreement: f64::NAN,
         secs: 0.0,
         hidden: String::new(),
     };
@@ -103,6 +106,7 @@ fn run_case(renderer: Renderer, kind: Kind, effect: &'static str, seed: u64) -> 
             o.verdict = verdict_of(&d);
             o.strength = strength(&d);
             o.own_shrink = own_shrink(&d, effect);
+            o.agreement = d.confidence.agreement;
             Some(d)
         }
         Ok(Err(e)) => {
@@ -199,6 +203,42 @@ fn by_strength(all: &[Outcome]) -> String {
         }
     }
     let _ = writeln!(s);
+    s
+}
+
+/// Each case's verdict and the bootstrap's agreement with it, a row per renderer, kind and
+/// hidden effect, a column per seed.
+fn agreements(all: &[Outcome]) -> String {
+    let mut seeds: Vec<u64> = all.iter().map(|o| o.seed).collect();
+    seeds.sort_unstable();
+    seeds.dedup();
+    let mut s = format!(
+        "\n## Bootstrap agreement per case\n\nEach case's verdict and the share of the bootstrap's resamples that reach it \
+         (`verdict.confidence.agreement`; under 80 % the report says uncertain).\n\n\
+         | renderer | kind | hidden | {} |\n|---|---|---|{}\n",
+        seeds.iter().map(|k| format!("seed {k}")).collect::<Vec<_>>().join(" | "),
+        "---|".repeat(seeds.len())
+    );
+    let mut rows: Vec<(&str, Kind, &str)> = Vec::new();
+    for o in all {
+        if !rows.contains(&(o.renderer.as_str(), o.kind, o.effect)) {
+            rows.push((o.renderer.as_str(), o.kind, o.effect));
+        }
+    }
+    for (renderer, kind, effect) in rows {
+        let cells: Vec<String> = seeds
+            .iter()
+            .map(|k| {
+                all.iter()
+                    .find(|o| o.renderer == renderer && o.kind == kind && o.effect == effect && o.seed == *k)
+                    .map_or("–".to_string(), |o| match &o.error {
+                        Some(_) => ERROR.to_string(),
+                        None => format!("{} {:.2}", o.verdict, o.agreement),
+                    })
+            })
+            .collect();
+        let _ = writeln!(s, "| {renderer} | {} | {effect} | {} |", kind_name(kind), cells.join(" | "));
+    }
     s
 }
 
@@ -358,6 +398,7 @@ fn document(all: &[Outcome], set: &str, seeds: u64, renderer_names: &[String]) -
             let _ = writeln!(s, "| {} | {} | {:.1} | {max:.1} |", kind_name(kind), t.len(), median(t.clone()));
         }
     }
+    s.push_str(&agreements(all));
     let _ = writeln!(
         s,
         "\n## Misses\n\nEach case whose verdict is not its hidden effect (`none` for none), or that failed.\n"
@@ -487,6 +528,7 @@ fn outcome_from_json(v: &serde_json::Value) -> Outcome {
         error: v["error"].as_str().map(str::to_string),
         strength: num("strength"),
         own_shrink: num("own_shrink"),
+        agreement: v["report"]["verdict"]["confidence"]["agreement"].as_f64().unwrap_or(f64::NAN),
         secs: num("secs"),
         hidden: text("hidden"),
     }
