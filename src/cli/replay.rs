@@ -18,6 +18,7 @@ use crate::daemon::tuned_config;
 use crate::estimate::EncoderDirection;
 use crate::physics::process::Process;
 use crate::pipeline::{Feeder, Pipeline};
+use crate::record::reader::ReadMode;
 use crate::record::{Payload, RecordReader, RecordWriter, Rotation};
 use crate::session::{
     End, MACHINE_CONFIG_NAME, Outcome, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, Session, Stamp, is_new_billet_marker,
@@ -57,6 +58,16 @@ pub struct ReplayArgs {
     /// service file's `[encoder] direction`.
     #[arg(long, value_name = "auto|down|up", value_parser = parse_direction)]
     pub encoder_direction: Option<EncoderDirection>,
+    /// Read each recording's chunks in turn on one thread, instead of ahead and in parallel.
+    /// The output is the same, byte for byte.
+    #[arg(long)]
+    pub sequential: bool,
+}
+
+impl ReplayArgs {
+    fn read_mode(&self) -> ReadMode {
+        if self.sequential { ReadMode::Sequential } else { ReadMode::Parallel }
+    }
 }
 
 fn parse_direction(s: &str) -> Result<EncoderDirection, String> {
@@ -120,7 +131,7 @@ pub(crate) fn replay_into<W: Write>(
     out: W,
     setup: impl FnOnce(&mut Pipeline),
 ) -> anyhow::Result<(ExitCode, Feeder)> {
-    let (input, stored) = open_input(&args.input)?;
+    let (input, stored) = open_input(&args.input, args.read_mode())?;
     let (mut pipeline, writer, kind) = configured(args, &stored)?;
     setup(&mut pipeline);
     // The recipe the live run judged with, unless the caller gave one.
@@ -274,7 +285,7 @@ impl<W: Write> Replay<W> {
                 // A rotated run's next files continue its stream; one that cannot be read
                 // is named and skipped.
                 for path in rest {
-                    match RecordReader::open(&path) {
+                    match RecordReader::open_with(&path, args.read_mode()) {
                         Ok(reader) => {
                             let s = self.recording(Box::new(reader), args)?;
                             if s != ExitCode::SUCCESS {
@@ -456,12 +467,12 @@ fn table_row(e: &crate::estimate::BlowEstimate, judged: bool) -> String {
 /// Classify the input and read the configuration it stores: a recording's (read up to its
 /// first samples), a capture directory's machine.toml and process.toml, or, for a
 /// directory of recordings (a rotated run), its first readable file's.
-fn open_input(path: &Path) -> anyhow::Result<(Input, Stored)> {
+fn open_input(path: &Path, mode: ReadMode) -> anyhow::Result<(Input, Stored)> {
     let recordings = path.is_dir() && super::capture_dir_files(path).is_err();
     if let Some(files) = recordings.then(|| super::inspect::recordings(path).ok()).flatten() {
         let (mut files, mut skipped) = (files.into_iter(), false);
         while let Some(first) = files.next() {
-            match open_recording(&first) {
+            match open_recording(&first, mode) {
                 Ok((reader, ahead, stored)) => {
                     return Ok((Input::Recording { reader, ahead, rest: files.collect(), skipped }, stored));
                 }
@@ -484,7 +495,7 @@ fn open_input(path: &Path) -> anyhow::Result<(Input, Stored)> {
     }
     let name = path.to_string_lossy();
     if name.ends_with(".mcap") || name.ends_with(".mcap.part") {
-        let (reader, ahead, stored) = open_recording(path)?;
+        let (reader, ahead, stored) = open_recording(path, mode)?;
         return Ok((Input::Recording { reader, ahead, rest: Vec::new(), skipped: false }, stored));
     }
     if !path.exists() {
@@ -495,8 +506,8 @@ fn open_input(path: &Path) -> anyhow::Result<(Input, Stored)> {
 
 /// A recording, with the configuration it stores before its first samples and the samples
 /// read ahead while looking for it.
-fn open_recording(path: &Path) -> anyhow::Result<(Box<RecordReader>, Vec<SampleBatch>, Stored)> {
-    let mut reader = RecordReader::open(path)?;
+fn open_recording(path: &Path, mode: ReadMode) -> anyhow::Result<(Box<RecordReader>, Vec<SampleBatch>, Stored)> {
+    let mut reader = RecordReader::open_with(path, mode)?;
     let mut stored = Stored::default();
     let mut ahead = Vec::new();
     // Configuration is written before the samples; read up to the first batch of them.

@@ -84,6 +84,7 @@ pub fn run(args: TeachArgs) -> anyhow::Result<ExitCode> {
             json: true,
             recipe: None,
             encoder_direction: None,
+            sequential: false,
         };
         let (_, mut feeder) = replay_into(&replay, std::io::sink(), |p| p.keep_signatures())
             .with_context(|| format!("--reference {}", input.display()))?;

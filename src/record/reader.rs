@@ -14,11 +14,12 @@ use std::collections::VecDeque;
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 
 use mcap::records::ChunkIndex;
 
 use super::channels::{Channels, Lookup};
-use super::chunk::{self, Inner};
+use super::chunk::{self, Inner, Unpacked};
 use super::codec;
 use super::error::{ChunkError, RecordError};
 use super::linear::{Linear, Step};
@@ -67,14 +68,51 @@ pub struct RecordReader {
 }
 
 enum Source {
-    Indexed { file: File, chunks: std::vec::IntoIter<ChunkIndex> },
+    Indexed {
+        file: File,
+        chunks: std::vec::IntoIter<ChunkIndex>,
+    },
+    /// The indexed chunks, read and unpacked ahead on a thread of their own.
+    Ahead(Receiver<Ahead>),
     Linear(Box<Linear>),
+}
+
+/// How a recording with a chunk index is read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ReadMode {
+    /// A thread of the reader's own reads the chunks ahead, `READ_AHEAD_CHUNKS` at a time,
+    /// and unpacks them (decompression and CRC) in parallel on rayon's threads, while the
+    /// caller handles the messages before them. What it yields, and the report, are the
+    /// sequential mode's.
+    #[default]
+    Parallel,
+    /// Each chunk read and unpacked on the caller's thread when its turn comes.
+    Sequential,
+}
+
+/// Chunks read and unpacked together in `ReadMode::Parallel`, and the most the read-ahead
+/// thread holds waiting (forgemon's chunks are about 1 MiB each).
+pub const READ_AHEAD_CHUNKS: usize = 8;
+
+/// One step of the read-ahead thread, in file order.
+enum Ahead {
+    /// A chunk the index points at: its records, or why not.
+    Chunk { index: ChunkIndex, unpacked: Result<Unpacked, ChunkError> },
+    /// Reading failed; nothing follows.
+    Io(std::io::Error),
+    /// Every indexed chunk was handed over.
+    End,
 }
 
 impl RecordReader {
     /// Open a recording. Fails when the file cannot be read or is not MCAP at all; a
     /// cut-off or damaged file opens, and yields what it holds.
     pub fn open(path: impl AsRef<Path>) -> Result<RecordReader, RecordError> {
+        RecordReader::open_with(path, ReadMode::default())
+    }
+
+    /// `open`, reading an indexed recording as `mode` says.
+    pub fn open_with(path: impl AsRef<Path>, mode: ReadMode) -> Result<RecordReader, RecordError> {
         let path = path.as_ref().to_path_buf();
         let io_err = |action: &'static str| {
             let path = path.clone();
@@ -91,7 +129,11 @@ impl RecordReader {
                 report.complete = true;
                 report.indexed = true;
                 let s = *s;
-                (Source::Indexed { file, chunks: s.chunk_indexes.into_iter() }, s.channels)
+                let source = match mode {
+                    ReadMode::Parallel => read_ahead(file, s.chunk_indexes, total_bytes),
+                    ReadMode::Sequential => Source::Indexed { file, chunks: s.chunk_indexes.into_iter() },
+                };
+                (source, s.channels)
             }
             other => {
                 if let Found::Unreadable(why) = other {
@@ -139,8 +181,23 @@ impl RecordReader {
                     Ok(()) => Ok(read_at(file, start, length as usize).map_err(io_err)?),
                     Err(error) => Err(error),
                 };
-                self.take_indexed(&index, record);
+                let unpacked = record.and_then(|r| chunk::unpack(&r, MAX_RECORD_BYTES));
+                self.take_indexed(&index, unpacked);
             }
+            Source::Ahead(rx) => match rx.recv() {
+                Ok(Ahead::Chunk { index, unpacked }) => self.take_indexed(&index, unpacked),
+                Ok(Ahead::Io(source)) => {
+                    return Err(RecordError::Io { path: self.path.clone(), action: "read", source });
+                }
+                Ok(Ahead::End) => {
+                    self.report.bytes_recovered = self.report.total_bytes;
+                    return Ok(false);
+                }
+                Err(_) => {
+                    let source = std::io::Error::other("the read-ahead thread stopped");
+                    return Err(RecordError::Io { path: self.path.clone(), action: "read", source });
+                }
+            },
             Source::Linear(linear) => match linear.next_step().map_err(io_err)? {
                 Some(step) => self.take_step(step),
                 None => return Ok(false),
@@ -150,17 +207,11 @@ impl RecordReader {
     }
 
     /// The chunk `index` points at (through the summary), read or refused by its bounds.
-    fn take_indexed(&mut self, index: &ChunkIndex, record: Result<Vec<u8>, ChunkError>) {
+    fn take_indexed(&mut self, index: &ChunkIndex, unpacked: Result<Unpacked, ChunkError>) {
         let mut topics: Vec<String> =
             index.message_index_offsets.keys().map(|&id| self.channels.topic_or_id(id)).collect();
         topics.sort();
-        let start = index.chunk_start_offset;
-        match record {
-            Ok(record) => {
-                self.take_chunk(start, &record, topics);
-            }
-            Err(error) => self.corrupt(start, index.chunk_length, topics, error),
-        }
+        self.take_chunk(index.chunk_start_offset, index.chunk_length, unpacked, topics);
     }
 
     /// One step of reading front to back: a chunk, a message index naming a corrupt
@@ -169,7 +220,8 @@ impl RecordReader {
         match step {
             Step::Chunk { offset, record } => {
                 self.naming = None;
-                if !self.take_chunk(offset, &record, Vec::new()) {
+                let unpacked = chunk::unpack(&record, MAX_RECORD_BYTES);
+                if !self.take_chunk(offset, record.len() as u64, unpacked, Vec::new()) {
                     self.naming = self.report.corrupt_chunks.len().checked_sub(1);
                 }
             }
@@ -206,10 +258,16 @@ impl RecordReader {
         }
     }
 
-    /// Check, unpack and decode one chunk record at `offset` into the queue; `false` when it
-    /// was corrupt (and is now in the report).
-    fn take_chunk(&mut self, offset: u64, record: &[u8], topics: Vec<String>) -> bool {
-        let decoded = chunk::unpack(record, MAX_RECORD_BYTES).and_then(|u| Ok((u.verified, self.decode(u.records)?)));
+    /// Decode one chunk record of `length` bytes at `offset`, checked and unpacked, into the
+    /// queue; `false` when it was corrupt (and is now in the report).
+    fn take_chunk(
+        &mut self,
+        offset: u64,
+        length: u64,
+        unpacked: Result<Unpacked, ChunkError>,
+        topics: Vec<String>,
+    ) -> bool {
+        let decoded = unpacked.and_then(|u| Ok((u.verified, self.decode(u.records)?)));
         match decoded {
             Ok((verified, messages)) => {
                 self.queue.extend(messages);
@@ -218,11 +276,11 @@ impl RecordReader {
                 } else {
                     self.report.chunks_unverified += 1;
                 }
-                self.report.bytes_recovered = self.report.bytes_recovered.max(offset + record.len() as u64);
+                self.report.bytes_recovered = self.report.bytes_recovered.max(offset + length);
                 true
             }
             Err(error) => {
-                self.corrupt(offset, record.len() as u64, topics, error);
+                self.corrupt(offset, length, topics, error);
                 false
             }
         }
@@ -290,6 +348,54 @@ impl Iterator for RecordReader {
     }
 }
 
+/// The indexed chunks of `file` (`total` bytes) read and unpacked on a thread of their
+/// own, in batches of `READ_AHEAD_CHUNKS` unpacked in parallel, handed over in file order.
+/// Without a thread, read in turn (`ReadMode::Sequential`).
+fn read_ahead(file: File, chunks: Vec<ChunkIndex>, total: u64) -> Source {
+    let (tx, rx) = sync_channel(READ_AHEAD_CHUNKS);
+    let Ok(mut own) = file.try_clone() else { return Source::Indexed { file, chunks: chunks.into_iter() } };
+    let ahead = chunks.clone();
+    let spawned = std::thread::Builder::new().name("forgemon-read".into()).spawn(move || {
+        for batch in ahead.chunks(READ_AHEAD_CHUNKS) {
+            let mut read = Vec::with_capacity(batch.len());
+            for index in batch {
+                let (start, length) = (index.chunk_start_offset, index.chunk_length);
+                match chunk_bounds(start, length, total).map(|()| read_at(&mut own, start, length as usize)) {
+                    Ok(Err(e)) => {
+                        // The chunks before the failed read are handed over first.
+                        send_unpacked(&tx, read);
+                        let _ = tx.send(Ahead::Io(e));
+                        return;
+                    }
+                    Ok(Ok(record)) => read.push((index.clone(), Ok(record))),
+                    Err(error) => read.push((index.clone(), Err(error))),
+                }
+            }
+            if !send_unpacked(&tx, read) {
+                return;
+            }
+        }
+        let _ = tx.send(Ahead::End);
+    });
+    match spawned {
+        Ok(_) => Source::Ahead(rx),
+        Err(_) => Source::Indexed { file, chunks: chunks.into_iter() },
+    }
+}
+
+/// Unpack `read` in parallel and send it in order; `false` once the reader is gone.
+fn send_unpacked(tx: &SyncSender<Ahead>, read: Vec<(ChunkIndex, Result<Vec<u8>, ChunkError>)>) -> bool {
+    use rayon::prelude::*;
+    let unpacked: Vec<Ahead> = read
+        .into_par_iter()
+        .map(|(index, record)| Ahead::Chunk {
+            index,
+            unpacked: record.and_then(|r| chunk::unpack(&r, MAX_RECORD_BYTES)),
+        })
+        .collect();
+    unpacked.into_iter().all(|a| tx.send(a).is_ok())
+}
+
 /// A chunk the index places at `start`, `length` bytes long, must lie inside the file of
 /// `total` bytes and within [`MAX_RECORD_BYTES`].
 fn chunk_bounds(start: u64, length: u64, total: u64) -> Result<(), ChunkError> {
@@ -348,11 +454,16 @@ mod tests {
     /// A small recording in 4 kB chunks (about 8 of them): a config file, then 24 batches
     /// of 50 samples, 50 ms apart from host time 1 s. Returns its bytes and what it holds.
     fn small_recording() -> (Vec<u8>, Vec<Recorded>) {
+        small_recording_in(4096)
+    }
+
+    /// The same in chunks of `chunk_size_bytes`.
+    fn small_recording_in(chunk_size_bytes: u64) -> (Vec<u8>, Vec<Recorded>) {
         let dir = tempfile::tempdir().expect("tempdir");
         let path = dir.path().join("r.mcap");
         let options = RecordOptions {
             compression: ChunkCompression::Zstd { level: 1 },
-            chunk_size_bytes: 4096,
+            chunk_size_bytes,
             ..RecordOptions::default()
         };
         let mut w = RecordWriter::create_with(&path, options).expect("create");
@@ -378,10 +489,14 @@ mod tests {
 
     /// Every message of `bytes` as a file, in file order, and the report.
     fn read_bytes(bytes: &[u8]) -> Result<(Vec<Recorded>, ReadReport), RecordError> {
+        read_bytes_with(bytes, ReadMode::default())
+    }
+
+    fn read_bytes_with(bytes: &[u8], mode: ReadMode) -> Result<(Vec<Recorded>, ReadReport), RecordError> {
         let dir = tempfile::tempdir().expect("tempdir");
         let path = dir.path().join("x.mcap");
         std::fs::write(&path, bytes).expect("write");
-        let mut reader = RecordReader::open(&path)?;
+        let mut reader = RecordReader::open_with(&path, mode)?;
         let messages = reader.by_ref().collect::<Result<Vec<_>, _>>()?;
         Ok((messages, reader.report().clone()))
     }
@@ -399,6 +514,31 @@ mod tests {
         let head = got.iter().zip(all).take_while(|(a, b)| a == b).count();
         let tail = got.iter().rev().zip(all.iter().rev()).take_while(|(a, b)| a == b).count();
         got.len() < all.len() && head + tail >= got.len()
+    }
+
+    /// Issue 42: the parallel read-ahead yields what the sequential read does, message for
+    /// message, with the same report: intact, and with each chunk in turn corrupt, over
+    /// several read-ahead batches (the report's paths differ only by the temp directory).
+    #[test]
+    fn the_parallel_read_yields_the_sequential_reads_messages_and_report() {
+        let (bytes, intact) = small_recording_in(1024);
+        let chunks = chunk_indexes(&bytes);
+        assert!(chunks.len() > 2 * READ_AHEAD_CHUNKS, "{} chunks", chunks.len());
+        let mut files = vec![bytes.clone()];
+        for c in &chunks {
+            let mut bad = bytes.clone();
+            bad[(c.compressed_data_offset().expect("offset") + c.compressed_size / 2) as usize] ^= 0x10;
+            files.push(bad);
+        }
+        for (k, file) in files.iter().enumerate() {
+            let (par, mut par_report) = read_bytes_with(file, ReadMode::Parallel).expect("parallel");
+            let (seq, seq_report) = read_bytes_with(file, ReadMode::Sequential).expect("sequential");
+            assert_eq!(par, seq, "file {k}: the messages");
+            par_report.path.clone_from(&seq_report.path);
+            assert_eq!(par_report, seq_report, "file {k}: the report");
+            assert_eq!(par_report.corrupt_chunks.len(), usize::from(k > 0), "file {k}");
+        }
+        assert_eq!(read_bytes_with(&bytes, ReadMode::Parallel).expect("intact").0, intact);
     }
 
     #[test]
