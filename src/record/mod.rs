@@ -19,7 +19,8 @@
 //! - [`reader`]: indexed reading, and recovery of files cut off by a crash or damaged:
 //!   every chunk's CRC is checked (`chunk`), a corrupt chunk is skipped and named in the
 //!   [`report`]; the summary (`summary`) is checked against its CRC; a file without a
-//!   usable one is read front to back, resynchronising after damaged records (`linear`).
+//!   usable one is read front to back, resynchronising after damaged records (`linear`);
+//!   an indexed file's chunks are read ahead and unpacked in parallel (`indexed`).
 //!
 //! This is the one layer above the pure core that does file IO; nothing in `signal/`,
 //! `estimate/` or `alert/` depends on it.
@@ -31,6 +32,7 @@ mod chunk;
 pub mod codec;
 pub mod error;
 mod file;
+mod indexed;
 mod linear;
 pub mod message;
 pub mod options;

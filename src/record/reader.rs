@@ -12,9 +12,9 @@
 
 use std::collections::VecDeque;
 use std::fs::File;
-use std::io::{Read, Seek, SeekFrom};
+use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::sync::mpsc::Receiver;
 
 use mcap::records::ChunkIndex;
 
@@ -22,14 +22,12 @@ use super::channels::{Channels, Lookup};
 use super::chunk::{self, Inner, Unpacked};
 use super::codec;
 use super::error::{ChunkError, RecordError};
+use super::indexed::{self, Ahead};
+pub use super::indexed::{MAX_RECORD_BYTES, READ_AHEAD_CHUNKS};
 use super::linear::{Linear, Step};
 use super::message::Recorded;
 use super::report::{CorruptChunk, ReadReport};
 use super::summary::{self, Found};
-
-/// The largest record (chunk, compressed or not) the reader accepts. forgemon's chunks are
-/// about 1 MiB; the limit keeps a damaged length field from allocating gigabytes.
-pub const MAX_RECORD_BYTES: usize = 64 * 1024 * 1024;
 
 /// A whole recording in memory, in log-time order (ties in file order).
 #[derive(Debug, Clone, PartialEq)]
@@ -90,20 +88,6 @@ pub enum ReadMode {
     Sequential,
 }
 
-/// Chunks read and unpacked together in `ReadMode::Parallel`, and the most the read-ahead
-/// thread holds waiting (forgemon's chunks are about 1 MiB each).
-pub const READ_AHEAD_CHUNKS: usize = 8;
-
-/// One step of the read-ahead thread, in file order.
-enum Ahead {
-    /// A chunk the index points at: its records, or why not.
-    Chunk { index: ChunkIndex, unpacked: Result<Unpacked, ChunkError> },
-    /// Reading failed; nothing follows.
-    Io(std::io::Error),
-    /// Every indexed chunk was handed over.
-    End,
-}
-
 impl RecordReader {
     /// Open a recording. Fails when the file cannot be read or is not MCAP at all; a
     /// cut-off or damaged file opens, and yields what it holds.
@@ -130,7 +114,10 @@ impl RecordReader {
                 report.indexed = true;
                 let s = *s;
                 let source = match mode {
-                    ReadMode::Parallel => read_ahead(file, s.chunk_indexes, total_bytes),
+                    ReadMode::Parallel => match indexed::read_ahead(&file, s.chunk_indexes.clone(), total_bytes) {
+                        Some(rx) => Source::Ahead(rx),
+                        None => Source::Indexed { file, chunks: s.chunk_indexes.into_iter() },
+                    },
                     ReadMode::Sequential => Source::Indexed { file, chunks: s.chunk_indexes.into_iter() },
                 };
                 (source, s.channels)
@@ -177,8 +164,8 @@ impl RecordReader {
                     return Ok(false);
                 };
                 let (start, length) = (index.chunk_start_offset, index.chunk_length);
-                let record = match chunk_bounds(start, length, self.report.total_bytes) {
-                    Ok(()) => Ok(read_at(file, start, length as usize).map_err(io_err)?),
+                let record = match indexed::chunk_bounds(start, length, self.report.total_bytes) {
+                    Ok(()) => Ok(indexed::read_at(file, start, length as usize).map_err(io_err)?),
                     Err(error) => Err(error),
                 };
                 let unpacked = record.and_then(|r| chunk::unpack(&r, MAX_RECORD_BYTES));
@@ -346,75 +333,6 @@ impl Iterator for RecordReader {
         }
         item
     }
-}
-
-/// The indexed chunks of `file` (`total` bytes) read and unpacked on a thread of their
-/// own, in batches of `READ_AHEAD_CHUNKS` unpacked in parallel, handed over in file order.
-/// Without a thread, read in turn (`ReadMode::Sequential`).
-fn read_ahead(file: File, chunks: Vec<ChunkIndex>, total: u64) -> Source {
-    let (tx, rx) = sync_channel(READ_AHEAD_CHUNKS);
-    let Ok(mut own) = file.try_clone() else { return Source::Indexed { file, chunks: chunks.into_iter() } };
-    let ahead = chunks.clone();
-    let spawned = std::thread::Builder::new().name("forgemon-read".into()).spawn(move || {
-        for batch in ahead.chunks(READ_AHEAD_CHUNKS) {
-            let mut read = Vec::with_capacity(batch.len());
-            for index in batch {
-                let (start, length) = (index.chunk_start_offset, index.chunk_length);
-                match chunk_bounds(start, length, total).map(|()| read_at(&mut own, start, length as usize)) {
-                    Ok(Err(e)) => {
-                        // The chunks before the failed read are handed over first.
-                        send_unpacked(&tx, read);
-                        let _ = tx.send(Ahead::Io(e));
-                        return;
-                    }
-                    Ok(Ok(record)) => read.push((index.clone(), Ok(record))),
-                    Err(error) => read.push((index.clone(), Err(error))),
-                }
-            }
-            if !send_unpacked(&tx, read) {
-                return;
-            }
-        }
-        let _ = tx.send(Ahead::End);
-    });
-    match spawned {
-        Ok(_) => Source::Ahead(rx),
-        Err(_) => Source::Indexed { file, chunks: chunks.into_iter() },
-    }
-}
-
-/// Unpack `read` in parallel and send it in order; `false` once the reader is gone.
-fn send_unpacked(tx: &SyncSender<Ahead>, read: Vec<(ChunkIndex, Result<Vec<u8>, ChunkError>)>) -> bool {
-    use rayon::prelude::*;
-    let unpacked: Vec<Ahead> = read
-        .into_par_iter()
-        .map(|(index, record)| Ahead::Chunk {
-            index,
-            unpacked: record.and_then(|r| chunk::unpack(&r, MAX_RECORD_BYTES)),
-        })
-        .collect();
-    unpacked.into_iter().all(|a| tx.send(a).is_ok())
-}
-
-/// A chunk the index places at `start`, `length` bytes long, must lie inside the file of
-/// `total` bytes and within [`MAX_RECORD_BYTES`].
-fn chunk_bounds(start: u64, length: u64, total: u64) -> Result<(), ChunkError> {
-    let end = start.saturating_add(length);
-    if end > total {
-        return Err(ChunkError::OutsideFile { start, end, total });
-    }
-    if length > MAX_RECORD_BYTES as u64 {
-        return Err(ChunkError::TooLarge { bytes: length, limit: MAX_RECORD_BYTES as u64 });
-    }
-    Ok(())
-}
-
-/// `length` bytes of `file` from `start`.
-fn read_at(file: &mut File, start: u64, length: usize) -> std::io::Result<Vec<u8>> {
-    let mut record = vec![0u8; length];
-    file.seek(SeekFrom::Start(start))?;
-    file.read_exact(&mut record)?;
-    Ok(record)
 }
 
 /// The first bytes must be the MCAP magic; anything else is not a recording.
