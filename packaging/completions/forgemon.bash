@@ -565,7 +565,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__replay)
-            opts="-h --machine --process --service --out --json --recipe --encoder-direction --help"
+            opts="-h --machine --process --service --out --json --recipe --encoder-direction --sequential --help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 2 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0

@@ -82,6 +82,7 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l out -d 'Rec
 complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l recipe -d 'Judge every blow against this recipe (docs/interfaces.md §9, `forgemon teach`): the §5 `judgement`, and `nok` alerts, as the service would' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l encoder-direction -d 'Which way the ram encoder counts: `down` (towards the lower die, docs/interfaces.md §1), `up` (away from it: read negated), or `auto` (each blow\'s approach tells); overrides the service file\'s `[encoder] direction`' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l json -d 'One JSON object per blow (docs/interfaces.md §5) instead of a table'
+complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -l sequential -d 'Read each recording\'s chunks in turn on one thread, instead of ahead and in parallel. The output is the same, byte for byte'
 complete -c forgemon -n "__fish_forgemon_using_subcommand replay" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand import" -s o -l out -d 'The recording to write' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand import" -l machine -d 'A machine model to store in the recording too' -r -F
