@@ -14,6 +14,7 @@ pub mod identify;
 pub mod import;
 pub mod inspect;
 pub mod out;
+mod progress;
 pub mod replay;
 pub mod run;
 pub mod simulate;

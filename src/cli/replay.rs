@@ -11,6 +11,7 @@ use std::process::ExitCode;
 use anyhow::{Context, bail};
 use clap::Args;
 
+use super::progress::Progress;
 use super::{parse_process_warn, read_text};
 use crate::config::parse_machine;
 use crate::config::service::parse_tuning;
@@ -153,6 +154,7 @@ pub(crate) fn replay_into<W: Write>(
         out: std::io::BufWriter::new(out),
         json: args.json,
         judged,
+        progress: Progress::hidden(),
         blows: 0,
         rejected: 0,
         end: End::InputEnded,
@@ -166,7 +168,11 @@ pub(crate) fn replay_into<W: Write>(
             let _ = replay.finish();
             return Err(e);
         }
-        status => status?,
+        Err(e) => {
+            replay.progress.clear();
+            return Err(e);
+        }
+        Ok(status) => status,
     };
     let feeder = replay.finish()?;
     Ok((status, feeder))
@@ -255,6 +261,8 @@ struct Replay<W: Write> {
     json: bool,
     /// The table has its recipe column (`table_header`).
     judged: bool,
+    /// Bytes of the recordings read, on a terminal.
+    progress: Progress,
     blows: u64,
     rejected: u64,
     /// How the input ends: a recording where its service stopped, capture files after their
@@ -275,6 +283,7 @@ impl<W: Write> Replay<W> {
             }
             Input::Recording { reader, ahead, rest, skipped } => {
                 self.end = End::Stopped;
+                self.progress = Progress::over(std::iter::once(reader.path()).chain(rest.iter().map(PathBuf::as_path)));
                 for batch in &ahead {
                     self.batch(batch)?;
                 }
@@ -293,7 +302,9 @@ impl<W: Write> Replay<W> {
                             }
                         }
                         Err(e) => {
-                            eprintln!("forgemon: skipped {}: {e}", path.display());
+                            self.progress.say(format_args!("forgemon: skipped {}: {e}", path.display()));
+                            self.progress.file(&path);
+                            self.progress.file_done();
                             status = ExitCode::from(super::inspect::EXIT_CORRUPT_INPUT);
                         }
                     }
@@ -306,7 +317,8 @@ impl<W: Write> Replay<W> {
     /// A recording's messages through the session, its control markers taken where the
     /// live run took them; the exit status its state gives.
     fn recording(&mut self, mut reader: Box<RecordReader>, args: &ReplayArgs) -> anyhow::Result<ExitCode> {
-        for m in reader.by_ref() {
+        self.progress.file(reader.path());
+        while let Some(m) = reader.next() {
             let m = m?;
             let log_ns = m.log_time_ns;
             match m.payload {
@@ -338,9 +350,11 @@ impl<W: Write> Replay<W> {
                 _ => {}
             }
             self.recorded()?;
+            self.progress.at(reader.report().bytes_recovered);
         }
+        self.progress.file_done();
         if !reader.report().complete {
-            eprintln!("forgemon: {}", reader.report());
+            self.progress.say(format_args!("forgemon: {}", reader.report()));
         }
         Ok(super::inspect::input_status(reader.report()))
     }
@@ -385,11 +399,11 @@ impl<W: Write> Replay<W> {
                         Some(name) if self.input.is_dir() => self.input.join(name),
                         _ => self.input.clone(),
                     };
-                    eprintln!(
+                    self.progress.say(format_args!(
                         "forgemon: {}: blow at t = {:.6} s not estimated: {error}",
                         place.display(),
                         cut.t_contact_s
-                    );
+                    ));
                 }
                 Outcome::NewBillet => {}
             }
@@ -401,6 +415,7 @@ impl<W: Write> Replay<W> {
     fn finish(mut self) -> anyhow::Result<Feeder> {
         let files = self.session.finish(self.end, 0, &mut self.outcomes);
         self.handle()?;
+        self.progress.clear();
         self.out.flush()?;
         for f in files? {
             eprintln!("forgemon: recorded {}", f.display());
