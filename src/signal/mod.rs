@@ -5,6 +5,7 @@ pub mod align;
 pub mod capture;
 pub mod fir;
 pub mod merge;
+mod pretrigger;
 pub mod resample;
 pub mod sample;
 pub mod segment;

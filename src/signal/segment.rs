@@ -8,7 +8,7 @@
 //! It works sample by sample on continuous streams and on triggered captures alike, and
 //! does not allocate per sample once its buffers have grown.
 
-use std::collections::VecDeque;
+use super::pretrigger::PreTrigger;
 
 use super::sample::{Role, SampleBatch};
 use crate::physics::machine::MachineKind;
@@ -159,7 +159,8 @@ enum State {
 pub struct Segmenter {
     cfg: SegmentConfig,
     state: State,
-    ring: VecDeque<Sample>,
+    /// The pre-trigger window.
+    ring: PreTrigger,
     ring_cap: usize,
     blow: Vec<Sample>,
     period_s: f64,
@@ -175,7 +176,7 @@ impl Segmenter {
         Segmenter {
             cfg,
             state: State::Armed,
-            ring: VecDeque::new(),
+            ring: PreTrigger::default(),
             ring_cap: 0,
             blow: Vec::new(),
             period_s: 0.0,
@@ -231,22 +232,76 @@ impl Segmenter {
         if self.ring_cap == 0 || (period_s - self.period_s).abs() > 1e-3 * period_s {
             self.period_s = period_s;
             self.ring_cap = ((self.cfg.pre_trigger_s / period_s).ceil() as usize).max(2);
-            while self.ring.len() > self.ring_cap {
-                self.ring.pop_front();
-            }
+            self.ring.set_cap(self.ring_cap);
         }
         let nc = batch.roles.len();
-        for (i, chunk) in batch.values.chunks_exact(nc).enumerate() {
-            let s = Sample {
-                t_s: batch.time_s(i),
-                load_n: chunk[il],
-                disp_m: chunk[id],
-                acc_mps2: chunk[ia],
-                filled: false,
-            };
+        let sample = |i: usize| {
+            let c = &batch.values[i * nc..(i + 1) * nc];
+            Sample { t_s: batch.time_s(i), load_n: c[il], disp_m: c[id], acc_mps2: c[ia], filled: false }
+        };
+        let (n, mut i) = (batch.len(), 0);
+        while i < n {
+            // Between blows (no hole to bridge first), whole runs of samples at once.
+            if self.pending_fill == 0 {
+                i += self.idle_run(batch, i, [il, id, ia], sample);
+                if i == n {
+                    break;
+                }
+            }
+            let s = sample(i);
             self.fill_to(&s, out);
             self.step(s, out);
+            i += 1;
         }
+    }
+
+    /// From sample `from` of `batch`, the samples `step` would take without a trigger
+    /// (armed) or until it rearms (refractory, the rearming sample included), taken as
+    /// `step` takes them: counted, the last kept, the ring holding the latest. How many.
+    fn idle_run(
+        &mut self,
+        batch: &SampleBatch,
+        from: usize,
+        cols: [usize; 3],
+        sample: impl Fn(usize) -> Sample,
+    ) -> usize {
+        let nc = batch.roles.len();
+        let acc = |i: usize| batch.values[i * nc + cols[2]];
+        let n = batch.len();
+        let taken = match self.state {
+            State::Armed => {
+                let to = (from..n).find(|&i| acc(i) < -self.cfg.trigger_acc_mps2).unwrap_or(n);
+                self.ring.extend_from(batch, from, to, cols);
+                to - from
+            }
+            State::Refractory { quiet_since } => {
+                let mut since = quiet_since;
+                let rearm = (from..n).find(|&i| {
+                    let t_s = batch.time_s(i);
+                    since = if acc(i) > -self.cfg.rearm_acc_mps2 { since.or(Some(t_s)) } else { None };
+                    since.is_some_and(|t0| t_s - t0 >= self.cfg.rearm_s)
+                });
+                match rearm {
+                    Some(i) => {
+                        self.state = State::Armed;
+                        self.ring.clear();
+                        self.ring.extend_from(batch, i, i + 1, cols);
+                        i + 1 - from
+                    }
+                    None => {
+                        self.state = State::Refractory { quiet_since: since };
+                        self.ring.extend_from(batch, from, n, cols);
+                        n - from
+                    }
+                }
+            }
+            State::InBlow { .. } => 0,
+        };
+        if taken > 0 {
+            self.stats.samples += taken as u64;
+            self.last = Some(sample(from + taken - 1));
+        }
+        taken
     }
 
     /// Step the samples of a pending hole, interpolated from the last sample to `next`.
@@ -328,7 +383,7 @@ impl Segmenter {
                 if s.acc_mps2 < -self.cfg.trigger_acc_mps2 && !s.filled {
                     self.stats.triggers += 1;
                     self.blow.clear();
-                    self.blow.extend(self.ring.drain(..));
+                    self.ring.drain_into(&mut self.blow);
                     let i_trigger = self.blow.len();
                     self.blow.push(s);
                     // The zero and any contact already in the pre-trigger window are known
@@ -341,10 +396,7 @@ impl Segmenter {
                     let quiet = usize::from(s.load_n - zero < self.cfg.end_load_n);
                     self.state = State::InBlow { i_trigger, zero, contact, quiet };
                 } else {
-                    if self.ring.len() == self.ring_cap {
-                        self.ring.pop_front();
-                    }
-                    self.ring.push_back(s);
+                    self.ring.push(s);
                 }
             }
             State::InBlow { i_trigger, zero, mut contact, mut quiet } => {
@@ -380,10 +432,7 @@ impl Segmenter {
                 } else {
                     self.state = State::Refractory { quiet_since: since };
                 }
-                if self.ring.len() == self.ring_cap {
-                    self.ring.pop_front();
-                }
-                self.ring.push_back(s);
+                self.ring.push(s);
             }
         }
     }
