@@ -5,7 +5,7 @@
 
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
-use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::sync::mpsc::{Receiver, channel, sync_channel};
 
 use mcap::records::ChunkIndex;
 
@@ -16,63 +16,58 @@ use super::error::ChunkError;
 /// about 1 MiB; the limit keeps a damaged length field from allocating gigabytes.
 pub const MAX_RECORD_BYTES: usize = 64 * 1024 * 1024;
 
-/// Chunks read and unpacked together in `ReadMode::Parallel`, and the most the read-ahead
-/// thread holds waiting (forgemon's chunks are about 1 MiB each).
+/// Chunks read ahead of the caller in `ReadMode::Parallel`: handed over or being unpacked
+/// (forgemon's chunks are about 1 MiB each, 3 MiB unpacked).
 pub const READ_AHEAD_CHUNKS: usize = 8;
 
 /// One step of the read-ahead thread, in file order.
 pub(super) enum Ahead {
-    /// A chunk the index points at: its records, or why not.
-    Chunk { index: ChunkIndex, unpacked: Result<Unpacked, ChunkError> },
+    /// A chunk the index points at: its records, or why not, once unpacked.
+    Chunk { index: ChunkIndex, unpacked: Receiver<Result<Unpacked, ChunkError>> },
     /// Reading failed; nothing follows.
     Io(std::io::Error),
     /// Every indexed chunk was handed over.
     End,
 }
 
-/// The indexed chunks of `file` (`total` bytes) read and unpacked on a thread of their
-/// own, in batches of `READ_AHEAD_CHUNKS` unpacked in parallel, handed over in file order.
-/// `None` when the file cannot be shared with a thread or the thread cannot start: the
-/// caller reads in turn.
+/// The indexed chunks of `file` (`total` bytes) read on a thread of their own and each
+/// unpacked (decompressed, CRC-checked) as a task on rayon's threads as soon as it is read,
+/// handed over in file order, at most `READ_AHEAD_CHUNKS` ahead of the caller. `None` when
+/// the file cannot be shared with a thread or the thread cannot start: the caller reads in
+/// turn.
 pub(super) fn read_ahead(file: &File, chunks: Vec<ChunkIndex>, total: u64) -> Option<Receiver<Ahead>> {
     let (tx, rx) = sync_channel(READ_AHEAD_CHUNKS);
     let mut own = file.try_clone().ok()?;
     let spawned = std::thread::Builder::new().name("forgemon-read".into()).spawn(move || {
-        for batch in chunks.chunks(READ_AHEAD_CHUNKS) {
-            let mut read = Vec::with_capacity(batch.len());
-            for index in batch {
-                let (start, length) = (index.chunk_start_offset, index.chunk_length);
-                match chunk_bounds(start, length, total).map(|()| read_at(&mut own, start, length as usize)) {
-                    Ok(Err(e)) => {
-                        // The chunks before the failed read are handed over first.
-                        send_unpacked(&tx, read);
+        // The buffers the chunks are read into come back once unpacked, to be used again.
+        let (spare_tx, spare) = channel::<Vec<u8>>();
+        for index in chunks {
+            let (start, length) = (index.chunk_start_offset, index.chunk_length);
+            let (done, unpacked) = sync_channel(1);
+            match chunk_bounds(start, length, total) {
+                Ok(()) => {
+                    let mut record = spare.try_recv().unwrap_or_default();
+                    if let Err(e) = read_at(&mut own, start, length as usize, &mut record) {
                         let _ = tx.send(Ahead::Io(e));
                         return;
                     }
-                    Ok(Ok(record)) => read.push((index.clone(), Ok(record))),
-                    Err(error) => read.push((index.clone(), Err(error))),
+                    let spare_tx = spare_tx.clone();
+                    rayon::spawn(move || {
+                        let _ = done.send(chunk::unpack(&record, MAX_RECORD_BYTES));
+                        let _ = spare_tx.send(record);
+                    });
+                }
+                Err(error) => {
+                    let _ = done.send(Err(error));
                 }
             }
-            if !send_unpacked(&tx, read) {
+            if tx.send(Ahead::Chunk { index, unpacked }).is_err() {
                 return;
             }
         }
         let _ = tx.send(Ahead::End);
     });
     spawned.ok().map(|_| rx)
-}
-
-/// Unpack `read` in parallel and send it in order; `false` once the reader is gone.
-fn send_unpacked(tx: &SyncSender<Ahead>, read: Vec<(ChunkIndex, Result<Vec<u8>, ChunkError>)>) -> bool {
-    use rayon::prelude::*;
-    let unpacked: Vec<Ahead> = read
-        .into_par_iter()
-        .map(|(index, record)| Ahead::Chunk {
-            index,
-            unpacked: record.and_then(|r| chunk::unpack(&r, MAX_RECORD_BYTES)),
-        })
-        .collect();
-    unpacked.into_iter().all(|a| tx.send(a).is_ok())
 }
 
 /// A chunk the index places at `start`, `length` bytes long, must lie inside the file of
@@ -88,10 +83,16 @@ pub(super) fn chunk_bounds(start: u64, length: u64, total: u64) -> Result<(), Ch
     Ok(())
 }
 
-/// `length` bytes of `file` from `start`.
-pub(super) fn read_at(file: &mut File, start: u64, length: usize) -> std::io::Result<Vec<u8>> {
-    let mut record = vec![0u8; length];
+/// `length` bytes of `file` from `start`, into `record` (what it held replaced; its
+/// capacity used again, nothing zeroed first).
+pub(super) fn read_at(file: &mut File, start: u64, length: usize, record: &mut Vec<u8>) -> std::io::Result<()> {
+    record.clear();
+    record.reserve(length);
     file.seek(SeekFrom::Start(start))?;
-    file.read_exact(&mut record)?;
-    Ok(record)
+    let got = file.by_ref().take(length as u64).read_to_end(record)?;
+    if got < length {
+        let why = format!("the file ends {got} bytes into a chunk of {length}");
+        return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, why));
+    }
+    Ok(())
 }

@@ -69,6 +69,8 @@ enum Source {
     Indexed {
         file: File,
         chunks: std::vec::IntoIter<ChunkIndex>,
+        /// The buffer each chunk is read into.
+        record: Vec<u8>,
     },
     /// The indexed chunks, read and unpacked ahead on a thread of their own.
     Ahead(Receiver<Ahead>),
@@ -78,10 +80,10 @@ enum Source {
 /// How a recording with a chunk index is read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum ReadMode {
-    /// A thread of the reader's own reads the chunks ahead, `READ_AHEAD_CHUNKS` at a time,
-    /// and unpacks them (decompression and CRC) in parallel on rayon's threads, while the
+    /// A thread of the reader's own reads the chunks ahead, up to `READ_AHEAD_CHUNKS`,
+    /// and each is unpacked (decompression and CRC) as a task on rayon's threads, while the
     /// caller handles the messages before them. What it yields, and the report, are the
-    /// sequential mode's.
+    /// sequential mode's. A reader opened inside a rayon task reads sequentially.
     #[default]
     Parallel,
     /// Each chunk read and unpacked on the caller's thread when its turn comes.
@@ -113,12 +115,17 @@ impl RecordReader {
                 report.complete = true;
                 report.indexed = true;
                 let s = *s;
+                // Inside a rayon task, waiting for the chunks' unpacking on rayon's threads
+                // could hold the thread it needs: read in turn there.
+                let mode = if rayon::current_thread_index().is_some() { ReadMode::Sequential } else { mode };
                 let source = match mode {
                     ReadMode::Parallel => match indexed::read_ahead(&file, s.chunk_indexes.clone(), total_bytes) {
                         Some(rx) => Source::Ahead(rx),
-                        None => Source::Indexed { file, chunks: s.chunk_indexes.into_iter() },
+                        None => Source::Indexed { file, chunks: s.chunk_indexes.into_iter(), record: Vec::new() },
                     },
-                    ReadMode::Sequential => Source::Indexed { file, chunks: s.chunk_indexes.into_iter() },
+                    ReadMode::Sequential => {
+                        Source::Indexed { file, chunks: s.chunk_indexes.into_iter(), record: Vec::new() }
+                    }
                 };
                 (source, s.channels)
             }
@@ -158,21 +165,29 @@ impl RecordReader {
     fn advance(&mut self) -> Result<bool, RecordError> {
         let io_err = |source| RecordError::Io { path: self.path.clone(), action: "read", source };
         match &mut self.source {
-            Source::Indexed { file, chunks } => {
+            Source::Indexed { file, chunks, record } => {
                 let Some(index) = chunks.next() else {
                     self.report.bytes_recovered = self.report.total_bytes;
                     return Ok(false);
                 };
                 let (start, length) = (index.chunk_start_offset, index.chunk_length);
-                let record = match indexed::chunk_bounds(start, length, self.report.total_bytes) {
-                    Ok(()) => Ok(indexed::read_at(file, start, length as usize).map_err(io_err)?),
+                let unpacked = match indexed::chunk_bounds(start, length, self.report.total_bytes) {
+                    Ok(()) => {
+                        indexed::read_at(file, start, length as usize, record).map_err(io_err)?;
+                        chunk::unpack(record, MAX_RECORD_BYTES)
+                    }
                     Err(error) => Err(error),
                 };
-                let unpacked = record.and_then(|r| chunk::unpack(&r, MAX_RECORD_BYTES));
                 self.take_indexed(&index, unpacked);
             }
             Source::Ahead(rx) => match rx.recv() {
-                Ok(Ahead::Chunk { index, unpacked }) => self.take_indexed(&index, unpacked),
+                Ok(Ahead::Chunk { index, unpacked }) => match unpacked.recv() {
+                    Ok(unpacked) => self.take_indexed(&index, unpacked),
+                    Err(_) => {
+                        let source = std::io::Error::other("a chunk's unpacking stopped");
+                        return Err(RecordError::Io { path: self.path.clone(), action: "read", source });
+                    }
+                },
                 Ok(Ahead::Io(source)) => {
                     return Err(RecordError::Io { path: self.path.clone(), action: "read", source });
                 }
