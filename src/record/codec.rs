@@ -101,11 +101,7 @@ pub fn decode_samples(mut bytes: &[u8]) -> Result<SampleBatch, DecodeError> {
                     return Err(DecodeError::Wire { what: "packed doubles not a multiple of 8 bytes".into() });
                 }
                 batch.values.reserve(packed.len() / 8);
-                batch.values.extend(
-                    packed
-                        .chunks_exact(8)
-                        .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]])),
-                );
+                batch.values.extend(packed.as_chunks::<8>().0.iter().map(|c| f64::from_le_bytes(*c)));
             }
             (7, wire::FIXED64) => batch.values.push(f64::from_le_bytes(wire::get_fixed64(buf)?)),
             (1..=7, _) => return Err(DecodeError::Wire { what: format!("field {field} has the wrong wire type") }),

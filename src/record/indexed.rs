@@ -18,7 +18,7 @@ pub const MAX_RECORD_BYTES: usize = 64 * 1024 * 1024;
 
 /// Chunks read ahead of the caller in `ReadMode::Parallel`: handed over or being unpacked
 /// (forgemon's chunks are about 1 MiB each, 3 MiB unpacked).
-pub const READ_AHEAD_CHUNKS: usize = 8;
+pub const READ_AHEAD_CHUNKS: usize = 16;
 
 /// One step of the read-ahead thread, in file order.
 pub(super) enum Ahead {

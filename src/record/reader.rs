@@ -456,7 +456,8 @@ mod tests {
     fn the_parallel_read_yields_the_sequential_reads_messages_and_report() {
         let (bytes, intact) = small_recording_in(1024);
         let chunks = chunk_indexes(&bytes);
-        assert!(chunks.len() > 2 * READ_AHEAD_CHUNKS, "{} chunks", chunks.len());
+        // More chunks than the read-ahead holds: the thread waits for the reader.
+        assert!(chunks.len() > READ_AHEAD_CHUNKS, "{} chunks", chunks.len());
         let mut files = vec![bytes.clone()];
         for c in &chunks {
             let mut bad = bytes.clone();
