@@ -207,6 +207,9 @@ fn pandas_and_pyarrow_read_back_the_replayed_results_of_every_file_and_billet() 
         let said = String::from_utf8_lossy(&done.stderr);
         assert!(said.contains("exported 24 blows from 2 recordings"), "{said}");
     }
+    // `--parquet -` into a pipe: the same bytes as the file.
+    let piped = ok(forgemon(&["export", inputs[0], inputs[1], "--parquet", "-"]));
+    assert!(piped.stdout == std::fs::read(&parquet).expect("the parquet file"), "--parquet - wrote other bytes");
     let read = python_read(&csv, &parquet);
 
     let want: Vec<(Value, i64, &Path)> = replayed(&demo_file)

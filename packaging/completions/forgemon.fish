@@ -89,7 +89,7 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand import" -l machine -d 
 complete -c forgemon -n "__fish_forgemon_using_subcommand import" -l process -d 'A process sheet to store (defaults to the directory\'s process.toml)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand import" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l csv -d 'Write CSV (a header row, then one row per blow; an empty field where a value is `null`); `-` writes it to standard output' -r -F
-complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l parquet -d 'Write Parquet (snappy-compressed; nullable columns where a value can be `null`)' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l parquet -d 'Write Parquet (snappy-compressed; nullable columns where a value can be `null`); `-` writes it to standard output, when that is not a terminal' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand inspect" -l json -d 'Print one JSON object instead of text'
 complete -c forgemon -n "__fish_forgemon_using_subcommand inspect" -s h -l help -d 'Print help'

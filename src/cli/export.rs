@@ -35,7 +35,8 @@ pub struct ExportArgs {
     /// `null`); `-` writes it to standard output.
     #[arg(long, value_name = "OUT.csv", required_unless_present = "parquet", conflicts_with = "parquet")]
     pub csv: Option<PathBuf>,
-    /// Write Parquet (snappy-compressed; nullable columns where a value can be `null`).
+    /// Write Parquet (snappy-compressed; nullable columns where a value can be `null`); `-`
+    /// writes it to standard output, when that is not a terminal.
     #[arg(long, value_name = "OUT.parquet")]
     pub parquet: Option<PathBuf>,
 }
@@ -169,7 +170,7 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     Ok(if corrupt { ExitCode::from(EXIT_CORRUPT_INPUT) } else { ExitCode::SUCCESS })
 }
 
-/// `--csv -`: the table to standard output.
+/// `--csv -`, `--parquet -`: the table to standard output.
 const STDOUT_PATH: &str = "-";
 
 fn write_csv(out: &Path, rows: &[ExportRow]) -> anyhow::Result<()> {
@@ -277,15 +278,27 @@ fn batch(rows: &[ExportRow]) -> anyhow::Result<RecordBatch> {
 }
 
 fn write_parquet(out: &Path, rows: &[ExportRow]) -> anyhow::Result<()> {
+    if out == Path::new(STDOUT_PATH) {
+        if std::io::IsTerminal::is_terminal(&std::io::stdout()) {
+            bail!("--parquet -: standard output is a terminal, and Parquet is binary; give a file, or a pipe");
+        }
+        // Through `out`: a closed stdout ends the export quietly (`main`).
+        return write_parquet_to(super::out::stdout(), rows, "standard output");
+    }
+    let file = File::create(out).with_context(|| format!("{}: cannot write", out.display()))?;
+    write_parquet_to(file, rows, &out.display().to_string())
+}
+
+/// The table as Parquet to `w`, which `place` names in the errors.
+fn write_parquet_to<W: std::io::Write + Send>(w: W, rows: &[ExportRow], place: &str) -> anyhow::Result<()> {
     use parquet::arrow::ArrowWriter;
     use parquet::basic::Compression;
     use parquet::file::properties::WriterProperties;
     let batch = batch(rows)?;
-    let file = File::create(out).with_context(|| format!("{}: cannot write", out.display()))?;
     let props = WriterProperties::builder().set_compression(Compression::SNAPPY).build();
-    let mut w = ArrowWriter::try_new(BufWriter::new(file), batch.schema(), Some(props))?;
-    w.write(&batch).with_context(|| format!("{}: cannot write", out.display()))?;
-    w.close().with_context(|| format!("{}: cannot write", out.display()))?;
+    let mut w = ArrowWriter::try_new(BufWriter::new(w), batch.schema(), Some(props))?;
+    w.write(&batch).with_context(|| format!("{place}: cannot write"))?;
+    w.close().with_context(|| format!("{place}: cannot write"))?;
     Ok(())
 }
 
