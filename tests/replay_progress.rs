@@ -1,5 +1,6 @@
 //! `forgemon replay DIR` over a rotated run (issue 42): the files stream in name order as
-//! one run, and a terminal shows the progress.
+//! one run, read ahead in parallel or in turn with the same output, and a terminal shows
+//! the progress.
 //!
 //! The run is the fast demo's recording of two billets, written again by the recorder with a
 //! rotation every 4 MiB, so its files are a rotated run as the service leaves one (each
@@ -76,6 +77,10 @@ fn a_rotated_run_replays_as_its_one_file_with_its_progress_on_a_terminal() {
     let blows = whole.stdout.iter().filter(|&&c| c == b'\n').count();
     assert!(blows >= 16, "the demo's two billets gave {blows} blows");
     assert!(whole.stdout == rotated.stdout, "the rotated run's blows differ from its one file's");
+    // The chunks read ahead and unpacked on other threads, or each in turn: the same bytes.
+    let sequential = Command::new(BIN).arg("replay").arg(&run).args(["--json", "--sequential"]).output().unwrap();
+    assert!(sequential.status.success(), "{}", String::from_utf8_lossy(&sequential.stderr));
+    assert!(sequential.stdout == rotated.stdout, "--sequential printed other blows than the parallel read");
     // Without a terminal on stderr, no bar: only the closing line.
     let err = String::from_utf8_lossy(&rotated.stderr);
     assert!(!err.contains("eta"), "a bar without a terminal: {err}");
