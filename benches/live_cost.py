@@ -192,10 +192,17 @@ def main():
         print(f"service: {st.get('samples')} samples, {st.get('blows')} blows ({st.get('incomplete_blows')} incomplete, "
               f"{st.get('implausible_blows')} implausible); recorded {size / 1e6:.0f} MB")
         if spans:
-            print(f"live cost after the first minute: {100 * (ce - cw) / (te - tw):.2f} % of one core over "
-                  f"{te - tw:.0f} s (spans of {sample_s:.0f} s: {min(spans):.2f} to {max(spans):.2f} %); "
-                  f"RSS {rw:.1f} MB at {tw - marks[0][0]:.0f} s, {re_:.1f} MB at the end "
-                  f"(max {max(m[2] for m in marks[warm:]):.1f}); load average {os.getloadavg()[0]:.1f}")
+            line = (f"live cost after the first minute: {100 * (ce - cw) / (te - tw):.2f} % of one core over "
+                    f"{te - tw:.0f} s (spans of {sample_s:.0f} s: {min(spans):.2f} to {max(spans):.2f} %); "
+                    f"RSS {rw:.1f} MB at {tw - marks[0][0]:.0f} s, {re_:.1f} MB at the end "
+                    f"(max {max(m[2] for m in marks[warm:]):.1f}); load average {os.getloadavg()[0]:.1f}")
+            print(line)
+            # For the performance report (`cargo bench --bench headline` puts it in).
+            out = os.path.join(ROOT, "target", "bench-data", "live_cost.txt")
+            os.makedirs(os.path.dirname(out), exist_ok=True)
+            with open(out, "w") as f:
+                f.write(f"{time.strftime('%Y-%m-%d', time.gmtime())}, {duration:.0f} s, a blow every {interval} s, "
+                        f"{st.get('blows')} blows: {line}\n")
 
 
 if __name__ == "__main__":
