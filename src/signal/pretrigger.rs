@@ -6,8 +6,7 @@
 
 use std::collections::VecDeque;
 
-use super::sample::SampleBatch;
-use super::segment::Sample;
+use super::sample::{Sample, SampleBatch};
 
 /// Value buffers kept for reuse, so that the window allocates nothing once running.
 const SPARE_BUFFERS: usize = 4;

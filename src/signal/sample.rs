@@ -44,6 +44,19 @@ impl fmt::Display for Role {
     }
 }
 
+/// One sample with the three roles, in device time: what the segmenter cuts blows from.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Sample {
+    pub t_s: f64,
+    pub load_n: f64,
+    pub disp_m: f64,
+    pub acc_mps2: f64,
+    /// Not measured: interpolated across a hole in the stream (`Segmenter::hole`), so that
+    /// a blow keeps one uniform time grid. The estimator decides whether a blow with such
+    /// samples can still be trusted.
+    pub filled: bool,
+}
+
 /// A block of samples from one source: `values` holds `len()` samples of `roles.len()`
 /// channels, interleaved (sample 0 of every channel, then sample 1, ...), in physical units.
 #[derive(Debug, Clone, PartialEq)]

@@ -68,18 +68,8 @@ impl SegmentConfig {
     }
 }
 
-/// One sample with the three roles, in device time.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Sample {
-    pub t_s: f64,
-    pub load_n: f64,
-    pub disp_m: f64,
-    pub acc_mps2: f64,
-    /// Not measured: interpolated across a hole in the stream (`Segmenter::hole`), so that
-    /// a blow keeps one uniform time grid. The estimator decides whether a blow with such
-    /// samples can still be trusted.
-    pub filled: bool,
-}
+/// The segmenter's sample (defined beside the batches, `signal::sample`).
+pub use super::sample::Sample;
 
 /// A segmented blow: the samples from the start of the pre-trigger buffer to the end.
 #[derive(Debug, Clone, PartialEq)]
