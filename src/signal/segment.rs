@@ -485,3 +485,68 @@ impl Segmenter {
         self.state = State::Refractory { quiet_since: None };
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One second at 100 kHz with three blows: the ram decelerating at 5000 m/s² and the
+    /// load a half sine of 500 kN over 5 ms; between them a little deterministic noise.
+    fn stream() -> Vec<[f64; 3]> {
+        let mut noise = 12345u64;
+        let mut jitter = move || {
+            noise = noise.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            ((noise >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        };
+        (0..100_000)
+            .map(|i| {
+                let t = i as f64 * 1e-5;
+                let blow = [0.2, 0.5, 0.8].iter().find(|&&tb| (tb..tb + 0.005).contains(&t));
+                match blow {
+                    Some(tb) => {
+                        let load = 500e3 * (std::f64::consts::PI * (t - tb) / 0.005).sin();
+                        [load + 100.0 * jitter(), 0.1 - t * 0.01, -5000.0 + jitter()]
+                    }
+                    None => [100.0 * jitter(), 0.1 - t * 0.01, 2.0 * jitter()],
+                }
+            })
+            .collect()
+    }
+
+    fn batches(rows: &[[f64; 3]], size: usize) -> Vec<SampleBatch> {
+        rows.chunks(size)
+            .enumerate()
+            .map(|(k, chunk)| SampleBatch {
+                source: "s".into(),
+                seq: k as u64,
+                device_time_ns: (k * size * 10_000) as i64,
+                host_time_ns: 0,
+                period_ns: 10_000.0,
+                // Not the roles' own order.
+                roles: vec![Role::Acc, Role::Load, Role::Disp],
+                values: chunk.iter().flat_map(|r| [r[2], r[0], r[1]]).collect(),
+            })
+            .collect()
+    }
+
+    /// Between blows the segmenter takes runs of a batch at once (`idle_run`): however
+    /// the stream is cut into batches, the blows are the same, sample for sample, as when
+    /// each sample comes in a batch of its own (every run one sample long).
+    #[test]
+    fn the_blows_do_not_depend_on_where_the_batches_end() {
+        let rows = stream();
+        let one_by_one = Segmenter::cut_all(SegmentConfig::HAMMER, &batches(&rows, 1));
+        assert_eq!(one_by_one.len(), 3, "three blows in the stream");
+        // Each opens with the pre-trigger window whole: the 25 ms (2500 samples, one more
+        // where the division rounds up) before its trigger, on one 10 µs grid.
+        for (b, tb) in one_by_one.iter().zip([0.2, 0.5, 0.8]) {
+            assert!((2500..=2501).contains(&b.i_trigger), "{} samples before the trigger", b.i_trigger);
+            assert!((b.samples[b.i_trigger].t_s - tb).abs() < 1.5e-5, "triggered at {}", b.samples[b.i_trigger].t_s);
+            assert!(b.samples.windows(2).all(|w| ((w[1].t_s - w[0].t_s) - 1e-5).abs() < 1e-9), "a hole in the blow");
+        }
+        for size in [7, 250, 1000, 4096, rows.len()] {
+            let cut = Segmenter::cut_all(SegmentConfig::HAMMER, &batches(&rows, size));
+            assert!(cut == one_by_one, "batches of {size}: other blows than one sample at a time");
+        }
+    }
+}
