@@ -6,7 +6,7 @@
 
 use std::collections::VecDeque;
 
-use super::sample::{Sample, SampleBatch};
+use super::sample::{Sample, SampleBatch, sample_time_s};
 
 /// Value buffers kept for reuse, so that the window allocates nothing once running.
 const SPARE_BUFFERS: usize = 4;
@@ -46,12 +46,11 @@ impl Run {
         self.values.len() / self.stride - self.skip
     }
 
-    /// The run's `k`-th sample in the window, as `SampleBatch::time_s` times it.
+    /// The run's `k`-th sample in the window, timed as its batch times it.
     fn sample(&self, k: usize) -> Sample {
         let i = self.skip + k;
-        let c = &self.values[i * self.stride..(i + 1) * self.stride];
-        let t_s = (self.device_time_ns as f64 + self.period_ns * (self.first + i) as f64) * 1e-9;
-        Sample { t_s, load_n: c[self.cols[0]], disp_m: c[self.cols[1]], acc_mps2: c[self.cols[2]], filled: false }
+        let t_s = sample_time_s(self.device_time_ns, self.period_ns, self.first + i);
+        Sample::from_row(t_s, &self.values[i * self.stride..(i + 1) * self.stride], self.cols)
     }
 }
 

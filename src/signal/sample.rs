@@ -57,6 +57,20 @@ pub struct Sample {
     pub filled: bool,
 }
 
+impl Sample {
+    /// A measured sample at `t_s` from one interleaved row of a batch whose load,
+    /// displacement and acceleration are the channels `cols`.
+    pub fn from_row(t_s: f64, row: &[f64], cols: [usize; 3]) -> Sample {
+        Sample { t_s, load_n: row[cols[0]], disp_m: row[cols[1]], acc_mps2: row[cols[2]], filled: false }
+    }
+}
+
+/// Device time, s, of sample `i` of a batch starting at `device_time_ns`, `period_ns` apart
+/// (`SampleBatch::time_s`, and a copy of the batch's values that keeps both).
+pub fn sample_time_s(device_time_ns: i64, period_ns: f64, i: usize) -> f64 {
+    (device_time_ns as f64 + period_ns * i as f64) * 1e-9
+}
+
 /// A block of samples from one source: `values` holds `len()` samples of `roles.len()`
 /// channels, interleaved (sample 0 of every channel, then sample 1, ...), in physical units.
 #[derive(Debug, Clone, PartialEq)]
@@ -88,7 +102,7 @@ impl SampleBatch {
 
     /// Device time of sample `i`, s.
     pub fn time_s(&self, i: usize) -> f64 {
-        (self.device_time_ns as f64 + self.period_ns * i as f64) * 1e-9
+        sample_time_s(self.device_time_ns, self.period_ns, i)
     }
 
     /// Index of a role's channel.

@@ -225,10 +225,7 @@ impl Segmenter {
             self.ring.set_cap(self.ring_cap);
         }
         let nc = batch.roles.len();
-        let sample = |i: usize| {
-            let c = &batch.values[i * nc..(i + 1) * nc];
-            Sample { t_s: batch.time_s(i), load_n: c[il], disp_m: c[id], acc_mps2: c[ia], filled: false }
-        };
+        let sample = |i: usize| Sample::from_row(batch.time_s(i), &batch.values[i * nc..(i + 1) * nc], [il, id, ia]);
         let (n, mut i) = (batch.len(), 0);
         while i < n {
             // Between blows (no hole to bridge first), whole runs of samples at once.
