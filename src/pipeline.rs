@@ -96,7 +96,7 @@ impl Pipeline {
     pub fn new(machine: Machine, process: Option<Process>, cfg: PipelineConfig) -> Self {
         Pipeline {
             ring_period_s: 1.0 / machine.second_mode_hz(),
-            segmenter: Segmenter::new(cfg.segment),
+            segmenter: Segmenter::new(cfg.segment).with_ram_kg(machine.ram_kg()),
             estimator: Estimator::new(machine, process, cfg.estimate),
             alerts: AlertRules::new(cfg.alerts),
             cut: Vec::new(),
@@ -120,6 +120,7 @@ impl Pipeline {
     /// one kept, with the reason.
     pub fn set_model(&mut self, machine: Machine, effects: crate::physics::effects::EffectSet) -> Result<(), String> {
         self.estimator.set_model(machine, effects)?;
+        self.segmenter.set_ram_kg(machine.ram_kg());
         self.ring_period_s = 1.0 / machine.second_mode_hz();
         Ok(())
     }

@@ -112,6 +112,12 @@ impl Session {
         }
     }
 
+    /// The roles no source carries (a hammer without a load cell): the merge does not wait
+    /// for them, and the blows are estimated without them (`Merger::set_absent`).
+    pub fn set_absent(&mut self, absent: crate::signal::sample::Channels) {
+        self.merger.set_absent(absent);
+    }
+
     /// A source's batch: recorded, merged with the other sources' roles, fed (a new billet
     /// announced for a device time inside it starts there), and the outcomes appended.
     pub fn batch(&mut self, batch: &SampleBatch, out: &mut Vec<Outcome>) {

@@ -17,21 +17,18 @@
 //! were tuned on `TUNING_SEEDS` (run `cargo test --release --test estimate_rates -- --ignored
 //! --nocapture` for their table); the tests assert on `ASSERT_SEEDS`, never used in tuning.
 
-use forgemon::config::{parse_machine, parse_process};
-use forgemon::daq::{DaqSpec, daq_blows};
-use forgemon::physics::EffectSet;
-use forgemon::physics::billet::FlowStress;
+#[path = "common/rigs.rs"]
+mod rigs;
+
 use forgemon::physics::blow::BlowResult;
-use forgemon::physics::machine::Machine;
 use forgemon::physics::process::Process;
 use forgemon::pipeline::{Pipeline, PipelineConfig, PipelineEvent};
-use forgemon::signal::capture::CaptureRow;
-use forgemon::synth::{CaptureSpec, idle_rows, rows_batch};
+use forgemon::synth::rows_batch;
+use rigs::{Rig, machine, render, sheet, truth_process};
 
 /// Issue 16's accuracy target.
 const EFFICIENCY_TOL: f64 = 0.02;
 const SPEED_REL_TOL: f64 = 0.01;
-
 /// Issue 16: the end height's bias below the encoder's resolution, 10 µm. Measured on the
 /// twelve tuning seeds (`tuning_table`, every blow; the DAQ puts first contact at a random
 /// point between samples), the bias is within 1.7 µm at every rate on both machines with
@@ -61,68 +58,6 @@ const HEIGHT_GROWTH_TOL_M: f64 = 10e-6;
 /// Seeds 13–21 were added to measure the end height's bias apart from its scatter (issue 16).
 const TUNING_SEEDS: [u64; 12] = [11, 12, 1601, 13, 14, 15, 16, 17, 18, 19, 20, 21];
 const ASSERT_SEEDS: [u64; 1] = [2411];
-
-#[derive(Clone, Copy, Debug)]
-enum Rig {
-    Hammer,
-    Press,
-}
-
-fn machine(rig: Rig) -> Machine {
-    match rig {
-        Rig::Hammer => parse_machine("m", include_str!("../config/hammer-lg1000.machine.toml")),
-        Rig::Press => parse_machine("m", include_str!("../config/screw-press-spr400.machine.toml")),
-    }
-    .expect("machine file")
-    .machine
-}
-
-/// The process sheet the estimator is given.
-fn sheet(rig: Rig) -> Process {
-    match rig {
-        Rig::Hammer => parse_process("p", include_str!("../config/steel-16NiCrMo13.process.toml")),
-        Rig::Press => parse_process("p", include_str!("../config/copper-cu99.process.toml")),
-    }
-    .expect("process file")
-}
-
-/// What was really forged: the flow stress and the billet's height off the sheet by
-/// factors the estimator is not told.
-fn truth_process(rig: Rig) -> Process {
-    let mut p = sheet(rig);
-    let (stress, height) = match rig {
-        Rig::Hammer => (1.07, 1.015),
-        Rig::Press => (0.93, 0.985),
-    };
-    p.material = match p.material {
-        FlowStress::Constant { sigma0_pa } => FlowStress::Constant { sigma0_pa: sigma0_pa * stress },
-        FlowStress::HanselSpittel { a_pa, m1, m2, m3, m4, temperature_c } => {
-            FlowStress::HanselSpittel { a_pa: a_pa * stress, m1, m2, m3, m4, temperature_c }
-        }
-    };
-    p.billet.height_m *= height;
-    p
-}
-
-fn speeds(rig: Rig) -> Vec<f64> {
-    match rig {
-        // Hammer paper §3.1: blow 1 at 3.9 m/s, the later blows at 5.3 m/s.
-        Rig::Hammer => vec![3.9, 5.3, 5.3, 5.3, 5.3],
-        // Press paper §2.2 Table 1: ten blows at 0.346 m/s.
-        Rig::Press => vec![0.346; 10],
-    }
-}
-
-fn capture(rig: Rig, rate_hz: f64, seed: u64) -> CaptureSpec {
-    let base = match rig {
-        Rig::Hammer => CaptureSpec::hammer(seed),
-        Rig::Press => CaptureSpec::press(seed),
-    };
-    let mut c = CaptureSpec { sample_rate_hz: rate_hz, ..base };
-    // Issue 16: 3 kN load noise; the encoder's 10 µm and the accelerometer's noise as synth's.
-    c.sensors.load_sd_n = 3e3;
-    c
-}
 
 /// One blow: the estimate against the truth.
 #[derive(Debug)]
@@ -157,20 +92,8 @@ enum Encoder {
 /// `run` with the billet and flow stress of `truth`.
 fn run_on(rig: Rig, rate_hz: f64, seed: u64, truth_p: &Process, encoder: Encoder) -> Vec<Row> {
     let m = machine(rig);
-    let spec = DaqSpec::new(capture(rig, rate_hz, seed));
-    let blows = daq_blows(&m, &EffectSet::NONE, truth_p, &speeds(rig), &spec).expect("simulate");
-    let c = spec.capture;
-    let idle = (0.15 * rate_hz) as usize;
-    let mut rows: Vec<CaptureRow> = Vec::new();
-    // Each blow's true contact on the pipeline's clock (sample k at k periods).
-    let mut t_contact_s = Vec::new();
-    for (i, b) in blows.iter().enumerate() {
-        rows.extend(idle_rows(idle, 0.0, &c, b.rows[0].disp_m, seed * 100 + i as u64));
-        t_contact_s.push(rows.len() as f64 / rate_hz + (b.t_contact_s - b.rows[0].t_s));
-        rows.extend_from_slice(&b.rows);
-    }
-    let last = rows.last().map_or(0.0, |r| r.disp_m);
-    rows.extend(idle_rows(idle, 0.0, &c, last, seed * 100 + 99));
+    let session = render(rig, rate_hz, seed, truth_p);
+    let (rows, t_contact_s) = (&session.rows, &session.t_contact_s);
     let period_ns = 1e9 / rate_hz;
     let per_batch = (rate_hz * 0.01) as usize;
     let mut cfg = PipelineConfig::for_machine(&m);
@@ -184,7 +107,7 @@ fn run_on(rig: Rig, rate_hz: f64, seed: u64, truth_p: &Process, encoder: Encoder
         p.push(&rows_batch("daq", k as u64, t0 as i64, period_ns, chunk), &mut events);
     }
     p.end_of_stream(&mut events);
-    let truth: Vec<&BlowResult> = blows.iter().map(|b| &b.truth).collect();
+    let truth: Vec<&BlowResult> = session.truth.iter().collect();
     // The estimator starts from the sheet's height, which is off the truth's by a height it
     // cannot know; what it must get right is every blow's set after that.
     let start_off_m = match encoder {

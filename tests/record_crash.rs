@@ -76,6 +76,9 @@ fn result(blow: u32) -> BlowEstimate {
         at_bound: Default::default(),
         height_check: None,
         billet: Default::default(),
+        channels: Default::default(),
+        efficiency_sd: None,
+        unobserved: Default::default(),
     }
 }
 

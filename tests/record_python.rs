@@ -11,7 +11,7 @@ use forgemon::alert::{Alert, AlertKind};
 use forgemon::estimate::billet_book::BilletSummary;
 use forgemon::estimate::{BlowClass, BlowEstimate};
 use forgemon::record::{BlowBoundary, Gap, RecordWriter, Rotation, Status};
-use forgemon::signal::sample::{Role, SampleBatch};
+use forgemon::signal::sample::{Channels, Role, SampleBatch};
 use serde_json::Value;
 
 const MS: i64 = 1_000_000;
@@ -73,6 +73,9 @@ fn result(blow: u32, with_sheet: bool) -> BlowEstimate {
         at_bound: Default::default(),
         height_check: None,
         billet: Default::default(),
+        channels: if with_sheet { Default::default() } else { Channels::ALL.without(Role::Load) },
+        efficiency_sd: whole.then_some(0.004),
+        unobserved: Default::default(),
     }
 }
 
@@ -259,6 +262,8 @@ fn python_mcap_protobuf_decodes_every_channel() {
         assert_eq!(r["friction_J"].as_f64(), want.friction_j, "blow {blow}");
         assert_eq!(r["h_end_m"].as_f64(), want.h_end_m, "blow {blow}");
         assert_eq!(r["method"].as_str(), want.method.map(|m| m.as_str()), "blow {blow}");
+        assert_eq!(r["channels"], serde_json::json!(want.channels.names()), "blow {blow}");
+        assert_eq!(r["efficiency_sd"].as_f64(), want.efficiency_sd, "blow {blow}");
         match &want.alert {
             Some(a) => {
                 assert_eq!(r["alert"]["kind"], "elastic_blow");

@@ -407,6 +407,9 @@ mod tests {
             at_bound: Default::default(),
             height_check: None,
             billet: crate::estimate::BilletTag { billet, billet_blow, ..Default::default() },
+            channels: Default::default(),
+            efficiency_sd: None,
+            unobserved: Default::default(),
         }
     }
 

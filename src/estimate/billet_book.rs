@@ -215,6 +215,9 @@ mod tests {
             sensor_check: None,
             method: None,
             billet: BilletTag { billet, billet_blow, billet_check: None, h_start_off_sheet_m: None },
+            channels: Default::default(),
+            efficiency_sd: None,
+            unobserved: Default::default(),
         }
     }
 

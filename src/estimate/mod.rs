@@ -22,6 +22,7 @@ pub mod decimate;
 mod energies;
 pub mod fit;
 mod model_fit;
+pub mod modes;
 pub mod observer;
 pub mod plausibility;
 pub mod result;
@@ -38,7 +39,8 @@ use crate::physics::billet::BilletLaw;
 use crate::physics::effects::EffectSet;
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
-use crate::signal::segment::Blow;
+use crate::signal::sample::{Channels, Role};
+use crate::signal::segment::{Blow, contact_force_n};
 use approach::{ApproachError, ApproachFit, fit_impact_speed};
 use billet::{BilletCheck, BilletDetect};
 pub use contact::contact_between_samples;
@@ -97,6 +99,9 @@ pub enum EstimateError {
     },
     /// The encoder's reading fell as the ram approached the die while its direction is set
     /// to down.
+    /// The blow lacks a channel its estimate cannot do without here.
+    #[error("blow {blow}: {reason}")]
+    Unobservable { blow: u32, reason: &'static str },
     #[error(
         "blow {blow}: the ram encoder's reading falls as the ram approaches the die ({v_mps:.3} m/s before \
          contact): it counts up, away from the die, where docs/interfaces.md §1 counts disp_m down towards it. Set \
@@ -285,11 +290,14 @@ impl Estimator {
         } else {
             blow
         };
+        let channels = self.channels_of(blow)?;
+        let with_load = channels.has(Role::Load);
         let (blow, approach) = self.approach(blow)?;
         let blow = blow.as_ref();
         let mut h_guess_m = self.h_m.or(self.process.as_ref().map(|p| p.billet.height_m));
-        // Contact between samples: from the load's rise, or where the model fits it.
-        let delta0 = self.locate_contact(blow, approach.v_impact_mps, h_guess_m);
+        // Contact between samples: from the load's rise, or where the model fits it
+        // (without a load, from the segmenter's contact sample).
+        let delta0 = if with_load { self.locate_contact(blow, approach.v_impact_mps, h_guess_m) } else { 0.0 };
         // A billet's first blow with the die reference configured: its height from the
         // locator's contact, so that the fit starts on the billet's own law. The fit's move
         // of the contact is then not refitted (that doubled a first blow's latency, 24 ms at
@@ -304,7 +312,8 @@ impl Estimator {
         }
         let gap_s = self.gap_s(blow);
         let complete = blow.lost_s == 0.0 && gap_s <= self.max_bridged_s();
-        let wants_fit = complete && self.method_for(blow.period_s) == Method::ModelFit;
+        // Without a load channel the observer has nothing to run on: every blow is fitted.
+        let wants_fit = complete && (!with_load || self.method_for(blow.period_s) == Method::ModelFit);
         // The residual of the last fit tried, good or not: the blow's model check.
         let mut check = None;
         let fitted = match h_guess_m {
@@ -319,6 +328,7 @@ impl Estimator {
         let tolerance_m = self.contact_tolerance_m(fit.v_impact_mps * blow.period_s);
         let placed = self.place(fit.x_contact_m, fit.v_impact_mps * blow.period_s, t_contact_s, tolerance_m);
         let mut e = started(self.blows, blow, (t_contact_s, fit.v_impact_mps), gap_s, &placed);
+        e.channels = channels;
         self.chain = placed.h_start_m.map(|h| (fit.x_contact_m, h));
         self.last_end = Some(LastEnd { x_m: fit.x_contact_m, end_known: false, h_end_m: None, t_s: e.t_end_s });
         if !complete {
@@ -381,12 +391,15 @@ impl Estimator {
         if h_start_m.is_none() {
             fitted = None;
         }
+        let with_load = e.channels.has(Role::Load);
         let h_end_m = match &fitted {
             Some(f) => {
                 self.scale = f.scale;
+                e.efficiency_sd = modes::efficiency_sd(e.channels, f.efficiency_sd);
                 self.fill_from_fit(e, blow, f)
             }
-            None => self.fill_from_observer(e, blow, h_start_m, delta0),
+            None if with_load => self.fill_from_observer(e, blow, h_start_m, delta0),
+            None => self.unfitted_without_load(e),
         };
         // Where the observer takes the blow by the rule, the model is fitted all the same, as
         // the check that it still describes the machine (a few ms a blow: `fit`).
@@ -394,12 +407,18 @@ impl Estimator {
             && let Some(f) = self.fit(blow, approach, FitStart::at(h0, self.scale, delta0, false, n), &mut check)
         {
             self.scale = f.scale;
+            // The observer's efficiency is the model's on the measured load: its sd is the
+            // fitted model's.
+            e.efficiency_sd = modes::efficiency_sd(e.channels, f.efficiency_sd);
         }
-        if h_start_m.is_some() {
+        // The model check is the load's residual: without a load, none.
+        if h_start_m.is_some() && with_load {
             e.model_residual = check.map(|c| c.load);
             e.model_residual_by_phase = check.map(|c| c.load_by_phase);
         }
-        e.sensor_check = sensor::sensor_check(&self.machine, blow, e.v_impact_mps).ok();
+        if with_load {
+            e.sensor_check = sensor::sensor_check(&self.machine, blow, e.v_impact_mps).ok();
+        }
         self.settle(e, blow, placed.first, tolerance_m, (x_contact_m, h_start_m, h_end_m));
     }
 
@@ -504,6 +523,9 @@ impl Estimator {
         };
         let cfg = self.cfg;
         plausibility::settle(e, &ranges, |x| cfg.classify(x));
+        if e.efficiency.is_none() {
+            e.efficiency_sd = None;
+        }
         // An implausible blow's end is not known: the encoder's chain takes the billet up
         // again from its contact at the next blow (its start height too, when that was in
         // range), as after an incomplete one.
@@ -546,6 +568,39 @@ impl Estimator {
         contact_between_samples(blow, rise.as_ref())
     }
 
+    /// Without a load the energies are the fitted model's or none: a blow the model could
+    /// not be fitted to stays unestimated, and says why. Its end is not known.
+    fn unfitted_without_load(&mut self, e: &mut BlowEstimate) -> Option<f64> {
+        let why = "no load channel, and the model could not be fitted to the encoder and the accelerometer \
+                   (the billet's height is not known, or the fit failed)";
+        for field in ["plastic_J", "efficiency"] {
+            e.unobserved.insert(field.to_string(), why.to_string());
+        }
+        self.forget_end();
+        None
+    }
+
+    /// The channels `blow` carries, or why it cannot be estimated with them: the impact
+    /// speed comes from the encoder's approach, and without a load the energies come from
+    /// the model fitted to the encoder and the accelerometer, which needs a process sheet.
+    fn channels_of(&self, blow: &Blow) -> Result<Channels, EstimateError> {
+        let channels = blow.channels();
+        let blow = self.blows;
+        if !channels.has(Role::Disp) {
+            return Err(EstimateError::Unobservable {
+                blow,
+                reason: "no ram encoder channel (disp_m): this version takes the impact speed from the encoder's approach",
+            });
+        }
+        if !channels.has(Role::Load) && self.process.is_none() {
+            return Err(EstimateError::Unobservable {
+                blow,
+                reason: "no load channel (load_N): the energies then come from the model fitted to the encoder and the accelerometer, which needs a process sheet (--process, or [process] in the service file)",
+            });
+        }
+        Ok(channels)
+    }
+
     /// Time lost inside the blow: interpolated samples from the start of the approach fit
     /// to the blow's end, and any time cut off by a break in the stream.
     fn gap_s(&self, blow: &Blow) -> f64 {
@@ -558,7 +613,10 @@ impl Estimator {
     /// found (`last_course`), the zeroed load falls below `level`.
     fn spring_back_seen(&self, blow: &Blow, t_contact_s: f64, level_n: f64) -> bool {
         let forming_end_s = self.last_course.as_ref().and_then(|c| c.forming_time_s).map(|f| t_contact_s + f);
-        forming_end_s.is_some_and(|t| blow.samples.iter().any(|s| s.t_s > t && s.load_n - blow.load_zero_n < level_n))
+        let ram_kg = self.machine.ram_kg();
+        forming_end_s.is_some_and(|t| {
+            blow.samples.iter().any(|s| s.t_s > t && contact_force_n(s, ram_kg) - blow.load_zero_n < level_n)
+        })
     }
 
     /// How well a contact position compares with a height (`EstimatorConfig::height_tolerance_m`).

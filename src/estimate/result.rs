@@ -239,6 +239,17 @@ pub struct BlowEstimate {
     /// the estimate's accuracy of it. Left out of the JSON when empty.
     #[serde(skip_serializing_if = "AtBound::is_empty")]
     pub at_bound: AtBound,
+    /// The sensor channels the estimate used (docs/interfaces.md §5 `channels`): all three,
+    /// or fewer when the source lacks one (issue 43).
+    pub channels: crate::signal::sample::Channels,
+    /// The efficiency's 1σ under the mode's own error model (`estimate::modes`), `None`
+    /// when there is no efficiency.
+    pub efficiency_sd: Option<f64>,
+    /// Why a value the contract reports is `null` although the blow is whole: the field's
+    /// name and the reason in words (the channel that would observe it is missing). Left
+    /// out of the JSON when empty.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub unobserved: BTreeMap<String, String>,
 }
 
 /// The reason of an implausible blow, as its words.
@@ -284,6 +295,9 @@ impl BlowEstimate {
             model_residual: None,
             model_residual_by_phase: None,
             at_bound: Default::default(),
+            channels: crate::signal::sample::Channels::ALL,
+            efficiency_sd: None,
+            unobserved: BTreeMap::new(),
         }
     }
 
@@ -422,6 +436,9 @@ pub(crate) mod examples {
             model_residual_by_phase: None,
             at_bound: AtBound::new(),
             billet: Default::default(),
+            channels: crate::signal::sample::Channels::ALL,
+            efficiency_sd: Some(0.01),
+            unobserved: BTreeMap::new(),
         }
     }
 }

@@ -87,6 +87,14 @@ impl Machine {
         }
     }
 
+    /// The ram's mass, kg: the body the accelerometer and the encoder sit on.
+    pub fn ram_kg(&self) -> f64 {
+        match self {
+            Machine::Hammer(h) => h.m1_kg,
+            Machine::ScrewPress(p) => p.m_ram_kg,
+        }
+    }
+
     /// Frequency of the machine's second (fast) mode, Hz: the ~2 kHz ring of the lower
     /// tool on its spring (hammer) or the ~300 Hz tool-against-ram mode (press).
     pub fn second_mode_hz(&self) -> f64 {

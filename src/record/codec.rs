@@ -16,7 +16,7 @@ use crate::estimate::billet::BilletCheck;
 use crate::estimate::fit::PhaseResidual;
 use crate::estimate::plausibility::{Check, Implausible};
 use crate::estimate::{BilletTag, BlowClass, BlowEstimate, HeightCheck, HeightSource};
-use crate::signal::sample::{Role, SampleBatch};
+use crate::signal::sample::{Channels, Role, SampleBatch};
 
 use super::error::DecodeError;
 use super::message::{BlowBoundary, ConfigFile, Gap, Payload, Status};
@@ -266,6 +266,9 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
             recipe: j.recipe.clone(),
             reasons: j.reasons.clone(),
         }),
+        channels: r.channels.names().into_iter().map(String::from).collect(),
+        efficiency_sd: r.efficiency_sd,
+        unobserved: r.unobserved.iter().map(|(k, v)| (k.clone(), v.clone())).collect(),
     }
 }
 
@@ -327,6 +330,15 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
             spring_back: p.spring_back,
         }),
         at_bound: r.at_bound.into_iter().collect(),
+        // Recordings from before issue 43 used all three channels.
+        channels: if r.channels.is_empty() {
+            Channels::ALL
+        } else {
+            Channels::parse(r.channels.iter().map(String::as_str))
+                .map_err(|c| DecodeError::Wire { what: format!("unknown channel {c:?} in a blow result") })?
+        },
+        efficiency_sd: r.efficiency_sd,
+        unobserved: r.unobserved.into_iter().collect(),
     })
 }
 
@@ -575,6 +587,13 @@ mod tests {
                 billet_blow: 3,
                 billet_check: with_optional.then_some(BilletCheck::ContactAboveLastEnd),
                 h_start_off_sheet_m: with_optional.then_some(-0.0021),
+            },
+            channels: if with_optional { Channels::ALL.without(Role::Load) } else { Channels::ALL },
+            efficiency_sd: with_optional.then_some(0.004),
+            unobserved: if with_optional {
+                [("h_end_m".to_string(), "no encoder".to_string())].into()
+            } else {
+                Default::default()
             },
         }
     }

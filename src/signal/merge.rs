@@ -17,7 +17,7 @@
 use std::collections::{HashMap, VecDeque};
 
 use super::align::ClockModel;
-use super::sample::{Role, SampleBatch};
+use super::sample::{Channels, Role, SampleBatch};
 
 /// Source name of merged batches.
 pub const MERGED_SOURCE: &str = "merged";
@@ -64,6 +64,9 @@ pub struct Merger {
     /// Newest host receive time of any batch.
     newest_host_ns: i64,
     stats: MergeStats,
+    /// The roles no source carries (a hammer without a load cell): not waited for, the
+    /// pipeline's batches go without them (`set_absent`).
+    absent: Channels,
 }
 
 impl Default for Merger {
@@ -83,7 +86,18 @@ impl Merger {
             pending: VecDeque::new(),
             newest_host_ns: i64::MIN,
             stats: MergeStats::default(),
+            absent: Channels::NONE,
         }
+    }
+
+    /// The roles no source carries: a batch is whole without them, and none is waited for.
+    pub fn set_absent(&mut self, absent: Channels) {
+        self.absent = absent;
+    }
+
+    /// The roles a batch needs to go on: all but the absent ones.
+    fn needed(&self) -> impl Iterator<Item = Role> + '_ {
+        Role::ALL.into_iter().filter(|r| !self.absent.has(*r))
     }
 
     /// Take one batch from any source. Returns true when the batch itself carries every
@@ -97,7 +111,7 @@ impl Merger {
         // The batch's last sample arrived with it.
         clock.observe(last_device_ns(batch), batch.host_time_ns);
         self.newest_host_ns = self.newest_host_ns.max(batch.host_time_ns);
-        if Role::ALL.iter().all(|r| batch.channel(*r).is_some()) {
+        if self.needed().all(|r| batch.channel(r).is_some()) {
             return true;
         }
         if self.timeline.is_none() && batch.channel(Role::Acc).is_some() {
@@ -158,7 +172,7 @@ impl Merger {
         while let Some(front) = self.pending.front() {
             let clock = &self.clocks[&front.source];
             let h_last = map_f64(clock, last_device_ns(front) as f64);
-            let missing: Vec<Role> = Role::ALL.iter().copied().filter(|r| front.channel(*r).is_none()).collect();
+            let missing: Vec<Role> = self.needed().filter(|r| front.channel(*r).is_none()).collect();
             let covered = missing
                 .iter()
                 .all(|r| self.tracks.get(r).and_then(|t| t.points.back()).is_some_and(|(h, _)| *h >= h_last));

@@ -36,7 +36,105 @@ impl Role {
     }
 
     pub const ALL: [Role; 3] = [Role::Load, Role::Disp, Role::Acc];
+
+    /// The channel's short name: in a blow's `channels` (docs/interfaces.md §5) and in
+    /// `demo --without`.
+    pub fn short(&self) -> &'static str {
+        match self {
+            Role::Load => "load",
+            Role::Disp => "disp",
+            Role::Acc => "acc",
+        }
+    }
+
+    /// The role of a short name (`short`).
+    pub fn from_short(name: &str) -> Option<Role> {
+        Role::ALL.into_iter().find(|r| r.short() == name)
+    }
 }
+
+/// A set of the three channels: those a blow's estimate used (docs/interfaces.md §5
+/// `channels`), those a source lacks. Serialised as the list of short names, in the order
+/// load, acc, disp.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Channels {
+    load: bool,
+    acc: bool,
+    disp: bool,
+}
+
+impl Channels {
+    pub const ALL: Channels = Channels { load: true, acc: true, disp: true };
+    pub const NONE: Channels = Channels { load: false, acc: false, disp: false };
+
+    pub fn has(&self, role: Role) -> bool {
+        match role {
+            Role::Load => self.load,
+            Role::Acc => self.acc,
+            Role::Disp => self.disp,
+        }
+    }
+
+    /// The set with `role` in it (`on`) or out of it.
+    pub fn with(mut self, role: Role, on: bool) -> Channels {
+        match role {
+            Role::Load => self.load = on,
+            Role::Acc => self.acc = on,
+            Role::Disp => self.disp = on,
+        }
+        self
+    }
+
+    pub fn without(self, role: Role) -> Channels {
+        self.with(role, false)
+    }
+
+    /// The roles in the set, in the order load, acc, disp.
+    pub fn roles(&self) -> impl Iterator<Item = Role> + '_ {
+        [Role::Load, Role::Acc, Role::Disp].into_iter().filter(|r| self.has(*r))
+    }
+
+    /// The roles not in the set.
+    pub fn missing(&self) -> impl Iterator<Item = Role> + '_ {
+        [Role::Load, Role::Acc, Role::Disp].into_iter().filter(|r| !self.has(*r))
+    }
+
+    /// The short names of the roles in the set (`roles`).
+    pub fn names(&self) -> Vec<&'static str> {
+        self.roles().map(|r| r.short()).collect()
+    }
+
+    /// The set of the short names `names` (unknown names are `Err` with the name).
+    pub fn parse<'a>(names: impl IntoIterator<Item = &'a str>) -> Result<Channels, &'a str> {
+        names.into_iter().try_fold(Channels::NONE, |c, n| Role::from_short(n).map(|r| c.with(r, true)).ok_or(n))
+    }
+
+    /// The roles a batch of `roles` carries.
+    pub fn of(roles: &[Role]) -> Channels {
+        roles.iter().fold(Channels::NONE, |c, r| c.with(*r, true))
+    }
+}
+
+impl Default for Channels {
+    fn default() -> Self {
+        Channels::ALL
+    }
+}
+
+impl fmt::Display for Channels {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.names().join("+"))
+    }
+}
+
+impl serde::Serialize for Channels {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(self.names())
+    }
+}
+
+/// The column index of a role a batch does not carry (`Sample::from_row`): its value is NaN.
+pub const ABSENT: usize = usize::MAX;
 
 impl fmt::Display for Role {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -59,9 +157,11 @@ pub struct Sample {
 
 impl Sample {
     /// A measured sample at `t_s` from one interleaved row of a batch whose load,
-    /// displacement and acceleration are the channels `cols`.
+    /// displacement and acceleration are the channels `cols`; a channel the batch does not
+    /// carry (`ABSENT`) reads NaN.
     pub fn from_row(t_s: f64, row: &[f64], cols: [usize; 3]) -> Sample {
-        Sample { t_s, load_n: row[cols[0]], disp_m: row[cols[1]], acc_mps2: row[cols[2]], filled: false }
+        let at = |c: usize| row.get(c).copied().unwrap_or(f64::NAN);
+        Sample { t_s, load_n: at(cols[0]), disp_m: at(cols[1]), acc_mps2: at(cols[2]), filled: false }
     }
 }
 

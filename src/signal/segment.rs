@@ -10,7 +10,7 @@
 
 use super::pretrigger::PreTrigger;
 
-use super::sample::{Role, SampleBatch};
+use super::sample::{ABSENT, Role, SampleBatch};
 use crate::physics::machine::MachineKind;
 
 /// Segmentation thresholds. Defaults per machine kind are named constructors.
@@ -96,7 +96,29 @@ pub struct Blow {
     pub open_end_n: Option<f64>,
 }
 
+/// The force the segmenter watches for contact, N: the load sensor's, or, on a stream
+/// without a load channel, the ram's deceleration times its mass `ram_kg` (zeroed like the
+/// load over the pre-trigger window, which takes the approach's own acceleration out). On
+/// a hammer that is the billet's push on the ram; on a press it also holds the link's, so
+/// it confirms contact there, where the model fit then places it between samples.
+pub fn contact_force_n(s: &Sample, ram_kg: f64) -> f64 {
+    if s.load_n.is_nan() { -ram_kg * s.acc_mps2 } else { s.load_n }
+}
+
 impl Blow {
+    /// The channels the blow's samples carry: a channel the source lacks reads NaN.
+    pub fn channels(&self) -> crate::signal::sample::Channels {
+        let at = self.samples.get(self.i_contact).or(self.samples.first());
+        Role::ALL.iter().fold(crate::signal::sample::Channels::NONE, |c, r| {
+            let v = at.map_or(f64::NAN, |s| match r {
+                Role::Load => s.load_n,
+                Role::Disp => s.disp_m,
+                Role::Acc => s.acc_mps2,
+            });
+            c.with(*r, !v.is_nan())
+        })
+    }
+
     /// Samples interpolated across holes within `range` (indices into `samples`).
     pub fn filled_in(&self, range: std::ops::Range<usize>) -> usize {
         self.samples.get(range).map_or(0, |s| s.iter().filter(|s| s.filled).count())
@@ -159,6 +181,9 @@ pub struct Segmenter {
     last: Option<Sample>,
     /// Samples missing before the next one pushed (`hole`).
     pending_fill: usize,
+    /// The ram's mass, kg: without a load channel, the ram's deceleration times it stands
+    /// for the load (`contact_force_n`).
+    ram_kg: f64,
 }
 
 impl Segmenter {
@@ -173,7 +198,24 @@ impl Segmenter {
             stats: SegmentStats::default(),
             last: None,
             pending_fill: 0,
+            ram_kg: f64::NAN,
         }
+    }
+
+    /// The ram's mass, kg, for the stand-in of a missing load channel (`contact_force_n`);
+    /// unset, a stream without a load channel confirms no contact.
+    pub fn with_ram_kg(mut self, ram_kg: f64) -> Self {
+        self.set_ram_kg(ram_kg);
+        self
+    }
+
+    /// A new ram mass from the next sample on (a new machine model).
+    pub fn set_ram_kg(&mut self, ram_kg: f64) {
+        self.ram_kg = ram_kg;
+    }
+
+    fn force(&self, s: &Sample) -> f64 {
+        contact_force_n(s, self.ram_kg)
     }
 
     /// `missing` samples were lost before the next batch (a lost frame, a dropped line, a
@@ -208,12 +250,14 @@ impl Segmenter {
 
     /// Feed a batch; completed blows are appended to `out`.
     pub fn push(&mut self, batch: &SampleBatch, out: &mut Vec<Blow>) {
-        let (Some(il), Some(id), Some(ia)) =
-            (batch.channel(Role::Load), batch.channel(Role::Disp), batch.channel(Role::Acc))
-        else {
+        // The accelerometer triggers; a batch without the load or the encoder (a source
+        // without that sensor) is cut all the same, the channel reading NaN.
+        let Some(ia) = batch.channel(Role::Acc) else {
             self.stats.batches_dropped += 1;
             return;
         };
+        let il = batch.channel(Role::Load).unwrap_or(ABSENT);
+        let id = batch.channel(Role::Disp).unwrap_or(ABSENT);
         if batch.values.iter().any(|v| !v.is_finite()) || batch.period_ns.is_nan() || batch.period_ns <= 0.0 {
             self.stats.batches_dropped += 1;
             return;
@@ -378,9 +422,9 @@ impl Segmenter {
                     let zero = self.zero(i_trigger);
                     let first = Self::first_searched(i_trigger, self.blow.len());
                     let contact = (first..self.blow.len())
-                        .find(|&i| self.blow[i].load_n - zero > self.cfg.contact_load_n)
+                        .find(|&i| self.force(&self.blow[i]) - zero > self.cfg.contact_load_n)
                         .map(|i| self.walk_back(i, first, zero));
-                    let quiet = usize::from(s.load_n - zero < self.cfg.end_load_n);
+                    let quiet = usize::from(self.force(&s) - zero < self.cfg.end_load_n);
                     self.state = State::InBlow { i_trigger, zero, contact, quiet };
                 } else {
                     self.ring.push(s);
@@ -389,11 +433,11 @@ impl Segmenter {
             State::InBlow { i_trigger, zero, mut contact, mut quiet } => {
                 self.blow.push(s);
                 let n = self.blow.len();
-                if contact.is_none() && s.load_n - zero > self.cfg.contact_load_n {
+                if contact.is_none() && self.force(&s) - zero > self.cfg.contact_load_n {
                     let first = Self::first_searched(i_trigger, n);
                     contact = Some(self.walk_back(n - 1, first, zero));
                 }
-                quiet = if s.load_n - zero < self.cfg.end_load_n { quiet + 1 } else { 0 };
+                quiet = if self.force(&s) - zero < self.cfg.end_load_n { quiet + 1 } else { 0 };
                 // The blow ends when, after contact, the load has been quiet for the hold time.
                 let hold = (self.cfg.hold_s / self.period_s).ceil() as usize;
                 let end =
@@ -424,10 +468,16 @@ impl Segmenter {
         }
     }
 
-    /// Load zero: the mean load over the first half of the pre-trigger window.
+    /// Load zero: the mean load over the first half of the pre-trigger window. The ram's
+    /// deceleration that stands in for a missing load is taken as it is (zero 0): it has no
+    /// offset to take out, and the window may hold the ram at rest as well as in free fall,
+    /// which differ by its weight (7 kN on the LG1000, above half the end level).
     fn zero(&self, i_trigger: usize) -> f64 {
+        if self.blow.get(i_trigger).is_some_and(|s| s.load_n.is_nan()) {
+            return 0.0;
+        }
         let n = (i_trigger / 2).max(1).min(self.blow.len());
-        self.blow[..n].iter().map(|s| s.load_n).sum::<f64>() / n as f64
+        self.blow[..n].iter().map(|s| self.force(s)).sum::<f64>() / n as f64
     }
 
     /// Where the contact search starts: after the zero's window.
@@ -440,7 +490,7 @@ impl Segmenter {
     /// contact is a few samples earlier).
     fn walk_back(&self, i: usize, first: usize, zero: f64) -> usize {
         let mut j = i;
-        while j > first && self.blow[j - 1].load_n - zero > self.cfg.end_load_n * 0.5 {
+        while j > first && self.force(&self.blow[j - 1]) - zero > self.cfg.end_load_n * 0.5 {
             j -= 1;
         }
         j

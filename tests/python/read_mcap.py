@@ -74,6 +74,8 @@ def describe(schema_name, msg):
             "gap_s": msg.gap_s,
             "h_start_m": optional(msg, "h_start_m"),
             "method": optional(msg, "method"),
+            "channels": list(msg.channels),
+            "efficiency_sd": optional(msg, "efficiency_sd"),
         }
     if schema_name == "forgemon.Alert":
         return alert_dict(msg)

@@ -1,0 +1,234 @@
+//! Degraded sensing (issue 43): every blow's energy with one of the three channels missing.
+//! The papers' two machines are rendered by the DAQ chain (`common/rigs.rs`: another code
+//! path than the estimator's model, the truth off the sheet the estimator is given) and fed
+//! to the pipeline as a source without that channel would send them: batches whose roles
+//! leave it out.
+//!
+//! Goals (issue 43): efficiency within 0.03 of the truth on every blow, impact speed within
+//! 1 %, end height within 0.1 mm where the mode observes it.
+//!
+//! Seeds: `TUNING_SEEDS` are the ones the modes were developed and tuned on (run
+//! `cargo test --release --test degraded_sensing -- --ignored --nocapture` for their
+//! table); the tests assert on `REPORT_SEEDS`, which nothing was tuned on.
+//! `FORGEMON_DEGRADED_DOC=docs/degraded-sensing.md` with that command writes the report
+//! seeds' table to the docs.
+
+#[path = "common/rigs.rs"]
+mod rigs;
+
+use forgemon::estimate::BlowEstimate;
+use forgemon::pipeline::{Pipeline, PipelineConfig, PipelineEvent};
+use forgemon::signal::sample::{Channels, Role, SampleBatch};
+use rigs::{Rig, machine, render, sheet, truth_process};
+
+/// Issue 43's accuracy goals.
+const EFFICIENCY_TOL: f64 = 0.03;
+const SPEED_REL_TOL: f64 = 0.01;
+const HEIGHT_TOL_M: f64 = 1e-4;
+
+const TUNING_SEEDS: [u64; 4] = [11, 12, 13, 14];
+const REPORT_SEEDS: [u64; 2] = [4301, 4302];
+
+/// The rates of the issue's goal.
+const RATES_HZ: [f64; 3] = [5e3, 20e3, 100e3];
+
+/// One blow: the estimate against the truth.
+#[derive(Debug)]
+struct Row {
+    efficiency_err: Option<f64>,
+    v_rel_err: f64,
+    h_err_m: Option<f64>,
+    estimate: Box<BlowEstimate>,
+}
+
+/// Render the rig's session and estimate it with `without` missing from every batch (none:
+/// the full mode).
+fn run(rig: Rig, rate_hz: f64, seed: u64, without: Option<Role>) -> Result<Vec<Row>, String> {
+    let m = machine(rig);
+    let session = render(rig, rate_hz, seed, &truth_process(rig));
+    let roles: Vec<Role> = Role::ALL.into_iter().filter(|r| Some(*r) != without).collect();
+    let period_ns = 1e9 / rate_hz;
+    let per_batch = (rate_hz * 0.01) as usize;
+    let mut cfg = PipelineConfig::for_machine(&m);
+    cfg.estimate.encoder_at_die_m = Some(forgemon::synth::ENCODER_AT_LOWER_DIE_M);
+    let mut p = Pipeline::new(m, Some(sheet(rig)), cfg);
+    let mut events = Vec::new();
+    for (k, chunk) in session.rows.chunks(per_batch).enumerate() {
+        let t0 = ((k * per_batch) as f64 * period_ns) as i64;
+        let values = chunk
+            .iter()
+            .flat_map(|r| {
+                roles.iter().map(move |role| match role {
+                    Role::Load => r.load_n,
+                    Role::Disp => r.disp_m,
+                    Role::Acc => r.acc_mps2,
+                })
+            })
+            .collect();
+        let batch = SampleBatch {
+            source: "daq".into(),
+            seq: k as u64,
+            device_time_ns: t0,
+            host_time_ns: t0,
+            period_ns,
+            roles: roles.clone(),
+            values,
+        };
+        p.push(&batch, &mut events);
+    }
+    p.end_of_stream(&mut events);
+    let blows: Vec<&PipelineEvent> = events.iter().filter(|e| !matches!(e, PipelineEvent::Billet(_))).collect();
+    if blows.len() != session.truth.len() {
+        return Err(format!("{} results for {} blows: {blows:?}", blows.len(), session.truth.len()));
+    }
+    blows
+        .iter()
+        .zip(&session.truth)
+        .map(|(e, t)| match e {
+            PipelineEvent::Blow { estimate, .. } => Ok(Row {
+                efficiency_err: estimate.efficiency.map(|x| x - t.efficiency()),
+                v_rel_err: estimate.v_impact_mps / t.v0_mps - 1.0,
+                h_err_m: estimate.h_end_m.zip(t.forming.map(|f| f.h_end_m)).map(|(a, b)| a - b),
+                estimate: estimate.clone(),
+            }),
+            other => Err(format!("{other:?}")),
+        })
+        .collect()
+}
+
+/// The worst errors over a session's blows: efficiency (absolute), impact speed (relative),
+/// end height (m), and how many blows had no efficiency or no end height; the efficiency's
+/// root mean square error and the mean `efficiency_sd` reported.
+#[derive(Debug, Default, Clone, Copy)]
+struct Worst {
+    efficiency: f64,
+    efficiency_ss: f64,
+    sd_sum: f64,
+    /// Blows whose efficiency is within 2 of its reported sd of the truth.
+    within_2sd: usize,
+    speed: f64,
+    height_m: f64,
+    no_efficiency: usize,
+    no_height: usize,
+    blows: usize,
+}
+
+impl Worst {
+    fn add(&mut self, rows: &[Row]) {
+        for r in rows {
+            self.blows += 1;
+            match r.efficiency_err {
+                Some(d) => {
+                    self.efficiency = self.efficiency.max(d.abs());
+                    self.efficiency_ss += d * d;
+                }
+                None => self.no_efficiency += 1,
+            }
+            let sd = r.estimate.efficiency_sd.unwrap_or(f64::NAN);
+            self.sd_sum += sd;
+            self.within_2sd += usize::from(r.efficiency_err.is_some_and(|d| d.abs() <= 2.0 * sd));
+            self.speed = self.speed.max(r.v_rel_err.abs());
+            match r.h_err_m {
+                Some(d) => self.height_m = self.height_m.max(d.abs()),
+                None => self.no_height += 1,
+            }
+        }
+    }
+
+    fn efficiency_rms(&self) -> f64 {
+        (self.efficiency_ss / (self.blows - self.no_efficiency).max(1) as f64).sqrt()
+    }
+
+    fn mean_sd(&self) -> f64 {
+        self.sd_sum / self.blows.max(1) as f64
+    }
+}
+
+/// Of a mode's blows on the report seeds, at least this share lies within two of its
+/// reported `efficiency_sd` of the truth: a normal error would put 95 % there; the floor of
+/// the error model came from the tuning seeds (`estimate::modes`).
+const WITHIN_2SD_SHARE: f64 = 0.9;
+
+fn check(rig: Rig, without: Role) {
+    let mut all = Worst::default();
+    for rate_hz in RATES_HZ {
+        for seed in REPORT_SEEDS {
+            let at = format!("{rig:?} without {} at {} kHz, seed {seed}", without.short(), rate_hz / 1e3);
+            let rows = run(rig, rate_hz, seed, Some(without)).unwrap_or_else(|e| panic!("{at}: {e}"));
+            let mut w = Worst::default();
+            w.add(&rows);
+            all.add(&rows);
+            eprintln!("{at}: {w:?}");
+            for (i, r) in rows.iter().enumerate() {
+                let e = &r.estimate;
+                let blow = format!("{at}, blow {}: {r:?}", i + 1);
+                assert_eq!(e.channels, Channels::ALL.without(without), "channels: {blow}");
+                assert!(r.efficiency_err.is_some_and(|d| d.abs() <= EFFICIENCY_TOL), "efficiency: {blow}");
+                assert!(r.v_rel_err.abs() <= SPEED_REL_TOL, "impact speed: {blow}");
+                assert!(r.h_err_m.is_some_and(|d| d.abs() <= HEIGHT_TOL_M), "end height: {blow}");
+                assert!(e.efficiency_sd.is_some_and(|sd| sd > 0.0 && sd < EFFICIENCY_TOL), "efficiency_sd: {blow}");
+                assert!(e.sensor_check.is_none(), "no sensor check without a load: {blow}");
+            }
+        }
+    }
+    let share = all.within_2sd as f64 / all.blows as f64;
+    assert!(share >= WITHIN_2SD_SHARE, "{rig:?} without {}: {share:.2} of the blows within 2 sd", without.short());
+}
+
+#[test]
+fn hammer_without_a_load_channel() {
+    check(Rig::Hammer, Role::Load);
+}
+
+#[test]
+fn press_without_a_load_channel() {
+    check(Rig::Press, Role::Load);
+}
+
+/// The table: worst errors per mode, rate and machine over a set of seeds
+/// (`FORGEMON_DEGRADED_SEEDS=tune|report`, tune by default).
+#[test]
+#[ignore = "prints the accuracy table; run with --ignored --nocapture"]
+fn accuracy_table() {
+    let report = std::env::var("FORGEMON_DEGRADED_SEEDS").is_ok_and(|s| s == "report");
+    let seeds: &[u64] = if report { &REPORT_SEEDS } else { &TUNING_SEEDS };
+    let mut lines = vec![
+        "| machine | without | rate | blows | worst Δefficiency | RMS Δefficiency | mean efficiency_sd | within 2 sd | worst Δv/v | worst Δh_end | no efficiency | no h_end |".to_string(),
+        "|---|---|---|---|---|---|---|---|---|---|---|---|".to_string(),
+    ];
+    for rig in [Rig::Hammer, Rig::Press] {
+        for without in [None, Some(Role::Load)] {
+            for rate_hz in RATES_HZ {
+                let mut w = Worst::default();
+                let mut failed = None;
+                for &seed in seeds {
+                    match run(rig, rate_hz, seed, without) {
+                        Ok(rows) => w.add(&rows),
+                        Err(e) => failed = Some(format!("seed {seed}: {e}")),
+                    }
+                }
+                let line = format!(
+                    "| {} | {} | {} kHz | {} | {:.4} | {:.4} | {:.4} | {} | {:.4} % | {:.1} µm | {} | {} |{}",
+                    if rig == Rig::Hammer { "hammer" } else { "press" },
+                    without.map_or("(none)", |r| r.short()),
+                    rate_hz / 1e3,
+                    w.blows,
+                    w.efficiency,
+                    w.efficiency_rms(),
+                    w.mean_sd(),
+                    w.within_2sd,
+                    w.speed * 100.0,
+                    w.height_m * 1e6,
+                    w.no_efficiency,
+                    w.no_height,
+                    failed.map_or(String::new(), |f| format!(" failed: {}", f.chars().take(300).collect::<String>())),
+                );
+                eprintln!("{line}");
+                lines.push(line);
+            }
+        }
+    }
+    if let Ok(path) = std::env::var("FORGEMON_DEGRADED_DOC") {
+        std::fs::write(path, lines.join("\n") + "\n").expect("write the table");
+    }
+}
