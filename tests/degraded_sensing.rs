@@ -167,7 +167,10 @@ fn check(rig: Rig, without: Role) {
                 assert!(r.v_rel_err.abs() <= SPEED_REL_TOL, "impact speed: {blow}");
                 assert!(r.h_err_m.is_some_and(|d| d.abs() <= HEIGHT_TOL_M), "end height: {blow}");
                 assert!(e.efficiency_sd.is_some_and(|sd| sd > 0.0 && sd < EFFICIENCY_TOL), "efficiency_sd: {blow}");
-                assert!(e.sensor_check.is_none(), "no sensor check without a load: {blow}");
+                assert!(
+                    e.sensor_check.is_none(),
+                    "no sensor check without both the load and the accelerometer: {blow}"
+                );
             }
         }
     }
@@ -185,6 +188,16 @@ fn press_without_a_load_channel() {
     check(Rig::Press, Role::Load);
 }
 
+#[test]
+fn hammer_without_an_accelerometer() {
+    check(Rig::Hammer, Role::Acc);
+}
+
+#[test]
+fn press_without_an_accelerometer() {
+    check(Rig::Press, Role::Acc);
+}
+
 /// The table: worst errors per mode, rate and machine over a set of seeds
 /// (`FORGEMON_DEGRADED_SEEDS=tune|report`, tune by default).
 #[test]
@@ -197,7 +210,7 @@ fn accuracy_table() {
         "|---|---|---|---|---|---|---|---|---|---|---|---|".to_string(),
     ];
     for rig in [Rig::Hammer, Rig::Press] {
-        for without in [None, Some(Role::Load)] {
+        for without in [None, Some(Role::Load), Some(Role::Acc)] {
             for rate_hz in RATES_HZ {
                 let mut w = Worst::default();
                 let mut failed = None;

@@ -82,7 +82,8 @@ pub fn fit_impact_speed(
     let tc = samples[i_contact].t_s;
     let acc_end = i_contact.saturating_sub(ACC_GUARD_SAMPLES).clamp(start + MIN_FIT_SAMPLES / 2, end);
     let (acc, acc_var) = mean_and_variance_of_mean(samples[start..acc_end].iter().map(|s| s.acc_mps2));
-    let (fit, v_var) = parabola(w, tc, Some((acc, acc_var)));
+    // Without an accelerometer (its samples NaN) the encoder alone bends the parabola.
+    let (fit, v_var) = parabola(w, tc, acc.is_finite().then_some((acc, acc_var)));
     let (x_contact_m, v, acc) = (fit[0], fit[1], fit[2]);
     if !(v.is_finite() && v > 0.0) {
         return Err(ApproachError::NotApproaching { v_mps: v });
@@ -101,7 +102,7 @@ fn mean_and_variance_of_mean(xs: impl Iterator<Item = f64> + Clone) -> (f64, f64
 /// Least squares of `disp = x0 + v t + c t² / 2` (t from `tc`): `[x0, v, c]` and the
 /// variance of `v`. With `curvature = Some((c, var))`, that measurement of `c` enters as one
 /// more observation, the encoder's rows weighted by their residual variance (from the free
-/// fit), scaled for the residuals' correlation (`ar1_factor`).
+/// fit), scaled for the residuals' correlation (`ar1_factor`); with `None`, the free fit.
 fn parabola(w: &[Sample], tc: f64, curvature: Option<(f64, f64)>) -> ([f64; 3], f64) {
     use nalgebra::{Matrix3, Vector3};
     let rows = || w.iter().map(|s| (Vector3::new(1.0, s.t_s - tc, 0.5 * (s.t_s - tc).powi(2)), s.disp_m));
@@ -120,6 +121,10 @@ fn parabola(w: &[Sample], tc: f64, curvature: Option<(f64, f64)>) -> ([f64; 3], 
     let resid: Vec<f64> = rows().map(|(phi, y)| y - phi.dot(&free)).collect();
     let rss: f64 = resid.iter().map(|r| r * r).sum();
     let x_var = rss / (n - 3.0).max(1.0) * ar1_factor(&resid);
+    if curvature.is_none() {
+        let v_var = (a / x_var.max(f64::MIN_POSITIVE)).try_inverse().map_or(f64::NAN, |cov| cov[(1, 1)]);
+        return ([free[0], free[1], free[2]], v_var);
+    }
     if !(x_var > 0.0 && c_var > 0.0) {
         return line_with_curvature(w, tc, c, c_var);
     }

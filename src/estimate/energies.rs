@@ -7,6 +7,7 @@ use super::result::{BlowEstimate, HeightSource};
 use super::{Estimator, MIN_TRACKED_HEIGHT_FRACTION, Method, curve, fit, observer};
 use crate::physics::billet::BilletLaw;
 use crate::physics::machine::Machine;
+use crate::signal::sample::Role;
 use crate::signal::segment::Blow;
 
 impl Estimator {
@@ -52,9 +53,14 @@ impl Estimator {
         e.final_load_n = f.blow.forming.map_or(0.0, |fm| fm.final_load_n);
         e.h_end_m = h_end_m;
         e.class = self.cfg.classify(efficiency);
-        e.peak_load_n =
-            blow.samples[blow.i_contact..=blow.i_end].iter().map(|s| s.load_n - blow.load_zero_n).fold(0.0, f64::max);
-        e.residual = Some(f.ram_energy_residual);
+        // Without a load channel, the fitted model's peak at the sensor.
+        e.peak_load_n = if e.channels.has(Role::Load) {
+            blow.samples[blow.i_contact..=blow.i_end].iter().map(|s| s.load_n - blow.load_zero_n).fold(0.0, f64::max)
+        } else {
+            f.blow.trace.iter().map(|p| p.out.sensor_n).fold(0.0, f64::max)
+        };
+        // The ram's energy measured needs the accelerometer.
+        e.residual = Some(f.ram_energy_residual).filter(|r| r.is_finite());
         e.flow_stress_scale = Some(f.scale);
         h_end_m
     }

@@ -31,6 +31,7 @@ use crate::physics::plant::Plant;
 use crate::physics::process::Process;
 use crate::signal::fir::LowPass;
 use crate::signal::resample;
+use crate::signal::sample::{Channels, Role};
 use crate::signal::segment::Blow;
 
 /// Model points per sample interval: the nominal anti-alias filter is applied on this grid.
@@ -134,9 +135,9 @@ pub struct FitProblem<'a> {
     /// (`decimate`). A declared anti-alias filter (`EffectSet::load_filter`) works at it.
     pub daq_period_s: f64,
     pub approach: ApproachFit,
-    /// Whether the blow has a load channel: without one the load's residuals are 0 and the
-    /// model is fitted to the encoder and the ram's acceleration alone (issue 43).
-    pub with_load: bool,
+    /// The channels the blow has (issue 43): a missing channel's residuals are 0, and the
+    /// model is fitted to the others.
+    pub channels: Channels,
 }
 
 /// Which residuals an evaluation gives, per sample: the encoder alone, or the encoder, the
@@ -194,12 +195,11 @@ impl<'a> Setup<'a> {
         }
         let k0 = b.i_contact - needed;
         let k1 = k_end.map_or(b.i_end, |k| k.clamp(b.i_contact + 1, b.i_end.max(b.i_contact + 1)));
-        let load: Vec<f64> = if p.with_load {
-            b.samples[k0..=k1].iter().map(|s| s.load_n - b.load_zero_n).collect()
-        } else {
-            vec![0.0; k1 + 1 - k0]
-        };
-        let acc: Vec<f64> = b.samples[k0..=k1].iter().map(|s| s.acc_mps2).collect();
+        let window = &b.samples[k0..=k1];
+        let has = |r: Role| p.channels.has(r);
+        let load: Vec<f64> =
+            window.iter().map(|s| if has(Role::Load) { s.load_n - b.load_zero_n } else { 0.0 }).collect();
+        let acc: Vec<f64> = window.iter().map(|s| if has(Role::Acc) { s.acc_mps2 } else { 0.0 }).collect();
         let load_meas = lp.apply(&load);
         let acc_meas = lp.apply(&acc);
         let peak = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
@@ -297,8 +297,9 @@ impl<'a> Setup<'a> {
             let s = &b.samples[self.k0 + k];
             r.push(if which == Residuals::Analogue { 0.0 } else { (s.disp_m - (x_c + x[centre(k)])) / self.sd_x });
             if which != Residuals::Encoder {
-                r.push(if self.p.with_load { (self.load_meas[k] - load_lp[k]) / self.sd_load } else { 0.0 });
-                r.push((self.acc_meas[k] - acc_lp[k]) / self.sd_acc);
+                let has = |r: Role| self.p.channels.has(r);
+                r.push(if has(Role::Load) { (self.load_meas[k] - load_lp[k]) / self.sd_load } else { 0.0 });
+                r.push(if has(Role::Acc) { (self.acc_meas[k] - acc_lp[k]) / self.sd_acc } else { 0.0 });
             }
         }
         let ram_end_mps = v[centre(m - 1)];
@@ -519,7 +520,7 @@ pub const NO_LOAD_WINDOW_MARGIN_S: f64 = 2e-3;
 /// `NO_LOAD_WINDOW_MARGIN_S`, at the start `u0`.
 fn window<'a>(p: &'a FitProblem<'a>, encoder_resolution_m: f64, u0: [f64; 2]) -> Result<Setup<'a>, FitError> {
     let setup = Setup::new(p, encoder_resolution_m, None)?;
-    if p.with_load {
+    if p.channels.has(Role::Load) {
         return Ok(setup);
     }
     let contact_s = setup.eval(u0, Residuals::Encoder)?.blow.contact_time_s;

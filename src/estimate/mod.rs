@@ -312,8 +312,10 @@ impl Estimator {
         }
         let gap_s = self.gap_s(blow);
         let complete = blow.lost_s == 0.0 && gap_s <= self.max_bridged_s();
-        // Without a load channel the observer has nothing to run on: every blow is fitted.
-        let wants_fit = complete && (!with_load || self.method_for(blow.period_s) == Method::ModelFit);
+        // The observer runs on the load and the accelerometer: without either, every blow is
+        // fitted.
+        let observable = with_load && channels.has(Role::Acc);
+        let wants_fit = complete && (!observable || self.method_for(blow.period_s) == Method::ModelFit);
         // The residual of the last fit tried, good or not: the blow's model check.
         let mut check = None;
         let fitted = match h_guess_m {
@@ -398,8 +400,8 @@ impl Estimator {
                 e.efficiency_sd = modes::efficiency_sd(e.channels, f.efficiency_sd);
                 self.fill_from_fit(e, blow, f)
             }
-            None if with_load => self.fill_from_observer(e, blow, h_start_m, delta0),
-            None => self.unfitted_without_load(e),
+            None if with_load && e.channels.has(Role::Acc) => self.fill_from_observer(e, blow, h_start_m, delta0),
+            None => self.unfitted(e),
         };
         // Where the observer takes the blow by the rule, the model is fitted all the same, as
         // the check that it still describes the machine (a few ms a blow: `fit`).
@@ -416,7 +418,8 @@ impl Estimator {
             e.model_residual = check.map(|c| c.load);
             e.model_residual_by_phase = check.map(|c| c.load_by_phase);
         }
-        if with_load {
+        // Load against the accelerometer: both are needed.
+        if with_load && e.channels.has(Role::Acc) {
             e.sensor_check = sensor::sensor_check(&self.machine, blow, e.v_impact_mps).ok();
         }
         self.settle(e, blow, placed.first, tolerance_m, (x_contact_m, h_start_m, h_end_m));
@@ -568,13 +571,16 @@ impl Estimator {
         contact_between_samples(blow, rise.as_ref())
     }
 
-    /// Without a load the energies are the fitted model's or none: a blow the model could
-    /// not be fitted to stays unestimated, and says why. Its end is not known.
-    fn unfitted_without_load(&mut self, e: &mut BlowEstimate) -> Option<f64> {
-        let why = "no load channel, and the model could not be fitted to the encoder and the accelerometer \
-                   (the billet's height is not known, or the fit failed)";
+    /// Without a load or an accelerometer the energies are the fitted model's or none: a
+    /// blow the model could not be fitted to stays unestimated, and says why. Its end is not
+    /// known.
+    fn unfitted(&mut self, e: &mut BlowEstimate) -> Option<f64> {
+        let why = format!(
+            "only the {} channels, and the model could not be fitted to them (the billet's height is not known, or the fit failed)",
+            e.channels.names().join(" and ")
+        );
         for field in ["plastic_J", "efficiency"] {
-            e.unobserved.insert(field.to_string(), why.to_string());
+            e.unobserved.insert(field.to_string(), why.clone());
         }
         self.forget_end();
         None
@@ -596,6 +602,12 @@ impl Estimator {
             return Err(EstimateError::Unobservable {
                 blow,
                 reason: "no load channel (load_N): the energies then come from the model fitted to the encoder and the accelerometer, which needs a process sheet (--process, or [process] in the service file)",
+            });
+        }
+        if !channels.has(Role::Acc) && self.process.is_none() {
+            return Err(EstimateError::Unobservable {
+                blow,
+                reason: "no accelerometer channel (acc_mps2): the energies then come from the model fitted to the load and the encoder, which needs a process sheet (--process, or [process] in the service file)",
             });
         }
         Ok(channels)

@@ -6,7 +6,6 @@
 
 use super::approach::ApproachFit;
 use super::{Estimator, decimate, fit};
-use crate::signal::sample::Role;
 use crate::signal::segment::Blow;
 
 /// Where a blow's model fit starts: the start height, the flow-stress scale, the contact in
@@ -54,14 +53,12 @@ impl Estimator {
             blow: &coarse,
             daq_period_s: blow.period_s,
             approach,
-            with_load: blow.channels().has(Role::Load),
+            channels: blow.channels(),
         };
         // Above the fit's rate the locator's contact, found in the finer samples, is already
         // within a fraction of a coarse sample: no second start is needed to find the basin
         // (it halved the hammer's 100 kHz latency, 10.8 to 6.4 ms, with the same results on
         // the tuning seeds of `tests/estimate_rates.rs`).
-        // Without a load channel the segmenter's contact came from the ram's deceleration,
-        // not the locator: the basin is searched at every rate.
         let search = search_contact && f == 1;
         let mut m = fit::fit_blow(&problem, self.cfg.encoder_resolution_m, scale0, delta0 / f as f64, search).ok()?;
         // The check is the load's own best fit: where the fit to all three channels leaves
