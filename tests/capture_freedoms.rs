@@ -89,6 +89,8 @@ struct Variant {
     sheet: Sheet,
     /// `--encoder-direction` given to replay.
     direction: Option<&'static str>,
+    /// A channel's column left out (a machine without that sensor, issue 43).
+    without: Option<&'static str>,
 }
 
 const INTACT: Variant = Variant {
@@ -101,6 +103,7 @@ const INTACT: Variant = Variant {
     jitter: false,
     sheet: Sheet::Measured,
     direction: None,
+    without: None,
 };
 
 fn variants(native_khz: f64) -> Vec<Variant> {
@@ -123,6 +126,15 @@ fn variants(native_khz: f64) -> Vec<Variant> {
             name: "sheet without heights, offsets per file",
             sheet: Sheet::None,
             encoder: Encoder::TaredAtTrigger,
+            ..v
+        },
+        Variant { name: "no load column", without: Some("load_N"), ..v },
+        Variant { name: "no accelerometer column", without: Some("acc_mps2"), ..v },
+        Variant {
+            name: "no load column, offsets and origins per file",
+            without: Some("load_N"),
+            encoder: Encoder::OffsetPerFile,
+            clock: Clock::PerFile,
             ..v
         },
     ]
@@ -176,7 +188,13 @@ fn write_dir(dir: &Path, r: &Rendered, v: &Variant) {
         let mut text = String::new();
         let header =
             if v.shuffled { "trigger,acc_mps2,t_s,temp_C,disp_m,load_N" } else { "t_s,load_N,disp_m,acc_mps2" };
-        text.push_str(header);
+        // The column a machine without that sensor does not have.
+        let kept: Vec<bool> = header.split(',').map(|c| Some(c) != v.without).collect();
+        let keep = |line: &str| {
+            let fields: Vec<&str> = line.split(',').zip(&kept).filter(|(_, k)| **k).map(|(f, _)| f).collect();
+            fields.join(",")
+        };
+        text.push_str(&keep(header));
         text.push('\n');
         for (k, s) in rows.iter().enumerate() {
             let jitter = if v.jitter { rng.random_range(-0.004..0.004) * dt } else { 0.0 };
@@ -186,11 +204,12 @@ fn write_dir(dir: &Path, r: &Rendered, v: &Variant) {
             let disp = num((sign * (s.disp_m - offset) / 1e-5).round() * 1e-5, v.shuffled, 5);
             let acc = num(s.acc_mps2, v.shuffled, 4);
             let line = if v.shuffled {
-                format!("{},{acc},{t},{:.1},{disp},{load}\n", u8::from(k == trigger), 1150.0 - 0.01 * k as f64)
+                format!("{},{acc},{t},{:.1},{disp},{load}", u8::from(k == trigger), 1150.0 - 0.01 * k as f64)
             } else {
-                format!("{t},{load},{disp},{acc}\n")
+                format!("{t},{load},{disp},{acc}")
             };
-            text.push_str(&line);
+            text.push_str(&keep(&line));
+            text.push('\n');
         }
         std::fs::write(dir.join(format!("blow_{:02}.csv", i + 1)), text).unwrap();
     }
@@ -310,6 +329,21 @@ fn check_height_source(v: &Variant, got: &Replayed, failures: &mut Vec<String>) 
     }
 }
 
+/// Every blow says which channels it was estimated from: all three, or the two a capture
+/// without a column has (docs/interfaces.md §5 `channels`).
+fn check_channels(v: &Variant, got: &Replayed, failures: &mut Vec<String>) {
+    let want: Vec<&str> = [("load_N", "load"), ("acc_mps2", "acc"), ("disp_m", "disp")]
+        .into_iter()
+        .filter(|(column, _)| Some(*column) != v.without)
+        .map(|(_, name)| name)
+        .collect();
+    for (i, b) in got.blows.iter().enumerate() {
+        if b["channels"] != serde_json::json!(want) {
+            failures.push(format!("{}: blow {}: channels {} where {want:?}", v.name, i + 1, b["channels"]));
+        }
+    }
+}
+
 fn run_matrix(kind: Kind, v0s: &[f64], height_scale: f64) {
     let tmp = tempfile::tempdir().unwrap();
     let (native, others) = rates(kind);
@@ -324,6 +358,7 @@ fn run_matrix(kind: Kind, v0s: &[f64], height_scale: f64) {
         let got = replay(&dir, v);
         let (a, b) = check(v.name, &r, &got, intact.as_ref(), &mut failures);
         check_height_source(v, &got, &mut failures);
+        check_channels(v, &got, &mut failures);
         println!("  {:<44} {:>5}  {a:.4}  {b:.4}", v.name, v.rate_khz);
         if i == 0 {
             intact = Some(got);

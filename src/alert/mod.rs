@@ -9,6 +9,7 @@ use std::collections::{BTreeMap, VecDeque};
 
 use crate::estimate::plausibility::Implausible;
 use crate::estimate::{BlowClass, BlowEstimate, HeightSource};
+use crate::signal::sample::Role;
 
 // The alert itself is part of a blow's result (`estimate::result`), where the estimate that
 // carries it is defined; the rules here read estimates, so the dependency runs one way.
@@ -186,8 +187,10 @@ impl AlertRules {
         if let Some(why) = &b.implausible {
             return self.on_implausible(b.blow, why);
         }
-        let (Some(efficiency), Some(plastic_j), Some(kinetic_in_j), Some(elastic_j), Some(residual)) =
-            (b.efficiency, b.plastic_j, b.kinetic_in_j, b.elastic_j, b.residual)
+        // The energy balance needs the accelerometer: a blow estimated without one has none.
+        let residual = b.residual;
+        let (Some(efficiency), Some(plastic_j), Some(kinetic_in_j), Some(elastic_j)) =
+            (b.efficiency, b.plastic_j, b.kinetic_in_j, b.elastic_j)
         else {
             return None;
         };
@@ -197,8 +200,13 @@ impl AlertRules {
             self.recent.pop_front();
         }
         let low = self.recent.iter().filter(|e| **e < c.low_efficiency).count();
+        // A blow estimated without the load or the accelerometer (issue 43) has nothing for
+        // the sensor check to compare, by its mode: it neither passes nor fails it.
+        let compared = b.channels.has(Role::Load) && b.channels.has(Role::Acc);
         let sensor_failed = b.sensor_check.is_none_or(|x| x.is_nan() || x.abs() > c.sensor_limit);
-        self.sensor_recent.push_back(sensor_failed);
+        if compared {
+            self.sensor_recent.push_back(sensor_failed);
+        }
         while self.sensor_recent.len() > c.sensor_n.max(1) {
             self.sensor_recent.pop_front();
         }
@@ -260,7 +268,7 @@ impl AlertRules {
                     b.blow
                 ),
             ))
-        } else if residual.abs() > c.residual_limit {
+        } else if let Some(residual) = residual.filter(|r| r.abs() > c.residual_limit) {
             figures.insert("residual".to_string(), residual);
             Some((
                 AlertKind::ModelHealth,
@@ -606,6 +614,24 @@ mod tests {
         // The debounce also survives the billet change.
         r.reset();
         assert_eq!(r.on_blow(&checked(4, None)), None);
+    }
+
+    /// Issue 43: a blow estimated without the load (or the accelerometer) has no sensor
+    /// check by its mode, and no energy balance without the accelerometer; neither fails a
+    /// rule, and its efficiency still raises the elastic-blow alert.
+    #[test]
+    fn a_blow_of_a_reduced_mode_fails_no_check_it_cannot_make_and_still_raises_a_hard_blow() {
+        let mut r = AlertRules::new(AlertConfig::default());
+        let without = |n: u32, role: Role| BlowEstimate {
+            channels: crate::signal::sample::Channels::ALL.without(role),
+            residual: None,
+            ..checked(n, None)
+        };
+        for n in 1..=6 {
+            assert_eq!(r.on_blow(&without(n, if n % 2 == 0 { Role::Load } else { Role::Acc })), None, "blow {n}");
+        }
+        let hard = BlowEstimate { class: BlowClass::Hard, ..without(7, Role::Acc) };
+        assert_eq!(r.on_blow(&hard).map(|a| a.kind), Some(AlertKind::ElasticBlow));
     }
 
     #[test]

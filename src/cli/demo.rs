@@ -26,7 +26,7 @@ use crate::config::{parse_machine, parse_process};
 use crate::daemon::{Control, Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve};
 use crate::estimate::BlowEstimate;
 use crate::physics::effects::EffectSet;
-use crate::signal::sample::Role;
+use crate::signal::sample::{Channels, Role};
 use crate::simdevice::{BilletPlan, SerialDeviceSpec, SimMachine, drive_serial};
 use crate::synth::CaptureSpec;
 
@@ -83,6 +83,15 @@ pub struct DemoArgs {
     /// The hammer's impact speeds the advisor may choose from, m/s (its drop heights).
     #[arg(long, value_name = "V,...", value_delimiter = ',', default_value = "2.6,3.9,4.6,5.3")]
     pub settings: Vec<f64>,
+    /// Simulate a hammer without this sensor (`load`, `acc` or `disp`): its DAQ sends the
+    /// other two channels, and each blow is estimated from them (the `channels` of its
+    /// result).
+    #[arg(long, value_name = "load|acc|disp", value_parser = parse_channel)]
+    pub without: Option<Role>,
+}
+
+fn parse_channel(s: &str) -> Result<Role, String> {
+    Role::from_short(s).ok_or_else(|| "must be one of load, acc, disp".to_string())
 }
 
 /// The DAQ's channels: 1 N, 1 µm and 1 mm/s² per count.
@@ -92,6 +101,11 @@ pub fn demo_channels() -> Vec<ChannelSpec> {
         ChannelSpec { role: Role::Disp, gain: 1e-6, offset: 0.0 },
         ChannelSpec { role: Role::Acc, gain: 1e-3, offset: 0.0 },
     ]
+}
+
+/// The demo DAQ's channels less the one `--without` leaves out.
+fn channels_without(without: Option<Role>) -> Vec<ChannelSpec> {
+    demo_channels().into_iter().filter(|c| Some(c.role) != without).collect()
 }
 
 pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
@@ -117,7 +131,8 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let hooks = hooks(&args, opcua.map(|o| o.url), &faces);
     super::run::init_logging("error");
     let rt = tokio::runtime::Runtime::new()?;
-    rt.block_on(serve_demo(args.fast, sim, parts, hooks, faces, stop_rx))?;
+    let channels = channels_without(args.without);
+    rt.block_on(serve_demo(args.fast, sim, channels, parts, hooks, faces, stop_rx))?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -176,6 +191,7 @@ fn parts(args: &DemoArgs, opcua: Option<crate::config::opcua::OpcuaConfig>) -> a
             speeds: crate::advise::Speeds::Settings(args.settings.clone()),
         }),
         uplink_mqtt: uplink,
+        absent_channels: args.without.map_or(Channels::NONE, |r| Channels::NONE.with(r, true)),
         ..ServiceConfig::minimal(PathBuf::from("hammer-lg1000.machine.toml"), args.dir.clone())
     };
     // No new-billet signal: the service finds each billet from the encoder (issue 22), so it
@@ -200,6 +216,7 @@ fn parts(args: &DemoArgs, opcua: Option<crate::config::opcua::OpcuaConfig>) -> a
 async fn serve_demo(
     fast: bool,
     sim: SimMachine,
+    channels: Vec<ChannelSpec>,
     parts: ServiceParts,
     hooks: Hooks,
     faces: Faces,
@@ -212,7 +229,7 @@ async fn serve_demo(
     let hold_open = faces.stay_up.then(|| tx.clone());
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let spec = SerialDeviceSpec {
-        channels: demo_channels(),
+        channels: channels.clone(),
         frame_samples: 1000,
         realtime: !fast,
         faults: Default::default(),
@@ -237,7 +254,7 @@ async fn serve_demo(
     });
     let cfg = SerialConfig {
         backpressure: parts.backpressure,
-        ..SerialConfig::new("daq", "pty", 0, SerialFormat::Binary, demo_channels())
+        ..SerialConfig::new("daq", "pty", 0, SerialFormat::Binary, channels)
     };
     tokio::spawn(run_on_stream(cfg, slave, system_clock_ns, tx, shutdown_rx));
     let summary = serve(parts, rx, shutdown_tx, stop_rx, hooks, Some((control_tx, control_rx))).await?;
@@ -288,6 +305,10 @@ fn hooks(args: &DemoArgs, opcua_url: Option<String>, faces: &Faces) -> Hooks {
         n => format!("{n} steel billets"),
     };
     let (plc, foxglove, mqtt) = (args.plc, args.foxglove, args.mqtt.clone());
+    let streaming = match args.without {
+        None => "3 channels".to_string(),
+        Some(r) => format!("2 channels (no {} sensor: its {} is left out)", r.short(), r.column()),
+    };
     let (http, stop) = (faces.http.clone(), faces.stop.clone());
     let [blow_stop, reject_stop, billet_stop, advice_stop] = [(); 4].map(|()| faces.stop.clone());
     Hooks {
@@ -298,7 +319,7 @@ fn hooks(args: &DemoArgs, opcua_url: Option<String>, faces: &Faces) -> Hooks {
                 "forgemon demo: a simulated MONTBARD LG1000 drop hammer (paper Table 1) forges {billets}, 60 x 112 mm,"
             ));
             say(format_args!(
-                "  streaming 3 channels at 100 kHz over a pty; recording to {}/; status on http://{addr}/status",
+                "  streaming {streaming} at 100 kHz over a pty; recording to {}/; status on http://{addr}/status",
                 dir.display()
             ));
             say(format_args!("  dashboard on http://{addr}/"));

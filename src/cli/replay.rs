@@ -24,7 +24,7 @@ use crate::record::{Payload, RecordReader, RecordWriter, Rotation};
 use crate::session::{
     End, MACHINE_CONFIG_NAME, Outcome, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, Session, Stamp, is_new_billet_marker,
 };
-use crate::signal::sample::SampleBatch;
+use crate::signal::sample::{Channels, SampleBatch};
 
 #[derive(Debug, Args)]
 pub struct ReplayArgs {
@@ -278,12 +278,22 @@ impl<W: Write> Replay<W> {
             Input::Files(files) => {
                 self.end = End::InputEnded;
                 for path in files {
-                    super::for_each_capture_batch(&path, |batch| self.batch(&batch))?;
+                    // A capture without a column is a source without that sensor.
+                    super::for_each_capture_batch(&path, |batch| {
+                        self.session.set_absent(Channels::ALL.missing_from(Channels::of(&batch.roles)));
+                        self.batch(&batch)
+                    })?;
                 }
             }
             Input::Recording { reader, ahead, rest, skipped } => {
                 self.end = End::Stopped;
                 self.progress = Progress::over(std::iter::once(reader.path()).chain(rest.iter().map(PathBuf::as_path)));
+                // The channels none of the recording's sources carries, by the samples read
+                // ahead (each source's first batches).
+                let carried = ahead.iter().fold(Channels::NONE, |c, b| b.roles.iter().fold(c, |c, r| c.with(*r, true)));
+                if !ahead.is_empty() {
+                    self.session.set_absent(Channels::ALL.missing_from(carried));
+                }
                 for batch in &ahead {
                     self.batch(batch)?;
                 }

@@ -37,6 +37,8 @@ pub fn needs_restart(old: &ServiceConfig, new: &ServiceConfig) -> Vec<&'static s
         encoder_at_die_m,
         encoder_direction,
         sources,
+        // Follows from `sources`, which a reload does not take.
+        absent_channels: _,
         advisor,
         uplink_mqtt,
     } = new;

@@ -25,6 +25,7 @@ use super::{ConfigError, source};
 use crate::acquire::ChannelSpec;
 use crate::alert::AlertConfig;
 use crate::estimate::EncoderDirection;
+use crate::signal::sample::Channels;
 
 /// Default status/metrics address: loopback only.
 pub const DEFAULT_HTTP_LISTEN: &str = "127.0.0.1:9187";
@@ -68,6 +69,42 @@ impl SourceSpec {
             SourceSpec::Modbus(m) => &m.source,
         }
     }
+
+    /// The channels the source carries.
+    pub fn channels(&self) -> Channels {
+        use crate::acquire::can::CanSignals;
+        use crate::acquire::modbus::{Mode, Signal};
+        match self {
+            SourceSpec::Serial { channels, .. } => Channels::of(&channels.iter().map(|c| c.role).collect::<Vec<_>>()),
+            SourceSpec::Can(c) => match &c.signals {
+                CanSignals::Dbc { names, .. } => Channels::of(&names.roles.iter().map(|(r, _)| *r).collect::<Vec<_>>()),
+                CanSignals::Explicit(m) => Channels::of(&m.roles()),
+            },
+            SourceSpec::Modbus(m) => match &m.mode {
+                Mode::Block { channels, .. } => Channels::of(&channels.iter().map(|c| c.role).collect::<Vec<_>>()),
+                Mode::Poll => Channels::of(
+                    &m.map
+                        .iter()
+                        .filter_map(|r| match r.signal {
+                            Signal::Role(role) => Some(role),
+                            Signal::Named(_) => None,
+                        })
+                        .collect::<Vec<_>>(),
+                ),
+            },
+        }
+    }
+}
+
+/// The channels none of `sources` carries (a hammer without a load cell): the service's
+/// merge does not wait for them and its blows are estimated without them (issue 43).
+/// Without sources (the caller feeds the service) none is taken to be absent.
+pub fn absent_channels(sources: &[SourceSpec]) -> Channels {
+    if sources.is_empty() {
+        return Channels::NONE;
+    }
+    let carried = sources.iter().fold(Channels::NONE, |c, s| s.channels().roles().fold(c, |c, r| c.with(r, true)));
+    Channels::ALL.missing_from(carried)
 }
 
 /// A Modbus coil on the PLC set when an alert fires.
@@ -140,6 +177,9 @@ pub struct ServiceConfig {
     /// approach).
     pub encoder_direction: EncoderDirection,
     pub sources: Vec<SourceSpec>,
+    /// The channels no source carries (`absent_channels` of `sources`; the demo's
+    /// `--without`): the merge does not wait for them (issue 43).
+    pub absent_channels: Channels,
     /// `[advisor]`: replan the billet's next blows after each one (issue 20).
     pub advisor: Option<super::advisor::AdvisorConfig>,
     /// `[uplink.mqtt]`: publish Sparkplug B to this broker (docs/interfaces.md §10, `uplink.rs`).
@@ -178,6 +218,7 @@ impl ServiceConfig {
             encoder_direction: EncoderDirection::Auto,
             idle_new_billet_s: crate::estimate::billet::DEFAULT_IDLE_NEW_BILLET_S,
             sources: Vec::new(),
+            absent_channels: Channels::NONE,
             advisor: None,
             uplink_mqtt: None,
         }
@@ -307,6 +348,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
     let (new_billet_rise_m, idle_new_billet_s, encoder_at_die_m) = parse_billets(&doc, raw.billets.as_ref())?;
     let encoder_direction = parse_encoder(&doc, raw.encoder.as_ref())?;
     let sources = parse_sources(&doc, raw.sources.len(), base)?;
+    let absent_channels = absent_channels(&sources);
     let advisor = super::advisor::parse_advisor(&doc, raw.advisor.as_ref())?;
     Ok(ServiceConfig {
         machine_path: path(&raw.machine),
@@ -341,6 +383,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         encoder_at_die_m,
         encoder_direction,
         sources,
+        absent_channels,
         advisor,
         uplink_mqtt: super::uplink::parse_uplink(&doc)?,
     })

@@ -193,7 +193,8 @@ pub async fn serve(
         writer.set_tap(Box::new(move |m| taps.iter_mut().for_each(|tap| tap(m))));
     }
     let (pipeline, recipe_text) = pipeline_with_recipe(&parts, &mut writer, &status)?;
-    let session = Session::new(pipeline, Some(writer), Stamp::Arrival);
+    let mut session = Session::new(pipeline, Some(writer), Stamp::Arrival);
+    session.set_absent(cfg.absent_channels);
     let in_force = reload::InForce::new(&parts, recipe_text);
     let service = service::Service::new(session, status, live.clone(), hooks, in_force, cfg.min_free_bytes);
     let rx = queue::SourceQueue::new(rx, parts.backpressure);

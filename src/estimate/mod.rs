@@ -410,8 +410,9 @@ impl Estimator {
         {
             self.scale = f.scale;
             // The observer's efficiency is the model's on the measured load: its sd is the
-            // fitted model's.
-            e.efficiency_sd = modes::efficiency_sd(e.channels, f.efficiency_sd);
+            // fitted model's, and at least the two methods' disagreement.
+            let apart = e.efficiency.map_or(0.0, |x| (x - f.blow.energy.efficiency()).abs());
+            e.efficiency_sd = modes::efficiency_sd(e.channels, f.efficiency_sd).map(|sd| sd.hypot(apart));
         }
         // The model check is the load's residual: without a load, none.
         if h_start_m.is_some() && with_load {

@@ -23,7 +23,7 @@ pub const DEFAULT_BATCH_S: f64 = 0.05;
 pub enum CaptureError {
     #[error("{origin}: empty file (no header line)")]
     Empty { origin: String },
-    #[error("{origin}:1: header lacks column '{column}' (it needs t_s, load_N, disp_m, acc_mps2)")]
+    #[error("{origin}:1: header lacks column '{column}' (it needs t_s and at least two of load_N, disp_m, acc_mps2)")]
     MissingColumn { origin: String, column: &'static str },
     #[error("{origin}: no samples after the header")]
     NoSamples { origin: String },
@@ -47,8 +47,9 @@ pub struct CaptureReader<R> {
     origin: String,
     lines: std::io::Lines<R>,
     line_no: usize,
-    /// Column index of t_s, load_N, disp_m, acc_mps2.
-    cols: [usize; 4],
+    /// Column index of t_s, load_N, disp_m, acc_mps2; `None` for a channel the capture lacks
+    /// (a machine without that sensor, issue 43).
+    cols: [Option<usize>; 4],
     n_fields: usize,
     batch_len: Option<usize>,
     batch_s: f64,
@@ -72,12 +73,16 @@ impl<R: BufRead> CaptureReader<R> {
             Some(Ok(h)) => h,
         };
         let names: Vec<&str> = header.trim_end_matches('\r').split(',').map(str::trim).collect();
-        let mut cols = [0; 4];
-        for (slot, column) in cols.iter_mut().zip(["t_s", "load_N", "disp_m", "acc_mps2"]) {
-            *slot = names
-                .iter()
-                .position(|n| *n == column)
-                .ok_or(CaptureError::MissingColumn { origin: origin.clone(), column })?;
+        let columns = ["t_s", "load_N", "disp_m", "acc_mps2"];
+        let cols = columns.map(|column| names.iter().position(|n| *n == column));
+        // The time, and two of the three channels at least: one may be missing.
+        let missing = |k: usize| CaptureError::MissingColumn { origin: origin.clone(), column: columns[k] };
+        if cols[0].is_none() {
+            return Err(missing(0));
+        }
+        if cols[1..].iter().filter(|c| c.is_none()).count() > 1 {
+            let first = (1..4).find(|&k| cols[k].is_none()).unwrap_or(1);
+            return Err(missing(first));
         }
         Ok(CaptureReader {
             n_fields: names.len(),
@@ -129,8 +134,9 @@ impl<R: BufRead> CaptureReader<R> {
                     expected: self.n_fields,
                 });
             }
-            let mut row = [0.0; 4];
+            let mut row = [f64::NAN; 4];
             for (k, (&c, name)) in self.cols.iter().zip(["t_s", "load_N", "disp_m", "acc_mps2"]).enumerate() {
+                let Some(c) = c else { continue };
                 let text = fields[c].trim();
                 row[k] =
                     text.parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| CaptureError::NotANumber {
@@ -219,9 +225,10 @@ impl<R: BufRead> CaptureReader<R> {
         // The period of a one-sample file is unknown; 1 s keeps the batch well-formed.
         let period_s = self.period_s.unwrap_or(1.0);
         let t0_ns = (rows[0][0] * 1e9).round() as i64;
-        let mut values = Vec::with_capacity(rows.len() * 3);
+        let present: Vec<usize> = (1..4).filter(|&k| self.cols[k].is_some()).collect();
+        let mut values = Vec::with_capacity(rows.len() * present.len());
         for r in &rows {
-            values.extend_from_slice(&[r[1], r[2], r[3]]);
+            values.extend(present.iter().map(|&k| r[k]));
         }
         let batch = SampleBatch {
             source: self.origin.clone(),
@@ -229,7 +236,7 @@ impl<R: BufRead> CaptureReader<R> {
             device_time_ns: t0_ns,
             host_time_ns: t0_ns,
             period_ns: period_s * 1e9,
-            roles: vec![Role::Load, Role::Disp, Role::Acc],
+            roles: present.iter().map(|&k| [Role::Load, Role::Disp, Role::Acc][k - 1]).collect(),
             values,
         };
         self.seq += 1;
@@ -300,12 +307,29 @@ mod tests {
         assert_eq!((b[0].seq, b[1].seq), (0, 1));
     }
 
+    /// Issue 43: a capture may lack one channel (a hammer without a load cell); its batches
+    /// then carry the other two, in any column order.
+    #[test]
+    fn a_capture_without_one_channel_gives_batches_of_the_other_two() {
+        let b = read("acc_mps2,t_s,disp_m\n9.8,10.000,0.5\n9.7,10.001,0.6\n").unwrap();
+        assert_eq!(b[0].roles, vec![Role::Disp, Role::Acc]);
+        assert_eq!(b[0].values, vec![0.5, 9.8, 0.6, 9.7]);
+        let b = read("t_s,load_N,acc_mps2\n0,100,9.8\n0.001,200,9.7\n").unwrap();
+        assert_eq!(b[0].roles, vec![Role::Load, Role::Acc]);
+        assert_eq!(b[0].values, vec![100.0, 9.8, 200.0, 9.7]);
+    }
+
     #[test]
     fn errors_name_file_line_and_column() {
         let e = read("").unwrap_err();
         assert_eq!(e.to_string(), "c.csv: empty file (no header line)");
-        let e = read("t_s,load_N,disp_m\n1,2,3\n").unwrap_err();
-        assert_eq!(e.to_string(), "c.csv:1: header lacks column 'acc_mps2' (it needs t_s, load_N, disp_m, acc_mps2)");
+        let e = read("t_s,load_N\n1,2\n").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "c.csv:1: header lacks column 'disp_m' (it needs t_s and at least two of load_N, disp_m, acc_mps2)"
+        );
+        let e = read("load_N,disp_m,acc_mps2\n1,2,3\n").unwrap_err();
+        assert!(e.to_string().starts_with("c.csv:1: header lacks column 't_s'"), "{e}");
         let e = read("t_s,load_N,disp_m,acc_mps2\n").unwrap_err();
         assert_eq!(e.to_string(), "c.csv: no samples after the header");
         let e = read("t_s,load_N,disp_m,acc_mps2\n0,1,2,3\n0.001,abc,2,3\n").unwrap_err();

@@ -99,6 +99,11 @@ impl Channels {
         [Role::Load, Role::Acc, Role::Disp].into_iter().filter(|r| !self.has(*r))
     }
 
+    /// The roles of `self` that `other` lacks.
+    pub fn missing_from(self, other: Channels) -> Channels {
+        self.roles().fold(Channels::NONE, |c, r| c.with(r, !other.has(r)))
+    }
+
     /// The short names of the roles in the set (`roles`).
     pub fn names(&self) -> Vec<&'static str> {
         self.roles().map(|r| r.short()).collect()
