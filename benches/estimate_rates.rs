@@ -3,7 +3,9 @@
 //! 5.3 m/s) and the press paper's blow 2 (copper, 0.346 m/s), rendered by the DAQ chain of
 //! `forgemon::daq` and cut by the segmenter, at 100 kHz and at 5 kHz. The estimator has
 //! seen blow 1 (its height and flow-stress scale carry over), as in service. At 5 and
-//! 100 kHz also blow 1 itself, with the encoder referenced to the die (`encoder_at_die_m`).
+//! 100 kHz also blow 1 itself, with the encoder referenced to the die (`encoder_at_die_m`),
+//! and blow 2 in each sensing mode (issue 43: without the load, without the accelerometer;
+//! `latency_by_mode`, the full mode its anchor).
 
 use std::hint::black_box;
 
@@ -15,6 +17,7 @@ use forgemon::physics::EffectSet;
 use forgemon::physics::machine::Machine;
 use forgemon::physics::process::Process;
 use forgemon::signal::capture::CaptureRow;
+use forgemon::signal::sample::Role;
 use forgemon::signal::segment::{Blow, SegmentConfig, Segmenter};
 use forgemon::synth::{CaptureSpec, idle_rows, rows_batch};
 
@@ -32,6 +35,11 @@ fn setup(hammer: bool) -> (Machine, Process, Vec<f64>, CaptureSpec) {
 
 /// The two blows, segmented, at `rate_hz`.
 fn blows(hammer: bool, rate_hz: f64) -> (Machine, Process, Vec<Blow>) {
+    blows_without(hammer, rate_hz, None)
+}
+
+/// The same from a DAQ without the channel `without`.
+fn blows_without(hammer: bool, rate_hz: f64, without: Option<Role>) -> (Machine, Process, Vec<Blow>) {
     let (m, p, v0s, base) = setup(hammer);
     let mut c = CaptureSpec { sample_rate_hz: rate_hz, ..base };
     c.sensors.load_sd_n = 3e3;
@@ -44,8 +52,13 @@ fn blows(hammer: bool, rate_hz: f64) -> (Machine, Process, Vec<Blow>) {
     let last = rows.last().map_or(0.0, |r| r.disp_m);
     rows.extend(idle_rows((0.15 * rate_hz) as usize, 0.0, &c, last, 99));
     let period_ns = 1e9 / rate_hz;
-    let batch = rows_batch("daq", 0, 0, period_ns, &rows);
-    let mut seg = Segmenter::new(SegmentConfig::for_kind(m.kind()));
+    let mut batch = rows_batch("daq", 0, 0, period_ns, &rows);
+    if let Some(role) = without {
+        let k = batch.channel(role).unwrap();
+        batch.values = batch.values.chunks(3).flat_map(|r| (0..3).filter(|&j| j != k).map(|j| r[j])).collect();
+        batch.roles.remove(k);
+    }
+    let mut seg = Segmenter::new(SegmentConfig::for_kind(m.kind())).with_ram_kg(m.ram_kg());
     let mut cut = Vec::new();
     seg.push(&batch, &mut cut);
     seg.finish(&mut cut);
@@ -90,5 +103,29 @@ fn latency(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, latency);
+/// Blow 2's latency in each sensing mode at 5 and 100 kHz: all three channels (the anchor),
+/// without the load, without the accelerometer.
+fn latency_by_mode(c: &mut Criterion) {
+    let mut g = c.benchmark_group("latency_by_mode");
+    g.sample_size(20);
+    for (name, hammer) in [("hammer", true), ("press", false)] {
+        for rate in [100e3, 5e3] {
+            for without in [None, Some(Role::Load), Some(Role::Acc)] {
+                let (m, p, cut) = blows_without(hammer, rate, without);
+                let mut warm = Estimator::new(m, Some(p.clone()), EstimatorConfig::for_kind(m.kind()));
+                warm.estimate(&cut[0]).unwrap();
+                let mode = without.map_or("full".to_string(), |r| format!("without_{}", r.short()));
+                g.bench_function(format!("{name}_{}kHz_{mode}", rate / 1e3), |b| {
+                    b.iter(|| {
+                        let mut est = warm.clone();
+                        black_box(est.estimate(black_box(&cut[1])).unwrap())
+                    })
+                });
+            }
+        }
+    }
+    g.finish();
+}
+
+criterion_group!(benches, latency, latency_by_mode);
 criterion_main!(benches);
