@@ -113,6 +113,11 @@ fn the_page_shows_the_first_blow_live_and_the_acknowledged_alert() {
     let advice = &seen["advice"];
     assert_eq!(advice["hidden"], false, "{advice}");
     assert!(advice["text"].as_str().unwrap().contains("30.0 mm"), "{advice}");
+    // The last blow's sensing mode (issue 43): the demo's DAQ has all three channels; its
+    // efficiency carries its 1σ in the title.
+    let sensors = &seen["sensors"];
+    assert_eq!(sensors["text"], "load + acc + disp", "{sensors}");
+    assert!(sensors["sd"].as_str().unwrap().starts_with("± "), "{sensors}");
     let after = &seen["alert_after"];
     assert!(after["cls"].as_str().unwrap().contains("acked"), "{after}");
     assert!(after["kind"].as_str().unwrap().starts_with("acknowledged: elastic_blow"), "{after}");

@@ -59,7 +59,7 @@ fn class_code(c: BlowClass) -> u32 {
     }
 }
 
-/// Registers 6–19 against the blow's recorded result.
+/// Registers 6–21 against the blow's recorded result.
 fn assert_image_shows(w: &[u32], r: &BlowEstimate) {
     let b = r.blow;
     assert_eq!(w[6], class_code(r.class), "blow {b}: class");
@@ -73,6 +73,9 @@ fn assert_image_shows(w: &[u32], r: &BlowEstimate) {
     // No recipe, no advisor yet (issue 20): "no recipe", "unknown", "none", and never NOK.
     assert_eq!((w[16], w[17], u32_at(w, 18)), (0, 0xFFFF, 0), "blow {b}: judgement and advisor");
     assert_eq!(w[1] & (1 << 3), 0, "blow {b}: NOK without a recipe");
+    // Issue 43: the demo's DAQ has all three channels, bits 0-2; the efficiency's 1σ.
+    assert_eq!(w[20], 0b111, "blow {b}: channels");
+    shows(w[21], r.efficiency_sd.unwrap_or(0.0), 1e-4, "efficiency sd", b);
 }
 
 #[test]
@@ -153,7 +156,7 @@ fn a_pymodbus_client_reads_the_demo_results_and_its_coils_act() {
     let acked_blows = u32_at(&words(&ack["before"]), 2);
     let mut blows_seen = Vec::new();
     for (i, w) in images.iter().enumerate() {
-        assert_eq!(w.len(), 20);
+        assert_eq!(w.len(), 22);
         assert_eq!(w[1] & 1, 1, "running");
         let n = u32_at(w, 2);
         if n == 0 {

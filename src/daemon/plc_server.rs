@@ -41,11 +41,12 @@ use super::status::{SharedStatus, StatusSnapshot};
 use crate::config::service::PlcLimits;
 use crate::estimate::result::AlertKind;
 use crate::estimate::{BlowClass, BlowEstimate};
+use crate::signal::sample::Role;
 
 /// The unit id the image answers (docs/interfaces.md §8).
 pub const PLC_UNIT_ID: u8 = 1;
-/// Holding registers 0–19.
-pub const IMAGE_WORDS: usize = 20;
+/// Holding registers 0–21.
+pub const IMAGE_WORDS: usize = 22;
 /// Coils 0 (acknowledge) and 1 (new billet).
 pub const COILS: u16 = 2;
 /// How often the heartbeat (register 0) counts up.
@@ -68,6 +69,16 @@ pub mod reg {
     pub const JUDGEMENT: usize = 16;
     pub const BLOWS_TO_TARGET: usize = 17;
     pub const ADVISED_KINETIC_J: usize = 18;
+    /// The last blow's sensing mode: the channels its estimate used (issue 43).
+    pub const CHANNELS: usize = 20;
+    pub const EFFICIENCY_SD: usize = 21;
+}
+
+/// Bits of register 20: the channels the last blow's estimate used (0 before the first).
+pub mod channel_bit {
+    pub const LOAD: u16 = 1 << 0;
+    pub const ACC: u16 = 1 << 1;
+    pub const DISP: u16 = 1 << 2;
 }
 
 /// Bits of register 1 (docs/interfaces.md §8).
@@ -176,6 +187,12 @@ pub fn encode(
         w[reg::IMPACT_MM_PER_S] = sat_u16(b.v_impact_mps * 1e3);
         put_u32(&mut w, reg::PEAK_LOAD_100N, sat_u32(b.peak_load_n / 100.0));
         w[reg::HEIGHT_10UM] = sat_u16(b.h_end_m.unwrap_or(0.0) * 1e5);
+        // Registers 20–21: the sensing mode and the efficiency's 1σ (issue 43).
+        let used = |role: Role, bit: u16| if b.channels.has(role) { bit } else { 0 };
+        w[reg::CHANNELS] = used(Role::Load, channel_bit::LOAD)
+            | used(Role::Acc, channel_bit::ACC)
+            | used(Role::Disp, channel_bit::DISP);
+        w[reg::EFFICIENCY_SD] = sat_u16(b.efficiency_sd.unwrap_or(0.0) * 1e4);
     }
     // Register 16: 0 no recipe (or a blow not judged: incomplete), 1 OK, 2 NOK.
     w[reg::JUDGEMENT] = match last.and_then(|b| b.judgement.as_ref()) {
@@ -217,7 +234,7 @@ pub struct PlcStats {
 }
 
 /// One request against `image` (Modbus Application Protocol v1.1b3 §6): holding registers
-/// 0–19 are read; coils 0 and 1 are written, and each coil written `true` sends its command
+/// 0–21 are read; coils 0 and 1 are written, and each coil written `true` sends its command
 /// through `command`. A quantity outside the function's range is an illegal data value
 /// (§6.3: 1..=125 registers), checked before the address; every other function or address
 /// is refused with an exception; a command the service cannot take now is "server device
@@ -488,6 +505,17 @@ pub(crate) mod tests {
         assert_eq!(u32_at(&w, reg::PEAK_LOAD_100N), 12_346);
         assert_eq!(w[reg::HEIGHT_10UM], 4012);
         assert_eq!((w[16], w[17], w[18], w[19]), (0, 0xFFFF, 0, 0), "no recipe, unknown, none");
+        assert_eq!(w[reg::CHANNELS], 0b111, "load, acc and disp");
+        assert_eq!(w[reg::EFFICIENCY_SD], 0, "no sd");
+        // A blow without a load channel (issue 43): bits acc and disp, and its sd.
+        let reduced = BlowEstimate {
+            channels: crate::signal::sample::Channels::ALL.without(Role::Load),
+            efficiency_sd: Some(0.00125),
+            ..blow()
+        };
+        let w2 = encode(41, &s, Some(&reduced), Warnings::default());
+        assert_eq!(w2[reg::CHANNELS], channel_bit::ACC | channel_bit::DISP);
+        assert_eq!(w2[reg::EFFICIENCY_SD], 13, "0.00125 × 10 000 rounds to 13");
         // The advisor's plan: blows left, and the next blow's energy (70 123.6 J rounds to
         // 70 124 = 0x0001_11EC).
         let step = |kinetic_j| crate::advise::PlannedBlow {
@@ -597,11 +625,11 @@ pub(crate) mod tests {
             Ok(Response::ReadHoldingRegisters(vec![54, 57]))
         );
         let refused = |r| answer(&image, r, |_| true);
-        assert_eq!(refused(Request::ReadHoldingRegisters(19, 2)), Err(ExceptionCode::IllegalDataAddress));
+        assert_eq!(refused(Request::ReadHoldingRegisters(21, 2)), Err(ExceptionCode::IllegalDataAddress));
         // A quantity outside 1..=125 is a value error, before any address is looked at.
         assert_eq!(refused(Request::ReadHoldingRegisters(0, 0)), Err(ExceptionCode::IllegalDataValue));
         assert_eq!(refused(Request::ReadHoldingRegisters(0, 126)), Err(ExceptionCode::IllegalDataValue));
-        assert_eq!(refused(Request::ReadHoldingRegisters(0, 21)), Err(ExceptionCode::IllegalDataAddress));
+        assert_eq!(refused(Request::ReadHoldingRegisters(0, 23)), Err(ExceptionCode::IllegalDataAddress));
         assert_eq!(refused(Request::WriteSingleRegister(0, 1)), Err(ExceptionCode::IllegalFunction));
         assert_eq!(refused(Request::WriteMultipleRegisters(0, vec![1].into())), Err(ExceptionCode::IllegalFunction));
         assert_eq!(refused(Request::ReadCoils(0, 2)), Err(ExceptionCode::IllegalFunction));

@@ -184,6 +184,8 @@ def main():
             before = p.eval(ALERT)
             advice = p.eval("({hidden: document.getElementById('advice-kv').hidden, "
                             "text: document.getElementById('advice').textContent})")
+            sensors = p.eval("({text: document.getElementById('big-channels').textContent, "
+                             "sd: document.getElementById('big-eff').title})")
             png = p.call("Page.captureScreenshot", format="png")["data"]
             with open(shot, "wb") as f:
                 f.write(base64.b64decode(png))
@@ -198,6 +200,7 @@ def main():
             after = p.eval(ALERT)
             status = json.load(urllib.request.urlopen(base + "/status"))
             print(json.dumps({"first_row": first, "blows_at_load": blows_at_load, "curve": curve_points,
+                              "sensors": sensors,
                               "alert_before": before, "alert_after": after, "advice": advice,
                               "status_latched_alert": status["latched_alert"],
                               "rates": rates, "rate_status_hz": (s1 - s0) / (t1 - t0),

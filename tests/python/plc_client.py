@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Read forgemon's PLC result image (docs/interfaces.md §8) as a PLC would, with pymodbus.
 
-The independent client of issue 19 §2: it polls holding registers 0-19 of unit 1 while a
+The independent client of issue 19 §2: it polls holding registers 0-21 of unit 1 while a
 `forgemon demo --plc ADDR` runs, keeps every image it saw twice in a row (so a half-updated
 one is never kept), checks that writes and other addresses are refused with Modbus
 exceptions, and once the alert-latched bit is set writes coil 0 (acknowledge), then coil 1
@@ -26,7 +26,7 @@ except ImportError as err:  # pragma: no cover - depends on the machine
     sys.exit(3)
 
 UNIT = 1
-WORDS = 20
+WORDS = 22
 ALERT_LATCHED = 1 << 2
 
 
@@ -85,7 +85,7 @@ def main():
     refused = {
         "write_register": error_code(client.write_register(7, 1, **kw)),
         "write_registers": error_code(client.write_registers(0, [1, 2], **kw)),
-        "read_past_end": error_code(client.read_holding_registers(19, count=2, **kw)),
+        "read_past_end": error_code(client.read_holding_registers(21, count=2, **kw)),
         "read_input": error_code(client.read_input_registers(0, count=2, **kw)),
         "write_coil_2": error_code(client.write_coil(2, True, **kw)),
         "read_coils": error_code(client.read_coils(0, count=2, **kw)),

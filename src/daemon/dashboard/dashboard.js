@@ -46,6 +46,17 @@ function renderLast(b) {
   $("big-kinetic").textContent = b.kinetic_in_J === null ? "–" : fmt(b.kinetic_in_J, 0) + " J";
   $("big-speed").textContent = fmt(b.v_impact_mps, 2) + " m/s";
   $("big-height").textContent = b.h_end_m === null ? "–" : fmt(1000 * b.h_end_m, 2) + " mm";
+  $("big-channels").textContent = sensingMode(b.channels);
+  if (b.efficiency !== null && b.efficiency_sd != null)
+    $("big-eff").title = "± " + fmt(100 * b.efficiency_sd, 1) + " % (1σ, " + sensingMode(b.channels) + ")";
+}
+
+// The channels a blow's estimate used, and the one it went without (issue 43).
+function sensingMode(channels) {
+  const all = ["load", "acc", "disp"];
+  const used = Array.isArray(channels) ? channels : all;
+  const missing = all.filter((c) => !used.includes(c));
+  return used.join(" + ") + (missing.length ? " (no " + missing.join(", ") + ")" : "");
 }
 
 // The panel shows three lines of the reason: the whole of it is the element's title (on
