@@ -204,6 +204,9 @@ pub struct SerialFaults {
     pub corrupt_every: u64,
     /// Skip every `drop_every`-th frame (its sequence number is used up: a gap) (0: never).
     pub drop_every: u64,
+    /// A channel that dies: from this many seconds into the stream it reads 0 counts (a
+    /// broken cable, a charge amplifier gone; issue 43).
+    pub dead: Option<(crate::signal::sample::Role, f64)>,
 }
 
 /// How a simulated serial device frames its samples.
@@ -259,7 +262,18 @@ pub async fn drive_serial<W: tokio::io::AsyncWrite + Unpin>(
         if billet_now > billet_before && billet_before > 0 {
             on_billet(billet_now, device_ns);
         }
-        let counts = to_counts(&rows, &spec.channels);
+        let mut counts = to_counts(&rows, &spec.channels);
+        if let Some((role, from_s)) = spec.faults.dead
+            && let Some(c) = spec.channels.iter().position(|ch| ch.role == role)
+        {
+            let n_ch = spec.channels.len();
+            for i in 0..rows.len() {
+                let t_s = (device_ns - 1_000_000_000) as f64 * 1e-9 + i as f64 * f64::from(period_ns) * 1e-9;
+                if t_s >= from_s {
+                    counts[i * n_ch + c] = 0;
+                }
+            }
+        }
         let frame = Frame {
             channel_count: spec.channels.len() as u8,
             sample_count: rows.len() as u16,

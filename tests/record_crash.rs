@@ -79,6 +79,7 @@ fn result(blow: u32) -> BlowEstimate {
         channels: Default::default(),
         efficiency_sd: None,
         unobserved: Default::default(),
+        excluded: Default::default(),
     }
 }
 

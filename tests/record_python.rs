@@ -76,6 +76,7 @@ fn result(blow: u32, with_sheet: bool) -> BlowEstimate {
         channels: if with_sheet { Default::default() } else { Channels::ALL.without(Role::Load) },
         efficiency_sd: whole.then_some(0.004),
         unobserved: Default::default(),
+        excluded: Default::default(),
     }
 }
 

@@ -157,7 +157,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__demo)
-            opts="-h --billets --interval --dir --fast --http --plc --foxglove --mqtt --opcua --recipe --target --settings --without --help"
+            opts="-h --billets --interval --dir --fast --http --plc --foxglove --mqtt --opcua --recipe --target --settings --without --dead --help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 2 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -208,6 +208,10 @@ _forgemon() {
                     return 0
                     ;;
                 --without)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --dead)
                     COMPREPLY=($(compgen -f "${cur}"))
                     return 0
                     ;;

@@ -107,6 +107,7 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l recipe -d 'Ju
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l target -d 'Run the live blow advisor towards this billet height, m: after each blow it plans the blows left (`[advisor]` in a service file)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l settings -d 'The hammer\'s impact speeds the advisor may choose from, m/s (its drop heights)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l without -d 'Simulate a hammer without this sensor (`load`, `acc` or `disp`): its DAQ sends the other two channels, and each blow is estimated from them (the `channels` of its result)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l dead -d 'Kill a channel of the simulated DAQ this many seconds into the run (`load@12.5`): from then on it reads 0. The service notices from the next blow, raises one `sensor` alert naming it, and estimates the blows without it' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l fast -d 'Run as fast as possible instead of in real time, and end after the last billet (on a terminal the demo otherwise keeps its dashboard up until Ctrl-C)'
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l machine -d 'The machine model (machine.toml)' -r -F

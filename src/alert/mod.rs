@@ -147,6 +147,10 @@ pub struct AlertRules {
     /// has raised its model-health alert (`model_health`).
     scale_ref: Option<(u32, f64)>,
     health_alerted: bool,
+    /// The channels left out of the last blow's estimate (`BlowEstimate::excluded`) whose
+    /// `sensor` alert has been raised: once a failure, again only after the channel worked.
+    /// Kept across billets, as the sensor memory is.
+    excluded_alerted: std::collections::BTreeSet<String>,
 }
 
 impl AlertRules {
@@ -159,6 +163,7 @@ impl AlertRules {
             implausible_alerted: false,
             scale_ref: None,
             health_alerted: false,
+            excluded_alerted: Default::default(),
         }
     }
 
@@ -184,6 +189,9 @@ impl AlertRules {
     /// sensors, and the energy balance. An incomplete blow (no efficiency) raises none and is
     /// not remembered: it neither counts toward the low-efficiency window nor breaks it.
     pub fn on_blow(&mut self, b: &BlowEstimate) -> Option<Alert> {
+        if let Some(alert) = self.on_excluded(b) {
+            return Some(alert);
+        }
         if let Some(why) = &b.implausible {
             return self.on_implausible(b.blow, why);
         }
@@ -292,6 +300,22 @@ impl AlertRules {
     /// An implausible blow (issue 36): no efficiency alert, and one alert per billet, of the
     /// kind its check names (`Check::alert_kind`: an input is the sensors', an output the
     /// model's), with its reason. It is not remembered by the efficiency window.
+    /// A channel the source sent but the blow's estimate left out (issue 43): one `sensor`
+    /// alert when it first fails, naming it and why, not debounced against other sensor
+    /// alerts; it may fire again once the channel has worked on a blow.
+    fn on_excluded(&mut self, b: &BlowEstimate) -> Option<Alert> {
+        self.excluded_alerted.retain(|c| b.excluded.contains_key(c));
+        let (channel, why) = b.excluded.iter().find(|(c, _)| !self.excluded_alerted.contains(*c))?;
+        self.excluded_alerted.insert(channel.clone());
+        let used = b.channels.names().join(" and ");
+        let reason = format!(
+            "the {channel} channel failed on blow {}: {why}; it is left out, and the blows are estimated from the {used} channels until it reads again",
+            b.blow
+        );
+        self.last_fired.insert(AlertKind::Sensor.as_str(), b.blow);
+        Some(Alert { kind: AlertKind::Sensor, blow: b.blow, reason, figures: BTreeMap::new() })
+    }
+
     fn on_implausible(&mut self, blow: u32, why: &Implausible) -> Option<Alert> {
         if std::mem::replace(&mut self.implausible_alerted, true) {
             return None;
@@ -632,6 +656,28 @@ mod tests {
         }
         let hard = BlowEstimate { class: BlowClass::Hard, ..without(7, Role::Acc) };
         assert_eq!(r.on_blow(&hard).map(|a| a.kind), Some(AlertKind::ElasticBlow));
+    }
+
+    /// Issue 43: a channel left out of a blow raises one sensor alert naming it, not again
+    /// while it stays out, and again once it has worked on a blow and fails anew; another
+    /// sensor alert just before does not swallow it.
+    #[test]
+    fn a_failed_channel_raises_one_alert_until_it_has_worked_again() {
+        let mut r = AlertRules::new(AlertConfig::default());
+        let dead = |n: u32| BlowEstimate {
+            excluded: [("load".to_string(), "load_N read 0 N throughout the blow (dead)".to_string())].into(),
+            channels: crate::signal::sample::Channels::ALL.without(Role::Load),
+            ..blow(n, 0.9, 0.0)
+        };
+        r.last_fired.insert(AlertKind::Sensor.as_str(), 1);
+        let a = r.on_blow(&dead(2)).expect("the channel's alert");
+        assert_eq!(a.kind, AlertKind::Sensor);
+        assert!(a.reason.starts_with("the load channel failed on blow 2: load_N read 0 N"), "{}", a.reason);
+        assert!(a.reason.contains("from the acc and disp channels"), "{}", a.reason);
+        assert_eq!(r.on_blow(&dead(3)), None);
+        assert_eq!(r.on_blow(&blow(4, 0.9, 0.0)), None, "the load works again");
+        let again = r.on_blow(&dead(30)).expect("a new failure, a new alert");
+        assert!(again.reason.contains("failed on blow 30"), "{}", again.reason);
     }
 
     #[test]

@@ -27,7 +27,7 @@ use crate::daemon::{Control, Hooks, SOURCE_CHANNEL_CAPACITY, ServiceParts, serve
 use crate::estimate::BlowEstimate;
 use crate::physics::effects::EffectSet;
 use crate::signal::sample::{Channels, Role};
-use crate::simdevice::{BilletPlan, SerialDeviceSpec, SimMachine, drive_serial};
+use crate::simdevice::{BilletPlan, SerialDeviceSpec, SerialFaults, SimMachine, drive_serial};
 use crate::synth::CaptureSpec;
 
 const MACHINE: &str = include_str!("../../config/hammer-lg1000.machine.toml");
@@ -88,6 +88,21 @@ pub struct DemoArgs {
     /// result).
     #[arg(long, value_name = "load|acc|disp", value_parser = parse_channel)]
     pub without: Option<Role>,
+    /// Kill a channel of the simulated DAQ this many seconds into the run (`load@12.5`): from
+    /// then on it reads 0. The service notices from the next blow, raises one `sensor`
+    /// alert naming it, and estimates the blows without it.
+    #[arg(long, value_name = "CHANNEL@SECONDS", value_parser = parse_dead)]
+    pub dead: Option<(Role, f64)>,
+}
+
+fn parse_dead(s: &str) -> Result<(Role, f64), String> {
+    let (channel, at) = s.split_once('@').ok_or("must be CHANNEL@SECONDS, e.g. load@12.5")?;
+    let role = parse_channel(channel)?;
+    let t: f64 = at.parse().map_err(|_| format!("'{at}' is not a number of seconds"))?;
+    if !(t.is_finite() && t >= 0.0) {
+        return Err(format!("{t} s is not a time into the run"));
+    }
+    Ok((role, t))
 }
 
 fn parse_channel(s: &str) -> Result<Role, String> {
@@ -131,8 +146,13 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let hooks = hooks(&args, opcua.map(|o| o.url), &faces);
     super::run::init_logging("error");
     let rt = tokio::runtime::Runtime::new()?;
-    let channels = channels_without(args.without);
-    rt.block_on(serve_demo(args.fast, sim, channels, parts, hooks, faces, stop_rx))?;
+    let device = SerialDeviceSpec {
+        channels: channels_without(args.without),
+        frame_samples: 1000,
+        realtime: !args.fast,
+        faults: SerialFaults { dead: args.dead, ..Default::default() },
+    };
+    rt.block_on(serve_demo(sim, device, parts, hooks, faces, stop_rx))?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -214,9 +234,8 @@ fn parts(args: &DemoArgs, opcua: Option<crate::config::opcua::OpcuaConfig>) -> a
 /// The simulated hammer on one end of a pty, the service on the other, until the device
 /// has sent its last billet (or, with `faces.stay_up`, until Ctrl-C); then the summary line.
 async fn serve_demo(
-    fast: bool,
     sim: SimMachine,
-    channels: Vec<ChannelSpec>,
+    spec: SerialDeviceSpec,
     parts: ServiceParts,
     hooks: Hooks,
     faces: Faces,
@@ -228,15 +247,10 @@ async fn serve_demo(
     // the device's last frame, until Ctrl-C, SIGTERM or a closed stdout.
     let hold_open = faces.stay_up.then(|| tx.clone());
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
-    let spec = SerialDeviceSpec {
-        channels: channels.clone(),
-        frame_samples: 1000,
-        realtime: !fast,
-        faults: Default::default(),
-    };
     let device_stop = shutdown_rx.clone();
     stop_on_hangup(faces.stop.clone())?;
     let (control_tx, control_rx) = mpsc::channel::<Control>(16);
+    let channels = spec.channels.clone();
     let device = tokio::spawn(async move {
         let mut master = master;
         let stopped = device_stop.clone();

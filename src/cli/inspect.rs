@@ -410,6 +410,7 @@ mod tests {
             channels: Default::default(),
             efficiency_sd: None,
             unobserved: Default::default(),
+            excluded: Default::default(),
         }
     }
 

@@ -133,6 +133,7 @@ pub fn run(args: SimulateDeviceArgs) -> anyhow::Result<ExitCode> {
             garbage_bytes: 64,
             corrupt_every: args.corrupt_every,
             drop_every: args.drop_every,
+            dead: None,
         },
     };
     if args.can_fd && args.transport != Transport::Candump {

@@ -218,6 +218,7 @@ mod tests {
             channels: Default::default(),
             efficiency_sd: None,
             unobserved: Default::default(),
+            excluded: Default::default(),
         }
     }
 

@@ -20,6 +20,7 @@ pub mod contact;
 pub mod curve;
 pub mod decimate;
 mod energies;
+pub mod faults;
 pub mod fit;
 mod model_fit;
 pub mod modes;
@@ -282,6 +283,15 @@ impl Estimator {
         self.blows += 1;
         self.last_method = None;
         self.last_course = None;
+        // A channel stuck through the blow is left out: the blow is estimated without it.
+        let excluded = faults::failed_channels(blow);
+        let masked;
+        let blow = if excluded.is_empty() {
+            blow
+        } else {
+            masked = faults::without(blow, &excluded);
+            &masked
+        };
         // The sensor chain's high-pass, undone on the measured load (`sensor_chain`).
         let restored;
         let blow = if self.effects.highpass_tau_s.is_finite() {
@@ -331,6 +341,7 @@ impl Estimator {
         let placed = self.place(fit.x_contact_m, fit.v_impact_mps * blow.period_s, t_contact_s, tolerance_m);
         let mut e = started(self.blows, blow, (t_contact_s, fit.v_impact_mps), gap_s, &placed);
         e.channels = channels;
+        e.excluded = excluded;
         self.chain = placed.h_start_m.map(|h| (fit.x_contact_m, h));
         self.last_end = Some(LastEnd { x_m: fit.x_contact_m, end_known: false, h_end_m: None, t_s: e.t_end_s });
         if !complete {

@@ -250,6 +250,11 @@ pub struct BlowEstimate {
     /// out of the JSON when empty.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub unobserved: BTreeMap<String, String>,
+    /// The channels the source sent but the blow's estimate left out, by short name, with
+    /// why (`estimate::faults`: a channel stuck at one value). Left out of the JSON when
+    /// empty.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub excluded: BTreeMap<String, String>,
 }
 
 /// The reason of an implausible blow, as its words.
@@ -298,6 +303,7 @@ impl BlowEstimate {
             channels: crate::signal::sample::Channels::ALL,
             efficiency_sd: None,
             unobserved: BTreeMap::new(),
+            excluded: BTreeMap::new(),
         }
     }
 
@@ -439,6 +445,7 @@ pub(crate) mod examples {
             channels: crate::signal::sample::Channels::ALL,
             efficiency_sd: Some(0.01),
             unobserved: BTreeMap::new(),
+            excluded: BTreeMap::new(),
         }
     }
 }

@@ -269,6 +269,7 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
         channels: r.channels.names().into_iter().map(String::from).collect(),
         efficiency_sd: r.efficiency_sd,
         unobserved: r.unobserved.iter().map(|(k, v)| (k.clone(), v.clone())).collect(),
+        excluded: r.excluded.iter().map(|(k, v)| (k.clone(), v.clone())).collect(),
     }
 }
 
@@ -339,6 +340,7 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
         },
         efficiency_sd: r.efficiency_sd,
         unobserved: r.unobserved.into_iter().collect(),
+        excluded: r.excluded.into_iter().collect(),
     })
 }
 
@@ -592,6 +594,11 @@ mod tests {
             efficiency_sd: with_optional.then_some(0.004),
             unobserved: if with_optional {
                 [("h_end_m".to_string(), "no encoder".to_string())].into()
+            } else {
+                Default::default()
+            },
+            excluded: if with_optional {
+                [("load".to_string(), "load_N read 0 N throughout the blow (dead)".to_string())].into()
             } else {
                 Default::default()
             },

@@ -149,6 +149,9 @@ pub struct SegmentStats {
     pub samples_filled: u64,
     /// Blows cut short by a break in the stream while the tools were loaded.
     pub blows_cut_short: u64,
+    /// Blows whose contact the load never confirmed and the ram's deceleration did (a
+    /// load channel that died).
+    pub contacts_by_deceleration: u64,
 }
 
 /// How a blow's samples ended: `Blow::lost_s` and `Blow::open_end_n`.
@@ -544,12 +547,63 @@ impl Segmenter {
                     open_end_n,
                 });
             }
+            None if lost_s == 0.0
+                && let Some((i_contact, i_end)) = self.contact_by_deceleration(i_trigger) =>
+            {
+                // The load never confirmed a contact the ram's deceleration shows: a load
+                // channel that died (issue 43). The blow goes on, for the estimator to judge
+                // the channel.
+                self.stats.blows += 1;
+                self.stats.contacts_by_deceleration += 1;
+                out.push(Blow {
+                    samples: std::mem::take(&mut self.blow),
+                    i_trigger,
+                    i_contact,
+                    i_end,
+                    load_zero_n,
+                    period_s: self.period_s,
+                    lost_s,
+                    open_end_n: None,
+                });
+            }
             _ => {
                 self.stats.triggers_without_contact += 1;
                 self.blow.clear();
             }
         }
         self.state = State::Refractory { quiet_since: None };
+    }
+
+    /// A blow the load never confirmed, when the load channel is stuck (it read one value
+    /// from the trigger on: a dead channel): where the ram's deceleration times its mass
+    /// (`contact_force_n` without a load, zero 0) confirms a contact, walked back as the
+    /// load's is, and where it then stays below the end level for the hold time:
+    /// `(contact, end)`. `None` when the load lives (a ram braked without touching anything
+    /// is no blow), or the deceleration shows no whole contact.
+    fn contact_by_deceleration(&self, i_trigger: usize) -> Option<(usize, usize)> {
+        let (lo, hi) = self.blow[i_trigger.min(self.blow.len())..]
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), s| (lo.min(s.load_n), hi.max(s.load_n)));
+        let stuck = hi - lo <= 1e-9 * hi.abs().max(1.0);
+        if !self.ram_kg.is_finite() || !stuck {
+            return None;
+        }
+        let ram = |s: &Sample| -self.ram_kg * s.acc_mps2;
+        let first = Self::first_searched(i_trigger, self.blow.len());
+        let above = (first..self.blow.len()).find(|&i| ram(&self.blow[i]) > self.cfg.contact_load_n)?;
+        let mut contact = above;
+        while contact > first && ram(&self.blow[contact - 1]) > self.cfg.end_load_n * 0.5 {
+            contact -= 1;
+        }
+        let hold = (self.cfg.hold_s / self.period_s).ceil() as usize;
+        let mut quiet = 0;
+        for i in above..self.blow.len() {
+            quiet = if ram(&self.blow[i]) < self.cfg.end_load_n { quiet + 1 } else { 0 };
+            if quiet >= hold {
+                return Some((contact, i + 1 - hold));
+            }
+        }
+        None
     }
 }
 
