@@ -23,7 +23,7 @@ use crate::pipeline::{Cut, Feeder, Pipeline, PipelineEvent};
 use crate::recipe::Recipe;
 use crate::record::{Gap, Payload, RecordError, RecordWriter, Status};
 use crate::signal::merge::Merger;
-use crate::signal::sample::SampleBatch;
+use crate::signal::sample::{Channels, SampleBatch};
 
 /// Source name of the control markers in a recording.
 pub const CONTROL_SOURCE: &str = "control";
@@ -38,6 +38,23 @@ pub const MACHINE_CONFIG_NAME: &str = "machine.toml";
 /// Name of the service configuration as a recording stores it (topic `/config`), at the
 /// start and again at each reload.
 pub const SERVICE_CONFIG_NAME: &str = "service.toml";
+/// The recorded channels no source carries (issue 43): `absent = ["load"]`, recorded when
+/// they are set (`Session::set_absent`), so that a replay does not wait for them.
+pub const CHANNELS_CONFIG_NAME: &str = "channels.toml";
+
+/// The text of `CHANNELS_CONFIG_NAME` for `absent`.
+pub fn channels_text(absent: Channels) -> String {
+    let names: Vec<String> = absent.names().iter().map(|n| format!("\"{n}\"")).collect();
+    format!("# the channels no source carries\nabsent = [{}]\n", names.join(", "))
+}
+
+/// The channels of a recorded `CHANNELS_CONFIG_NAME` text, `None` when it is not one.
+pub fn parse_channels_text(text: &str) -> Option<Channels> {
+    let line = text.lines().find_map(|l| l.trim().strip_prefix("absent"))?.trim().strip_prefix('=')?.trim();
+    let inner = line.strip_prefix('[')?.strip_suffix(']')?;
+    let names = inner.split(',').map(|n| n.trim().trim_matches('"')).filter(|n| !n.is_empty());
+    Channels::parse(names).ok()
+}
 
 /// The status message that marks a new billet in a recording, in stream order.
 pub fn new_billet_marker() -> Status {
@@ -114,8 +131,14 @@ impl Session {
 
     /// The roles no source carries (a hammer without a load cell): the merge does not wait
     /// for them, and the blows are estimated without them (`Merger::set_absent`).
-    pub fn set_absent(&mut self, absent: crate::signal::sample::Channels) {
-        self.merger.set_absent(absent);
+    /// Recorded (`CHANNELS_CONFIG_NAME`) when it changes, at `log_ns`.
+    pub fn set_absent(&mut self, absent: Channels, log_ns: i64) {
+        if self.merger.absent() != absent {
+            self.merger.set_absent(absent);
+            self.record("the absent channels", |w| {
+                w.write_config(log_ns, CHANNELS_CONFIG_NAME, &channels_text(absent))
+            });
+        }
     }
 
     /// A source's batch: recorded, merged with the other sources' roles, fed (a new billet

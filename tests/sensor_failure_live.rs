@@ -6,6 +6,8 @@
 //! the same blow with all three channels (issue 43's goal), and give no blow a false class.
 //! The healthy run is the anchor: the same simulated session with nothing killed.
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
 
@@ -26,13 +28,7 @@ fn demo(dir: &Path, extra: &[&str]) -> (Vec<BlowEstimate>, Vec<Alert>) {
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "demo {extra:?} failed: {stdout}\n{}", String::from_utf8_lossy(&out.stderr));
-    let file = std::fs::read_dir(dir)
-        .unwrap()
-        .filter_map(|e| e.ok())
-        .map(|e| e.path())
-        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
-        .expect("a finished recording");
-    let rec = read_recording(&file).unwrap();
+    let rec = read_recording(common::first_recording(dir)).unwrap();
     let (mut blows, mut alerts) = (Vec::new(), Vec::new());
     for m in rec.messages {
         match m.payload {
@@ -76,4 +72,26 @@ fn a_load_channel_killed_mid_billet_is_left_out_from_the_next_blow_with_one_aler
     let kinds =
         |a: &[Alert]| a.iter().filter(|a| a.kind != AlertKind::Sensor).map(|a| (a.kind, a.blow)).collect::<Vec<_>>();
     assert_eq!(kinds(&alerts), kinds(&healthy_alerts));
+}
+
+/// A machine without a load cell, live over the pty (`demo --without load`): every blow is
+/// estimated from the accelerometer and the encoder, the recording says which channel no
+/// source carried (`channels.toml`), and replaying it gives the live results.
+#[test]
+fn a_run_without_a_load_channel_replays_as_it_ran_live() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("without");
+    let (live, _) = demo(&dir, &["--without", "load"]);
+    assert_eq!(live.len(), 16, "every blow of two billets");
+    assert!(live.iter().all(|b| b.channels.names() == ["acc", "disp"] && b.efficiency.is_some()), "{live:#?}");
+    let out = Command::new(env!("CARGO_BIN_EXE_forgemon"))
+        .arg("replay")
+        .arg(common::first_recording(&dir))
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let replayed: Vec<String> = String::from_utf8(out.stdout).unwrap().lines().map(String::from).collect();
+    let live: Vec<String> = live.iter().map(|b| serde_json::to_string(b).unwrap()).collect();
+    assert_eq!(replayed, live);
 }

@@ -4,6 +4,8 @@
 //! Both drive the one session core (`forgemon::session`), so the replay's own recording
 //! holds the same results, alerts and billet summaries as the live one.
 
+mod common;
+
 use std::process::Command;
 
 use forgemon::record::{Payload, read_recording};
@@ -20,12 +22,7 @@ fn live_equals_replay_over_a_pty() {
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "demo failed: {stdout}\n{}", String::from_utf8_lossy(&out.stderr));
-    let file = std::fs::read_dir(&dir)
-        .unwrap()
-        .filter_map(|e| e.ok())
-        .map(|e| e.path())
-        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
-        .expect("a finished recording");
+    let file = common::first_recording(&dir);
     // The live results, as the service recorded them.
     let rec = read_recording(&file).unwrap();
     assert!(rec.report.complete);

@@ -22,7 +22,8 @@ use crate::pipeline::{Feeder, Pipeline};
 use crate::record::reader::ReadMode;
 use crate::record::{Payload, RecordReader, RecordWriter, Rotation};
 use crate::session::{
-    End, MACHINE_CONFIG_NAME, Outcome, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, Session, Stamp, is_new_billet_marker,
+    CHANNELS_CONFIG_NAME, End, MACHINE_CONFIG_NAME, Outcome, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, Session, Stamp,
+    is_new_billet_marker, parse_channels_text,
 };
 use crate::signal::sample::{Channels, SampleBatch};
 
@@ -83,6 +84,8 @@ enum Input {
     Recording {
         reader: Box<RecordReader>,
         ahead: Vec<SampleBatch>,
+        /// The channels no source carried (`session::CHANNELS_CONFIG_NAME`), when recorded.
+        absent: Option<Channels>,
         /// The directory's recordings after this one, in name order (a rotated run).
         rest: Vec<PathBuf>,
         /// Whether unreadable files before this one were skipped.
@@ -99,6 +102,8 @@ struct Stored {
     service: Option<String>,
     /// The recipe the live run judged with (`daemon::RECIPE_CONFIG_NAME`).
     recipe: Option<String>,
+    /// The channels none of the live run's sources carried (`session::CHANNELS_CONFIG_NAME`).
+    absent: Option<Channels>,
 }
 
 /// A configuration file's text and where it came from (for error messages).
@@ -280,19 +285,18 @@ impl<W: Write> Replay<W> {
                 for path in files {
                     // A capture without a column is a source without that sensor.
                     super::for_each_capture_batch(&path, |batch| {
-                        self.session.set_absent(Channels::ALL.missing_from(Channels::of(&batch.roles)));
+                        let absent = Channels::ALL.missing_from(Channels::of(&batch.roles));
+                        self.session.set_absent(absent, batch.host_time_ns);
                         self.batch(&batch)
                     })?;
                 }
             }
-            Input::Recording { reader, ahead, rest, skipped } => {
+            Input::Recording { reader, ahead, rest, skipped, absent } => {
                 self.end = End::Stopped;
                 self.progress = Progress::over(std::iter::once(reader.path()).chain(rest.iter().map(PathBuf::as_path)));
-                // The channels none of the recording's sources carries, by the samples read
-                // ahead (each source's first batches).
-                let carried = ahead.iter().fold(Channels::NONE, |c, b| b.roles.iter().fold(c, |c, r| c.with(*r, true)));
-                if !ahead.is_empty() {
-                    self.session.set_absent(Channels::ALL.missing_from(carried));
+                // The channels none of the live run's sources carried, as it recorded them.
+                if let Some(absent) = absent {
+                    self.session.set_absent(absent, 0);
                 }
                 for batch in &ahead {
                     self.batch(batch)?;
@@ -499,7 +503,8 @@ fn open_input(path: &Path, mode: ReadMode) -> anyhow::Result<(Input, Stored)> {
         while let Some(first) = files.next() {
             match open_recording(&first, mode) {
                 Ok((reader, ahead, stored)) => {
-                    return Ok((Input::Recording { reader, ahead, rest: files.collect(), skipped }, stored));
+                    let absent = stored.absent;
+                    return Ok((Input::Recording { reader, ahead, rest: files.collect(), skipped, absent }, stored));
                 }
                 Err(e) => {
                     eprintln!("forgemon: skipped {}: {}", first.display(), super::error_message(&e));
@@ -514,14 +519,20 @@ fn open_input(path: &Path, mode: ReadMode) -> anyhow::Result<(Input, Stored)> {
             let p = path.join(name);
             p.exists().then(|| read_text(&p)).transpose()
         };
-        let stored =
-            Stored { machine: read("machine.toml")?, process: read("process.toml")?, service: None, recipe: None };
+        let stored = Stored {
+            machine: read("machine.toml")?,
+            process: read("process.toml")?,
+            service: None,
+            recipe: None,
+            absent: None,
+        };
         return Ok((Input::Files(super::capture_dir_files(path)?), stored));
     }
     let name = path.to_string_lossy();
     if name.ends_with(".mcap") || name.ends_with(".mcap.part") {
         let (reader, ahead, stored) = open_recording(path, mode)?;
-        return Ok((Input::Recording { reader, ahead, rest: Vec::new(), skipped: false }, stored));
+        let absent = stored.absent;
+        return Ok((Input::Recording { reader, ahead, rest: Vec::new(), skipped: false, absent }, stored));
     }
     if !path.exists() {
         bail!("{}: no such file or directory", path.display());
@@ -546,6 +557,7 @@ fn open_recording(path: &Path, mode: ReadMode) -> anyhow::Result<(Box<RecordRead
             Payload::Config(c) if c.name == "process.toml" => stored.process = Some(c.text),
             Payload::Config(c) if c.name == SERVICE_CONFIG_NAME => stored.service = Some(c.text),
             Payload::Config(c) if c.name == RECIPE_CONFIG_NAME => stored.recipe = Some(c.text),
+            Payload::Config(c) if c.name == CHANNELS_CONFIG_NAME => stored.absent = parse_channels_text(&c.text),
             _ => {}
         }
     }

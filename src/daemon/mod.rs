@@ -194,7 +194,7 @@ pub async fn serve(
     }
     let (pipeline, recipe_text) = pipeline_with_recipe(&parts, &mut writer, &status)?;
     let mut session = Session::new(pipeline, Some(writer), Stamp::Arrival);
-    session.set_absent(cfg.absent_channels);
+    session.set_absent(cfg.absent_channels, 0);
     let in_force = reload::InForce::new(&parts, recipe_text);
     let service = service::Service::new(session, status, live.clone(), hooks, in_force, cfg.min_free_bytes);
     let rx = queue::SourceQueue::new(rx, parts.backpressure);

@@ -95,6 +95,10 @@ impl Merger {
         self.absent = absent;
     }
 
+    pub fn absent(&self) -> Channels {
+        self.absent
+    }
+
     /// The roles a batch needs to go on: all but the absent ones.
     fn needed(&self) -> impl Iterator<Item = Role> + '_ {
         Role::ALL.into_iter().filter(|r| !self.absent.has(*r))

@@ -532,9 +532,19 @@ impl Segmenter {
         Tail { lost_s, open_end_n }: Tail,
         out: &mut Vec<Blow>,
     ) {
-        match contact {
+        let whole = match contact {
             // A blow cut short right at its contact is still a blow (an incomplete one).
-            Some(i_contact) if i_end > i_contact || lost_s > 0.0 => {
+            Some(i_contact) if i_end > i_contact || lost_s > 0.0 => Some((i_contact, i_end, open_end_n)),
+            // The load never confirmed a contact the ram's deceleration shows: a load channel
+            // that died (issue 43). The blow goes on, for the estimator to judge the channel.
+            None if lost_s == 0.0 => self.contact_by_deceleration(i_trigger).map(|(i_contact, i_end)| {
+                self.stats.contacts_by_deceleration += 1;
+                (i_contact, i_end, None)
+            }),
+            _ => None,
+        };
+        match whole {
+            Some((i_contact, i_end, open_end_n)) => {
                 self.stats.blows += 1;
                 out.push(Blow {
                     samples: std::mem::take(&mut self.blow),
@@ -547,26 +557,7 @@ impl Segmenter {
                     open_end_n,
                 });
             }
-            None if lost_s == 0.0
-                && let Some((i_contact, i_end)) = self.contact_by_deceleration(i_trigger) =>
-            {
-                // The load never confirmed a contact the ram's deceleration shows: a load
-                // channel that died (issue 43). The blow goes on, for the estimator to judge
-                // the channel.
-                self.stats.blows += 1;
-                self.stats.contacts_by_deceleration += 1;
-                out.push(Blow {
-                    samples: std::mem::take(&mut self.blow),
-                    i_trigger,
-                    i_contact,
-                    i_end,
-                    load_zero_n,
-                    period_s: self.period_s,
-                    lost_s,
-                    open_end_n: None,
-                });
-            }
-            _ => {
+            None => {
                 self.stats.triggers_without_contact += 1;
                 self.blow.clear();
             }

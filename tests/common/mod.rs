@@ -132,6 +132,11 @@ pub fn files_in(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
     v
 }
 
+/// The first MCAP recording in `dir`, by name.
+pub fn first_recording(dir: &std::path::Path) -> std::path::PathBuf {
+    files_in(dir).into_iter().find(|p| p.extension().is_some_and(|x| x == "mcap")).expect("an mcap file")
+}
+
 /// The repository's root (fixtures and configs are found from it).
 pub fn root() -> std::path::PathBuf {
     std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
