@@ -40,7 +40,7 @@ use crate::physics::billet::BilletLaw;
 use crate::physics::effects::EffectSet;
 use crate::physics::machine::Machine;
 use crate::physics::process::Process;
-use crate::signal::sample::{Channels, Role};
+use crate::signal::sample::Role;
 use crate::signal::segment::{Blow, contact_force_n};
 use approach::{ApproachError, ApproachFit, fit_impact_speed};
 use billet::{BilletCheck, BilletDetect};
@@ -581,48 +581,6 @@ impl Estimator {
             .zip(contact::support_stiffness(&self.machine))
             .map(|((law, h0_m), k)| contact::RiseModel { law, h0_m, v0_mps, k_series_n_per_m: k });
         contact_between_samples(blow, rise.as_ref())
-    }
-
-    /// Without a load or an accelerometer the energies are the fitted model's or none: a
-    /// blow the model could not be fitted to stays unestimated, and says why. Its end is not
-    /// known.
-    fn unfitted(&mut self, e: &mut BlowEstimate) -> Option<f64> {
-        let why = format!(
-            "only the {} channels, and the model could not be fitted to them (the billet's height is not known, or the fit failed)",
-            e.channels.names().join(" and ")
-        );
-        for field in ["plastic_J", "efficiency"] {
-            e.unobserved.insert(field.to_string(), why.clone());
-        }
-        self.forget_end();
-        None
-    }
-
-    /// The channels `blow` carries, or why it cannot be estimated with them: the impact
-    /// speed comes from the encoder's approach, and without a load the energies come from
-    /// the model fitted to the encoder and the accelerometer, which needs a process sheet.
-    fn channels_of(&self, blow: &Blow) -> Result<Channels, EstimateError> {
-        let channels = blow.channels();
-        let blow = self.blows;
-        if !channels.has(Role::Disp) {
-            return Err(EstimateError::Unobservable {
-                blow,
-                reason: "no ram encoder channel (disp_m): this version takes the impact speed from the encoder's approach",
-            });
-        }
-        if !channels.has(Role::Load) && self.process.is_none() {
-            return Err(EstimateError::Unobservable {
-                blow,
-                reason: "no load channel (load_N): the energies then come from the model fitted to the encoder and the accelerometer, which needs a process sheet (--process, or [process] in the service file)",
-            });
-        }
-        if !channels.has(Role::Acc) && self.process.is_none() {
-            return Err(EstimateError::Unobservable {
-                blow,
-                reason: "no accelerometer channel (acc_mps2): the energies then come from the model fitted to the load and the encoder, which needs a process sheet (--process, or [process] in the service file)",
-            });
-        }
-        Ok(channels)
     }
 
     /// Time lost inside the blow: interpolated samples from the start of the approach fit

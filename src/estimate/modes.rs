@@ -11,7 +11,10 @@
 //! covariance from the residuals about the fit) with the part it cannot see added in
 //! quadrature: a floor per mode (`efficiency_floor_sd`).
 
+use super::result::BlowEstimate;
+use super::{EstimateError, Estimator};
 use crate::signal::sample::{Channels, Role};
+use crate::signal::segment::Blow;
 
 /// The part of a mode's efficiency error the fit's covariance does not see: the start
 /// height's quantisation carried down the encoder's chain, and the contact's placement
@@ -27,4 +30,48 @@ pub fn efficiency_floor_sd(channels: Channels) -> f64 {
 /// A blow's efficiency 1σ in its mode from the fit's own, `None` when the fit gave none.
 pub fn efficiency_sd(channels: Channels, fit_sd: Option<f64>) -> Option<f64> {
     fit_sd.map(|sd| sd.hypot(efficiency_floor_sd(channels)))
+}
+
+impl Estimator {
+    /// Without a load or an accelerometer the energies are the fitted model's or none: a
+    /// blow the model could not be fitted to stays unestimated, and says why. Its end is not
+    /// known.
+    pub(super) fn unfitted(&mut self, e: &mut BlowEstimate) -> Option<f64> {
+        let why = format!(
+            "only the {} channels, and the model could not be fitted to them (the billet's height is not known, or the fit failed)",
+            e.channels.names().join(" and ")
+        );
+        for field in ["plastic_J", "efficiency"] {
+            e.unobserved.insert(field.to_string(), why.clone());
+        }
+        self.forget_end();
+        None
+    }
+
+    /// The channels `blow` carries, or why it cannot be estimated with them: the impact
+    /// speed comes from the encoder's approach, and without a load the energies come from
+    /// the model fitted to the encoder and the accelerometer, which needs a process sheet.
+    pub(super) fn channels_of(&self, blow: &Blow) -> Result<Channels, EstimateError> {
+        let channels = blow.channels();
+        let blow = self.blows;
+        if !channels.has(Role::Disp) {
+            return Err(EstimateError::Unobservable {
+                blow,
+                reason: "no ram encoder channel (disp_m): this version takes the impact speed from the encoder's approach",
+            });
+        }
+        if !channels.has(Role::Load) && self.process.is_none() {
+            return Err(EstimateError::Unobservable {
+                blow,
+                reason: "no load channel (load_N): the energies then come from the model fitted to the encoder and the accelerometer, which needs a process sheet (--process, or [process] in the service file)",
+            });
+        }
+        if !channels.has(Role::Acc) && self.process.is_none() {
+            return Err(EstimateError::Unobservable {
+                blow,
+                reason: "no accelerometer channel (acc_mps2): the energies then come from the model fitted to the load and the encoder, which needs a process sheet (--process, or [process] in the service file)",
+            });
+        }
+        Ok(channels)
+    }
 }
