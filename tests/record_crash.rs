@@ -80,6 +80,7 @@ fn result(blow: u32) -> BlowEstimate {
         efficiency_sd: None,
         unobserved: Default::default(),
         excluded: Default::default(),
+        acc_check: None,
     }
 }
 

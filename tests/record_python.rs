@@ -76,7 +76,12 @@ fn result(blow: u32, with_sheet: bool) -> BlowEstimate {
         channels: if with_sheet { Default::default() } else { Channels::ALL.without(Role::Load) },
         efficiency_sd: whole.then_some(0.004),
         unobserved: Default::default(),
-        excluded: Default::default(),
+        excluded: if whole {
+            Default::default()
+        } else {
+            [("load".to_string(), "load_N disagrees with the accelerometer and the encoder".to_string())].into()
+        },
+        acc_check: whole.then_some(-0.0013),
     }
 }
 
@@ -265,6 +270,12 @@ fn python_mcap_protobuf_decodes_every_channel() {
         assert_eq!(r["method"].as_str(), want.method.map(|m| m.as_str()), "blow {blow}");
         assert_eq!(r["channels"], serde_json::json!(want.channels.names()), "blow {blow}");
         assert_eq!(r["efficiency_sd"].as_f64(), want.efficiency_sd, "blow {blow}");
+        assert_eq!(r["acc_check"].as_f64(), want.acc_check, "blow {blow}");
+        assert_eq!(
+            serde_json::from_value::<std::collections::BTreeMap<String, String>>(r["excluded"].clone()).ok().as_ref(),
+            Some(&want.excluded),
+            "blow {blow}"
+        );
         match &want.alert {
             Some(a) => {
                 assert_eq!(r["alert"]["kind"], "elastic_blow");

@@ -309,7 +309,7 @@ impl AlertRules {
         self.excluded_alerted.insert(channel.clone());
         let used = b.channels.names().join(" and ");
         let reason = format!(
-            "the {channel} channel failed on blow {}: {why}; it is left out, and the blows are estimated from the {used} channels until it reads again",
+            "the {channel} channel failed on blow {}: {why}; it is left out, and the blows are estimated from the {used} channels until it is healthy again",
             b.blow
         );
         self.last_fired.insert(AlertKind::Sensor.as_str(), b.blow);

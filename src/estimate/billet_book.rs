@@ -219,6 +219,7 @@ mod tests {
             efficiency_sd: None,
             unobserved: Default::default(),
             excluded: Default::default(),
+            acc_check: None,
         }
     }
 

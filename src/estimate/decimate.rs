@@ -60,6 +60,7 @@ pub fn decimate(blow: &Blow, f: usize) -> Blow {
         .collect();
     let to_grid = |i: usize| i.saturating_sub(r) / f;
     let i_contact = to_grid(blow.i_contact);
+    let last = samples.len().saturating_sub(1);
     Blow {
         i_trigger: to_grid(blow.i_trigger),
         i_contact,
@@ -69,6 +70,7 @@ pub fn decimate(blow: &Blow, f: usize) -> Blow {
         period_s: blow.period_s * fl,
         lost_s: blow.lost_s,
         open_end_n: blow.open_end_n,
+        ram_cut: blow.ram_cut.map(|(c, e)| (to_grid(c), to_grid(e).min(last))),
     }
 }
 
@@ -96,6 +98,7 @@ mod tests {
             period_s: dt,
             lost_s: 0.0,
             open_end_n: None,
+            ram_cut: None,
         }
     }
 

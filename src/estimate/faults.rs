@@ -12,7 +12,10 @@
 
 use std::collections::BTreeMap;
 
-use crate::signal::sample::Role;
+use super::approach::{ACC_GUARD_SAMPLES, ApproachFit};
+use super::sensor;
+use crate::physics::machine::Machine;
+use crate::signal::sample::{Channels, Role};
 use crate::signal::segment::Blow;
 
 /// The load and accelerometer channels of `blow` that are stuck, by short name, with the
@@ -43,7 +46,8 @@ pub fn failed_channels(blow: &Blow) -> BTreeMap<String, String> {
 }
 
 /// `blow` with the channels in `failed` (short names) read as missing, as a source without
-/// them would give it; without the load, its zero is the ram's stand-in's (0).
+/// them would give it; without the load, its zero is the ram's stand-in's (0), and its
+/// contact the ram's deceleration's (`Blow::ram_cut`).
 pub fn without(blow: &Blow, failed: &BTreeMap<String, String>) -> Blow {
     let mut b = blow.clone();
     let gone = |r: Role| failed.contains_key(r.short());
@@ -57,6 +61,137 @@ pub fn without(blow: &Blow, failed: &BTreeMap<String, String>) -> Blow {
     }
     if gone(Role::Load) {
         b.load_zero_n = 0.0;
+        // Contact as the ram's deceleration confirms it: a load off by its gain rises
+        // through the contact level at another sample. The blow keeps its end (the fit
+        // without a load sets its own window, `fit`), unless the ram's came first.
+        if let Some((contact, end)) = b.ram_cut.take() {
+            b.i_contact = contact;
+            if b.i_end <= contact {
+                b.i_end = end;
+            }
+        }
     }
     b
+}
+
+/// The accelerometer against the encoder, by kinematics alone (no model, no mass): over the
+/// blow, the ram's travel the encoder read, less the free flight the approach parabola
+/// would have carried it (`approach`), is the double integral of its acceleration, less the
+/// parabola's. Least squares of the encoder's on the accelerometer's, from contact to the
+/// end of the ram's deceleration (`Blow::ram_cut`; the blow's end without one), give
+/// `acc / encoder − 1`: positive when the accelerometer reads high (a gain 25 % high gives
+/// +0.25). The velocity lost is a second regressor: a DAQ whose anti-alias filter delays
+/// the accelerometer against the encoder shifts the double integral by that velocity times
+/// the delay, and would otherwise read as a gain (−0.8 % at 5 kHz on `tests/sensor_health.rs`'s
+/// DAQ, seed 7). The integration starts `ACC_GUARD_SAMPLES` before contact, where the ram still
+/// flew free and the anti-alias filter's pre-ringing has not yet begun. `None` when the blow
+/// has too few samples, or the ram lost no travel to it.
+pub fn acc_against_encoder(blow: &Blow, approach: &ApproachFit) -> Option<f64> {
+    let i0 = blow.i_contact.saturating_sub(ACC_GUARD_SAMPLES + 1);
+    let ram_end = blow.ram_cut.map_or(blow.i_end, |(_, end)| end);
+    let end = (2 * ram_end).saturating_sub(blow.i_contact).min(blow.samples.len().checked_sub(1)?);
+    if end <= blow.i_contact {
+        return None;
+    }
+    let dt = blow.period_s;
+    let t_contact = blow.samples[blow.i_contact].t_s;
+    let start = approach.at(blow.samples[i0].t_s - t_contact);
+    let (mut v_lost, mut x_lost, mut prev) = (0.0, 0.0, None::<f64>);
+    // Normal equations of `encoder ≈ β x_lost + γ v_lost`.
+    let mut n = nalgebra::Matrix2::<f64>::zeros();
+    let mut r = nalgebra::Vector2::<f64>::zeros();
+    for (i, s) in blow.samples.iter().enumerate().take(end + 1).skip(i0) {
+        let a = s.acc_mps2 - start.acc_mps2;
+        if let Some(p) = prev {
+            let v_before = v_lost;
+            v_lost += 0.5 * (p + a) * dt;
+            x_lost += 0.5 * (v_before + v_lost) * dt;
+        }
+        prev = Some(a);
+        if i < blow.i_contact {
+            continue;
+        }
+        let tau = s.t_s - blow.samples[i0].t_s;
+        let free_m = start.x_contact_m + start.v_impact_mps * tau + 0.5 * start.acc_mps2 * tau * tau;
+        let encoder_lost = s.disp_m - free_m;
+        let x = nalgebra::Vector2::new(x_lost, v_lost);
+        n += x * x.transpose();
+        r += x * encoder_lost;
+    }
+    let beta = n.lu().solve(&r)?[0];
+    (beta.is_finite() && beta > 0.0).then(|| 1.0 / beta - 1.0)
+}
+
+/// How far the accelerometer may read from the encoder's travel (`acc_against_encoder`)
+/// and still be used: 0.8 %. On healthy blows (`tests/degraded_sensing.rs`
+/// `cross_check_spread`, tuning seeds 11–14, both renderers, both machines, 5, 20 and
+/// 100 kHz) |`acc_check`| stayed within 0.0020, so the limit is four times that. A gain
+/// error just inside it costs the full mode at most 0.0235 of efficiency (`gain_sensitivity`,
+/// the press's observer at 20 kHz), inside issue 43's 0.03: the press's observer weighs the
+/// ram's 106 t by the accelerometer, so 1 % of gain is about 0.03 of efficiency there.
+pub const ACC_LIMIT: f64 = 0.008;
+
+/// How far the load may read from the momentum the accelerometer and the encoder agree on
+/// (`sensor::sensor_check`) and still be used: 2 %. On healthy simulated blows
+/// |`sensor_check`| stayed within 0.0113 (`alert::AlertConfig::DEFAULT_SENSOR_LIMIT` says
+/// where; 0.0065 on this module's tuning seeds). A gain error just inside it costs the full
+/// mode at most 0.0232 of efficiency (`gain_sensitivity`: the hammer by the independent
+/// renderer at 100 kHz). Tighter than the alerts' 5 %, which allows a real machine's model
+/// its 3 % against the load: such a machine's blows are then estimated without the load,
+/// whose mode does not rest on it (`docs/degraded-sensing.md`), and one `sensor` alert
+/// says so.
+pub const LOAD_LIMIT: f64 = 0.02;
+
+/// A blow's three channels weighed against each other: the load against the accelerometer
+/// (`sensor::sensor_check`, through the model's masses) and the accelerometer against the
+/// encoder (`acc_against_encoder`, kinematics alone).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Judged {
+    pub sensor_check: Option<f64>,
+    pub acc_check: Option<f64>,
+    /// The channel the other two outvote, with why, in words.
+    pub suspect: Option<(Role, String)>,
+}
+
+impl Judged {
+    /// A blow not judged.
+    pub const NONE: Judged = Judged { sensor_check: None, acc_check: None, suspect: None };
+}
+
+/// Weigh a full blow's channels (`Judged`). The encoder is the referee: an accelerometer off
+/// its travel by more than `ACC_LIMIT` is the suspect (whatever the load says); one that
+/// agrees with it, against a load off by more than `LOAD_LIMIT`, leaves the load the
+/// suspect. A blow lacking any of the three, or whose figures could not be formed, is not
+/// judged.
+pub fn judge(machine: &Machine, blow: &Blow, approach: &ApproachFit) -> Judged {
+    if blow.channels() != Channels::ALL {
+        return Judged::NONE;
+    }
+    let sensor_check = sensor::sensor_check(machine, blow, approach.v_impact_mps).ok();
+    let acc_check = acc_against_encoder(blow, approach);
+    let pct = |x: Option<f64>| x.map_or("no figure".to_string(), |x| format!("{:+.1} %", 100.0 * x));
+    let suspect = if acc_check.is_some_and(|x| x.abs() > ACC_LIMIT) {
+        Some((
+            Role::Acc,
+            format!(
+                "acc_mps2 disagrees with the encoder's travel ({}, limit ±{:.1} %; the load against it {})",
+                pct(acc_check),
+                100.0 * ACC_LIMIT,
+                pct(sensor_check)
+            ),
+        ))
+    } else if acc_check.is_some() && sensor_check.is_some_and(|x| x.abs() > LOAD_LIMIT) {
+        Some((
+            Role::Load,
+            format!(
+                "load_N disagrees with the accelerometer and the encoder, which agree ({} against the momentum, limit ±{:.0} %; acceleration against travel {})",
+                pct(sensor_check),
+                100.0 * LOAD_LIMIT,
+                pct(acc_check)
+            ),
+        ))
+    } else {
+        None
+    };
+    Judged { sensor_check, acc_check, suspect }
 }

@@ -35,6 +35,7 @@ pub use config::{EncoderDirection, EstimatorConfig};
 pub use result::{BilletTag, BlowClass, BlowEstimate, HeightCheck, HeightSource};
 
 use std::borrow::Cow;
+use std::collections::BTreeMap;
 
 use crate::physics::billet::BilletLaw;
 use crate::physics::effects::EffectSet;
@@ -284,26 +285,26 @@ impl Estimator {
         self.last_method = None;
         self.last_course = None;
         // A channel stuck through the blow is left out: the blow is estimated without it.
-        let excluded = faults::failed_channels(blow);
-        let masked;
-        let blow = if excluded.is_empty() {
-            blow
-        } else {
-            masked = faults::without(blow, &excluded);
-            &masked
+        let mut excluded = faults::failed_channels(blow);
+        let blow = self.prepared(blow, &excluded);
+        self.channels_of(&blow)?;
+        let (blow, approach) = self.approach(&blow)?;
+        // A channel the other two outvote is left out too (`faults::judge`); a blow with a
+        // hole, or cut before its end, has no whole impulses to weigh.
+        let whole = blow.lost_s == 0.0 && blow.open_end_n.is_none() && self.gap_s(&blow) <= self.max_bridged_s();
+        let judged = if whole { faults::judge(&self.machine, &blow, &approach) } else { faults::Judged::NONE };
+        let (blow, approach) = match &judged.suspect {
+            None => (blow, approach),
+            Some((role, why)) => {
+                excluded.insert(role.short().to_string(), why.clone());
+                let reduced = faults::without(&blow, &excluded);
+                let approach = self.approach_as_read(&reduced)?;
+                (Cow::Owned(reduced), approach)
+            }
         };
-        // The sensor chain's high-pass, undone on the measured load (`sensor_chain`).
-        let restored;
-        let blow = if self.effects.highpass_tau_s.is_finite() {
-            restored = sensor_chain::restore(blow, self.effects.highpass_tau_s);
-            &restored
-        } else {
-            blow
-        };
+        let blow = blow.as_ref();
         let channels = self.channels_of(blow)?;
         let with_load = channels.has(Role::Load);
-        let (blow, approach) = self.approach(blow)?;
-        let blow = blow.as_ref();
         let mut h_guess_m = self.h_m.or(self.process.as_ref().map(|p| p.billet.height_m));
         // Contact between samples: from the load's rise, or where the model fits it
         // (without a load, from the segmenter's contact sample).
@@ -342,6 +343,10 @@ impl Estimator {
         let mut e = started(self.blows, blow, (t_contact_s, fit.v_impact_mps), gap_s, &placed);
         e.channels = channels;
         e.excluded = excluded;
+        e.acc_check = judged.acc_check;
+        if judged.suspect.is_some() {
+            e.sensor_check = judged.sensor_check;
+        }
         self.chain = placed.h_start_m.map(|h| (fit.x_contact_m, h));
         self.last_end = Some(LastEnd { x_m: fit.x_contact_m, end_known: false, h_end_m: None, t_s: e.t_end_s });
         if !complete {
@@ -437,15 +442,30 @@ impl Estimator {
         self.settle(e, blow, placed.first, tolerance_m, (x_contact_m, h_start_m, h_end_m));
     }
 
+    /// `blow` as the estimate reads it: the channels in `excluded` read as missing
+    /// (`faults::without`), and the sensor chain's high-pass undone on the measured load
+    /// (`sensor_chain`).
+    fn prepared<'b>(&self, blow: &'b Blow, excluded: &BTreeMap<String, String>) -> Cow<'b, Blow> {
+        let blow = if excluded.is_empty() { Cow::Borrowed(blow) } else { Cow::Owned(faults::without(blow, excluded)) };
+        if self.effects.highpass_tau_s.is_finite() {
+            Cow::Owned(sensor_chain::restore(&blow, self.effects.highpass_tau_s))
+        } else {
+            blow
+        }
+    }
+
+    /// The approach fit of a blow whose encoder is already read the way it counts.
+    fn approach_as_read(&self, blow: &Blow) -> Result<ApproachFit, EstimateError> {
+        fit_impact_speed(&blow.samples, blow.i_contact, self.cfg.fit_s, blow.period_s)
+            .map_err(|source| EstimateError::Approach { blow: self.blows, source })
+    }
+
     /// The approach fit of `blow`'s encoder as configured to count (`EncoderDirection`);
     /// under `Auto`, one whose reading fell before contact counts up, and is read negated
     /// if then it rises. The blow as read, and its fit.
     fn approach<'b>(&mut self, blow: &'b Blow) -> Result<(Cow<'b, Blow>, ApproachFit), EstimateError> {
+        let fit = |b: &Blow| self.approach_as_read(b);
         let n = self.blows;
-        let fit = |b: &Blow| {
-            fit_impact_speed(&b.samples, b.i_contact, self.cfg.fit_s, b.period_s)
-                .map_err(|source| EstimateError::Approach { blow: n, source })
-        };
         match (self.cfg.encoder_direction, fit(blow)) {
             (EncoderDirection::Up, _) => {
                 let negated = negate_encoder(blow);

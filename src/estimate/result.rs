@@ -255,6 +255,11 @@ pub struct BlowEstimate {
     /// empty.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub excluded: BTreeMap<String, String>,
+    /// The accelerometer against the encoder by kinematics (`faults::acc_against_encoder`):
+    /// `acc / encoder − 1` over the blow's lost travel; `None` without both channels or on
+    /// an incomplete blow. With `sensor_check` it tells which of the load and the
+    /// accelerometer is off when the two disagree (issue 43).
+    pub acc_check: Option<f64>,
 }
 
 /// The reason of an implausible blow, as its words.
@@ -304,6 +309,7 @@ impl BlowEstimate {
             efficiency_sd: None,
             unobserved: BTreeMap::new(),
             excluded: BTreeMap::new(),
+            acc_check: None,
         }
     }
 
@@ -446,6 +452,7 @@ pub(crate) mod examples {
             efficiency_sd: Some(0.01),
             unobserved: BTreeMap::new(),
             excluded: BTreeMap::new(),
+            acc_check: Some(-0.003),
         }
     }
 }

@@ -186,6 +186,7 @@ mod tests {
             period_s: DT,
             lost_s: 0.0,
             open_end_n: None,
+            ram_cut: None,
         }
     }
 

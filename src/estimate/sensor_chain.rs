@@ -69,6 +69,7 @@ mod tests {
             period_s: dt,
             lost_s: 0.0,
             open_end_n: None,
+            ram_cut: None,
         };
         let undershoot = blow.samples.iter().map(|s| s.load_n - zero).fold(0.0, f64::min);
         assert!(undershoot < -0.15e6, "the high-pass undershoots: {undershoot}");

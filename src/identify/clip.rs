@@ -95,6 +95,7 @@ mod tests {
             period_s: 1e-5,
             lost_s: 0.0,
             open_end_n: None,
+            ram_cut: None,
         }
     }
 

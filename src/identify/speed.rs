@@ -55,6 +55,7 @@ mod tests {
             period_s: dt,
             lost_s: 0.0,
             open_end_n: None,
+            ram_cut: None,
         }
     }
 

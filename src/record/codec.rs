@@ -270,6 +270,7 @@ fn result_to_pb(r: &BlowEstimate) -> pb::BlowResult {
         efficiency_sd: r.efficiency_sd,
         unobserved: r.unobserved.iter().map(|(k, v)| (k.clone(), v.clone())).collect(),
         excluded: r.excluded.iter().map(|(k, v)| (k.clone(), v.clone())).collect(),
+        acc_check: r.acc_check,
     }
 }
 
@@ -341,6 +342,7 @@ fn result_from_pb(r: pb::BlowResult) -> Result<BlowEstimate, DecodeError> {
         efficiency_sd: r.efficiency_sd,
         unobserved: r.unobserved.into_iter().collect(),
         excluded: r.excluded.into_iter().collect(),
+        acc_check: r.acc_check,
     })
 }
 
@@ -602,6 +604,7 @@ mod tests {
             } else {
                 Default::default()
             },
+            acc_check: with_optional.then_some(0.012),
         }
     }
 

@@ -94,6 +94,12 @@ pub struct Blow {
     /// spring-back after the blow's own end of forming (`None`: the blow ended by its hold,
     /// at its maximum length, or was cut loaded, `lost_s`).
     pub open_end_n: Option<f64>,
+    /// The contact and end samples the ram's deceleration gives (`contact_force_n` without a
+    /// load), where the blow has a load, an accelerometer and the ram's mass: the cut a
+    /// source without the load would have made. The estimator takes it when it leaves a
+    /// load out of the blow (`estimate::faults`). `None` otherwise, or when the deceleration
+    /// never crossed the contact level.
+    pub ram_cut: Option<(usize, usize)>,
 }
 
 /// The force the segmenter watches for contact, N: the load sensor's, or, on a stream
@@ -546,6 +552,7 @@ impl Segmenter {
         match whole {
             Some((i_contact, i_end, open_end_n)) => {
                 self.stats.blows += 1;
+                let ram_cut = self.ram_cut(i_trigger);
                 out.push(Blow {
                     samples: std::mem::take(&mut self.blow),
                     i_trigger,
@@ -555,6 +562,7 @@ impl Segmenter {
                     period_s: self.period_s,
                     lost_s,
                     open_end_n,
+                    ram_cut,
                 });
             }
             None => {
@@ -576,7 +584,25 @@ impl Segmenter {
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), s| (lo.min(s.load_n), hi.max(s.load_n)));
         let stuck = hi - lo <= 1e-9 * hi.abs().max(1.0);
-        if !self.ram_kg.is_finite() || !stuck {
+        if !stuck {
+            return None;
+        }
+        self.ram_contact(i_trigger)
+    }
+
+    /// `Blow::ram_cut` of the blow being closed: only where the load would have cut it.
+    fn ram_cut(&self, i_trigger: usize) -> Option<(usize, usize)> {
+        let s = self.blow.get(i_trigger)?;
+        if s.load_n.is_nan() || s.acc_mps2.is_nan() {
+            return None;
+        }
+        self.ram_contact(i_trigger)
+    }
+
+    /// The contact and end the ram's deceleration times its mass gives, as the segmenter
+    /// finds them on a stream without a load (zero 0, the same levels and hold).
+    fn ram_contact(&self, i_trigger: usize) -> Option<(usize, usize)> {
+        if !self.ram_kg.is_finite() {
             return None;
         }
         let ram = |s: &Sample| -self.ram_kg * s.acc_mps2;

@@ -76,6 +76,8 @@ def describe(schema_name, msg):
             "method": optional(msg, "method"),
             "channels": list(msg.channels),
             "efficiency_sd": optional(msg, "efficiency_sd"),
+            "acc_check": optional(msg, "acc_check"),
+            "excluded": dict(msg.excluded),
         }
     if schema_name == "forgemon.Alert":
         return alert_dict(msg)
