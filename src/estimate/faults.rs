@@ -3,12 +3,15 @@
 //!
 //! A channel is failed when it is stuck: from the trigger to the blow's end it read one
 //! value, where a live sensor shows at least its noise (a dead charge amplifier reads 0, a
-//! broken cable or a sensor at its rail one constant). The load and the accelerometer are
+//! broken cable or a sensor at its rail one constant); or when it died inside the blow: it
+//! read one value from some sample to the blow's last, for at least `MIN_DEAD_RUN_S`, while
+//! the other channel says the blow was still under way. The load and the accelerometer are
 //! judged; a blow without a working encoder is not estimated in this version.
 //!
-//! Not judged here: a clipped peak (a quantised healthy peak repeats its value for several
-//! samples at 100 kHz, so a flat top alone does not tell), a drifting zero, and a gain off
-//! by a few per cent (the sensor check, `sensor`, flags those; the alert names them).
+//! A channel that reads, but wrongly, is outvoted by the other two (`judge`): a gain off, a
+//! drifting zero, a clipped or saturated peak (its impulse falls short), a channel that
+//! stops short of the blow's end. A quantised healthy peak repeats its value for several
+//! samples at 100 kHz, so a flat top alone does not tell.
 
 use std::collections::BTreeMap;
 
@@ -33,16 +36,63 @@ pub fn failed_channels(blow: &Blow) -> BTreeMap<String, String> {
         if !(lo.is_finite() && hi.is_finite()) {
             continue;
         }
-        if hi - lo <= 1e-9 * hi.abs().max(1.0) {
-            let unit = if role == Role::Load { "N" } else { "m/s²" };
+        let unit = if role == Role::Load { "N" } else { "m/s²" };
+        if same(lo, hi) {
             let dead = if hi == 0.0 { " (dead)" } else { "" };
             failed.insert(
                 role.short().to_string(),
                 format!("{} read {hi} {unit} throughout the blow{dead}", role.column()),
             );
+        } else if let Some(k) = died_inside(blow, role) {
+            let s = &blow.samples[k];
+            failed.insert(
+                role.short().to_string(),
+                format!(
+                    "{} read {} {unit} from {:.4} s, {:.1} ms after contact, to the blow's end, while the blow was under way (died inside it)",
+                    role.column(),
+                    value(s),
+                    s.t_s,
+                    1e3 * (s.t_s - blow.samples[blow.i_contact].t_s)
+                ),
+            );
         }
     }
     failed
+}
+
+/// The shortest flat run that `died_inside` takes for a dead channel, s: a live sensor's
+/// noise changes its reading within a few samples, and the shortest hold that ends a blow
+/// (the hammer's, `SegmentConfig::HAMMER`) is 2 ms.
+pub const MIN_DEAD_RUN_S: f64 = 1e-3;
+
+/// Two readings the same to rounding.
+fn same(a: f64, b: f64) -> bool {
+    (b - a).abs() <= 1e-9 * a.abs().max(b.abs()).max(1.0)
+}
+
+/// Where `role` went flat inside the blow: the first sample of a run of one value that
+/// lasts to the blow's last sample, at least `MIN_DEAD_RUN_S` and 10 samples long, starting
+/// after contact and while the other channel still saw the blow: for the load, before the
+/// ram's deceleration ended (`Blow::ram_cut`; none found: it had not); for the
+/// accelerometer, before the load's end (`Blow::i_end`).
+fn died_inside(blow: &Blow, role: Role) -> Option<usize> {
+    let value = |i: usize| {
+        let s = &blow.samples[i];
+        if role == Role::Load { s.load_n } else { s.acc_mps2 }
+    };
+    let last = blow.samples.len().checked_sub(1)?;
+    let v = value(last);
+    let mut k = last;
+    while k > 0 && (blow.samples[k - 1].filled || same(value(k - 1), v)) {
+        k -= 1;
+    }
+    let run = last - k + 1;
+    let long = run >= 10 && run as f64 * blow.period_s >= MIN_DEAD_RUN_S;
+    let under_way = match role {
+        Role::Load => blow.samples[k].acc_mps2.is_finite() && blow.ram_cut.is_none_or(|(_, end)| k < end),
+        _ => blow.samples[k].load_n.is_finite() && k < blow.i_end,
+    };
+    (long && k > blow.i_contact && under_way).then_some(k)
 }
 
 /// `blow` with the channels in `failed` (short names) read as missing, as a source without
