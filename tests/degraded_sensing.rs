@@ -190,6 +190,28 @@ fn run_with(
     if let Some(fault) = fault {
         apply(fault, &mut session.rows);
     }
+    let events = events_of(&session, rate_hz, without);
+    let blows: Vec<&PipelineEvent> = events.iter().filter(|e| !matches!(e, PipelineEvent::Billet(_))).collect();
+    if blows.len() != session.truth.len() {
+        return Err(format!("{} results for {} blows: {blows:?}", blows.len(), session.truth.len()));
+    }
+    blows
+        .iter()
+        .zip(&session.truth)
+        .map(|(e, &(efficiency, v0_mps, h_end_m))| match e {
+            PipelineEvent::Blow { estimate, .. } => Ok(Row {
+                efficiency_err: estimate.efficiency.map(|x| x - efficiency),
+                v_rel_err: estimate.v_impact_mps / v0_mps - 1.0,
+                h_err_m: estimate.h_end_m.map(|h| h - h_end_m),
+                estimate: estimate.clone(),
+            }),
+            other => Err(format!("{other:?}")),
+        })
+        .collect()
+}
+
+/// The pipeline's events on `session`'s samples, sent without `without`.
+fn events_of(session: &Rendered, rate_hz: f64, without: Option<Role>) -> Vec<PipelineEvent> {
     let m = session.machine;
     let roles: Vec<Role> = Role::ALL.into_iter().filter(|r| Some(*r) != without).collect();
     let period_ns = 1e9 / rate_hz;
@@ -222,23 +244,7 @@ fn run_with(
         p.push(&batch, &mut events);
     }
     p.end_of_stream(&mut events);
-    let blows: Vec<&PipelineEvent> = events.iter().filter(|e| !matches!(e, PipelineEvent::Billet(_))).collect();
-    if blows.len() != session.truth.len() {
-        return Err(format!("{} results for {} blows: {blows:?}", blows.len(), session.truth.len()));
-    }
-    blows
-        .iter()
-        .zip(&session.truth)
-        .map(|(e, &(efficiency, v0_mps, h_end_m))| match e {
-            PipelineEvent::Blow { estimate, .. } => Ok(Row {
-                efficiency_err: estimate.efficiency.map(|x| x - efficiency),
-                v_rel_err: estimate.v_impact_mps / v0_mps - 1.0,
-                h_err_m: estimate.h_end_m.map(|h| h - h_end_m),
-                estimate: estimate.clone(),
-            }),
-            other => Err(format!("{other:?}")),
-        })
-        .collect()
+    events
 }
 
 /// The worst errors over a session's blows: efficiency (absolute), impact speed (relative),
@@ -422,10 +428,12 @@ fn accuracy_table() {
              ## A channel that fails\n\n\
              The same sessions with all three channels sent and one of them failing: its readings scaled (a lost \
              calibration), clipped at 60 % of the session's peak (an amplifier at its rail), or read 0 from the peak \
-             of the hardest blow on (it dies inside a blow, which is under way). The encoder referees \
-             (`estimate::faults::judge`): an accelerometer more than 0.8 % off its travel, or a load more than 2 % \
-             off the momentum the other two agree on, is left out of the blow, which is then estimated without it; a \
-             channel that reads one value from inside a blow to its end is left out too (`faults::failed_channels`). \
+             of the hardest blow on (it dies inside a blow, which is under way). `estimate::faults::judge` weighs \
+             them: an accelerometer more than 0.8 % off the encoder's travel, the load siding with the encoder, or a \
+             load more than 2 % off the momentum the other two agree on, is left out of the blow, which is then \
+             estimated without it; a channel that drops from the blow's load to one value held to its end is left \
+             out too (`faults::failed_channels`). An encoder 2 % off, the other two agreeing, is named and its blows \
+             are not estimated (`a_wrong_encoder_is_named_and_no_blow_is_estimated_on_it`). \
              \"left out\" counts the blows that left the failed channel out (a clipped channel fails only on the \
              blows whose peak passes the rail); the errors are against the truth.\n\n{}\n",
             if report { "the report seeds, which nothing was tuned on" } else { "the tuning seeds" },
@@ -443,6 +451,28 @@ fn outvoted(rig: Rig, role: Role, gain: f64) {
     for (i, rows) in survives(rig, Fault::Gain(role, gain)).iter().enumerate() {
         for r in rows {
             assert_eq!(r.estimate.channels, Channels::ALL.without(role), "case {i}: {r:?}");
+        }
+    }
+}
+
+/// An encoder whose scale is 2 % off (its reading times 1.02): the load and the
+/// accelerometer agree, so the encoder is named, and, since this version takes the impact
+/// speed from it, no blow is estimated on it: each is rejected with the reason.
+#[test]
+fn a_wrong_encoder_is_named_and_no_blow_is_estimated_on_it() {
+    for rig in [Rig::Hammer, Rig::Press] {
+        for (renderer, rate_hz, seed) in cases(&REPORT_SEEDS) {
+            let mut session = rendered(renderer, rig, rate_hz, seed);
+            apply(Fault::Gain(Role::Disp, 1.02), &mut session.rows);
+            let events = events_of(&session, rate_hz, None);
+            let results: Vec<_> = events.iter().filter(|e| !matches!(e, PipelineEvent::Billet(_))).collect();
+            assert_eq!(results.len(), session.truth.len(), "{rig:?} {renderer:?} {rate_hz} Hz seed {seed}");
+            for e in results {
+                let PipelineEvent::Rejected { error, .. } = e else {
+                    panic!("{rig:?} {renderer:?} {rate_hz} Hz seed {seed}: estimated on a wrong encoder: {e:?}")
+                };
+                assert!(error.to_string().contains("disp_m disagrees"), "{error}");
+            }
         }
     }
 }

@@ -110,6 +110,13 @@ pub enum EstimateError {
          [encoder] direction = \"up\" in the service file (--encoder-direction up for replay), or \"auto\""
     )]
     EncoderCountsUp { blow: u32, v_mps: f64 },
+    /// The encoder disagrees with the load and the accelerometer, which agree
+    /// (`faults::judge`): this version takes the impact speed and the heights from it, so the
+    /// blow is not estimated.
+    #[error(
+        "blow {blow}: {reason}; this version takes the impact speed from the encoder, so the blow is not estimated"
+    )]
+    EncoderOutvoted { blow: u32, reason: String },
 }
 
 /// Estimates blow after blow, tracking the billet's height from the process sheet.
@@ -289,19 +296,7 @@ impl Estimator {
         let blow = self.prepared(blow, &excluded);
         self.channels_of(&blow)?;
         let (blow, approach) = self.approach(&blow)?;
-        // A channel the other two outvote is left out too (`faults::judge`); a blow with a
-        // hole, or cut before its end, has no whole impulses to weigh.
-        let whole = blow.lost_s == 0.0 && blow.open_end_n.is_none() && self.gap_s(&blow) <= self.max_bridged_s();
-        let judged = if whole { faults::judge(&self.machine, &blow, &approach) } else { faults::Judged::NONE };
-        let (blow, approach) = match &judged.suspect {
-            None => (blow, approach),
-            Some((role, why)) => {
-                excluded.insert(role.short().to_string(), why.clone());
-                let reduced = faults::without(&blow, &excluded);
-                let approach = self.approach_as_read(&reduced)?;
-                (Cow::Owned(reduced), approach)
-            }
-        };
+        let (blow, approach, judged) = self.outvote(blow, approach, &mut excluded)?;
         let blow = blow.as_ref();
         let channels = self.channels_of(blow)?;
         let with_load = channels.has(Role::Load);
@@ -451,6 +446,30 @@ impl Estimator {
             Cow::Owned(sensor_chain::restore(&blow, self.effects.highpass_tau_s))
         } else {
             blow
+        }
+    }
+
+    /// A channel the other two outvote (`faults::judge`) left out of `blow`, added to
+    /// `excluded`, with the approach fitted again; a blow with a hole, or cut before its end
+    /// (a capture's end inside the blow: the load sensor still rings), has no whole
+    /// impulses to weigh and is not judged. An outvoted encoder rejects the blow.
+    fn outvote<'b>(
+        &self,
+        blow: Cow<'b, Blow>,
+        approach: ApproachFit,
+        excluded: &mut BTreeMap<String, String>,
+    ) -> Result<(Cow<'b, Blow>, ApproachFit, faults::Judged), EstimateError> {
+        let whole = blow.lost_s == 0.0 && blow.open_end_n.is_none() && self.gap_s(&blow) <= self.max_bridged_s();
+        let judged = if whole { faults::judge(&self.machine, &blow, &approach) } else { faults::Judged::NONE };
+        match &judged.suspect {
+            None => Ok((blow, approach, judged)),
+            Some((Role::Disp, why)) => Err(EstimateError::EncoderOutvoted { blow: self.blows, reason: why.clone() }),
+            Some((role, why)) => {
+                excluded.insert(role.short().to_string(), why.clone());
+                let reduced = faults::without(&blow, excluded);
+                let approach = self.approach_as_read(&reduced)?;
+                Ok((Cow::Owned(reduced), approach, judged))
+            }
         }
     }
 

@@ -160,6 +160,12 @@ pub struct Sample {
     pub filled: bool,
 }
 
+/// Two readings of one channel the same to rounding (1e-9 relative, at least 1e-9 absolute):
+/// a stuck or dead channel repeats one value, where a live one shows at least its noise.
+pub fn same_reading(a: f64, b: f64) -> bool {
+    (b - a).abs() <= 1e-9 * a.abs().max(b.abs()).max(1.0)
+}
+
 impl Sample {
     /// A measured sample at `t_s` from one interleaved row of a batch whose load,
     /// displacement and acceleration are the channels `cols`; a channel the batch does not

@@ -583,7 +583,7 @@ impl Segmenter {
         let (lo, hi) = self.blow[i_trigger.min(self.blow.len())..]
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), s| (lo.min(s.load_n), hi.max(s.load_n)));
-        let stuck = hi - lo <= 1e-9 * hi.abs().max(1.0);
+        let stuck = crate::signal::sample::same_reading(lo, hi);
         if !stuck {
             return None;
         }
