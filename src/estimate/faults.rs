@@ -13,10 +13,11 @@
 //! stops short of the blow's end. A quantised healthy peak repeats its value for several
 //! samples at 100 kHz, so a flat top alone does not tell.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 
 use super::approach::{ACC_GUARD_SAMPLES, ApproachFit};
-use super::sensor;
+use super::{EstimateError, Estimator, sensor};
 use crate::physics::machine::Machine;
 use crate::signal::sample::{Channels, Role, same_reading};
 use crate::signal::segment::Blow;
@@ -267,6 +268,44 @@ pub fn judge(machine: &Machine, blow: &Blow, approach: &ApproachFit) -> Judged {
         _ => None,
     };
     Judged { sensor_check, acc_check, suspect }
+}
+
+impl Estimator {
+    /// `blow` as the estimate reads it: the channels in `excluded` read as missing
+    /// (`without`), and the sensor chain's high-pass undone on the measured load
+    /// (`sensor_chain`).
+    pub(super) fn prepared<'b>(&self, blow: &'b Blow, excluded: &BTreeMap<String, String>) -> Cow<'b, Blow> {
+        let blow = if excluded.is_empty() { Cow::Borrowed(blow) } else { Cow::Owned(without(blow, excluded)) };
+        if self.effects.highpass_tau_s.is_finite() {
+            Cow::Owned(super::sensor_chain::restore(&blow, self.effects.highpass_tau_s))
+        } else {
+            blow
+        }
+    }
+
+    /// A channel the other two outvote (`judge`) left out of `blow`, added to
+    /// `excluded`, with the approach fitted again; a blow with a hole, or cut before its end
+    /// (a capture's end inside the blow: the load sensor still rings), has no whole
+    /// impulses to weigh and is not judged. An outvoted encoder rejects the blow.
+    pub(super) fn outvote<'b>(
+        &self,
+        blow: Cow<'b, Blow>,
+        approach: ApproachFit,
+        excluded: &mut BTreeMap<String, String>,
+    ) -> Result<(Cow<'b, Blow>, ApproachFit, Judged), EstimateError> {
+        let whole = blow.lost_s == 0.0 && blow.open_end_n.is_none() && self.gap_s(&blow) <= self.max_bridged_s();
+        let judged = if whole { judge(&self.machine, &blow, &approach) } else { Judged::NONE };
+        match &judged.suspect {
+            None => Ok((blow, approach, judged)),
+            Some((Role::Disp, why)) => Err(EstimateError::EncoderOutvoted { blow: self.blows, reason: why.clone() }),
+            Some((role, why)) => {
+                excluded.insert(role.short().to_string(), why.clone());
+                let reduced = without(&blow, excluded);
+                let approach = self.approach_as_read(&reduced)?;
+                Ok((Cow::Owned(reduced), approach, judged))
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -35,7 +35,6 @@ pub use config::{EncoderDirection, EstimatorConfig};
 pub use result::{BilletTag, BlowClass, BlowEstimate, HeightCheck, HeightSource};
 
 use std::borrow::Cow;
-use std::collections::BTreeMap;
 
 use crate::physics::billet::BilletLaw;
 use crate::physics::effects::EffectSet;
@@ -435,42 +434,6 @@ impl Estimator {
             e.sensor_check = sensor::sensor_check(&self.machine, blow, e.v_impact_mps).ok();
         }
         self.settle(e, blow, placed.first, tolerance_m, (x_contact_m, h_start_m, h_end_m));
-    }
-
-    /// `blow` as the estimate reads it: the channels in `excluded` read as missing
-    /// (`faults::without`), and the sensor chain's high-pass undone on the measured load
-    /// (`sensor_chain`).
-    fn prepared<'b>(&self, blow: &'b Blow, excluded: &BTreeMap<String, String>) -> Cow<'b, Blow> {
-        let blow = if excluded.is_empty() { Cow::Borrowed(blow) } else { Cow::Owned(faults::without(blow, excluded)) };
-        if self.effects.highpass_tau_s.is_finite() {
-            Cow::Owned(sensor_chain::restore(&blow, self.effects.highpass_tau_s))
-        } else {
-            blow
-        }
-    }
-
-    /// A channel the other two outvote (`faults::judge`) left out of `blow`, added to
-    /// `excluded`, with the approach fitted again; a blow with a hole, or cut before its end
-    /// (a capture's end inside the blow: the load sensor still rings), has no whole
-    /// impulses to weigh and is not judged. An outvoted encoder rejects the blow.
-    fn outvote<'b>(
-        &self,
-        blow: Cow<'b, Blow>,
-        approach: ApproachFit,
-        excluded: &mut BTreeMap<String, String>,
-    ) -> Result<(Cow<'b, Blow>, ApproachFit, faults::Judged), EstimateError> {
-        let whole = blow.lost_s == 0.0 && blow.open_end_n.is_none() && self.gap_s(&blow) <= self.max_bridged_s();
-        let judged = if whole { faults::judge(&self.machine, &blow, &approach) } else { faults::Judged::NONE };
-        match &judged.suspect {
-            None => Ok((blow, approach, judged)),
-            Some((Role::Disp, why)) => Err(EstimateError::EncoderOutvoted { blow: self.blows, reason: why.clone() }),
-            Some((role, why)) => {
-                excluded.insert(role.short().to_string(), why.clone());
-                let reduced = faults::without(&blow, excluded);
-                let approach = self.approach_as_read(&reduced)?;
-                Ok((Cow::Owned(reduced), approach, judged))
-            }
-        }
     }
 
     /// The approach fit of a blow whose encoder is already read the way it counts.
