@@ -117,6 +117,9 @@ pub fn without(blow: &Blow, failed: &BTreeMap<String, String>) -> Blow {
         if gone(Role::Acc) {
             s.acc_mps2 = f64::NAN;
         }
+        if gone(Role::Disp) {
+            s.disp_m = f64::NAN;
+        }
     }
     if gone(Role::Load) {
         b.load_zero_n = 0.0;
@@ -297,7 +300,10 @@ impl Estimator {
         let judged = if whole { judge(&self.machine, &blow, &approach) } else { Judged::NONE };
         match &judged.suspect {
             None => Ok((blow, approach, judged)),
-            Some((Role::Disp, why)) => Err(EstimateError::EncoderOutvoted { blow: self.blows, reason: why.clone() }),
+            Some((Role::Disp, why)) => {
+                excluded.insert(Role::Disp.short().to_string(), why.clone());
+                Ok((Cow::Owned(without(&blow, excluded)), approach, judged))
+            }
             Some((role, why)) => {
                 excluded.insert(role.short().to_string(), why.clone());
                 let reduced = without(&blow, excluded);

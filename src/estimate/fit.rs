@@ -20,6 +20,8 @@
 //! compares). The residuals are the encoder in its resolution and the two low-passed
 //! channels in a fraction of their peaks.
 
+use nalgebra::{DMatrix, DVector};
+
 use crate::estimate::approach::ApproachFit;
 use crate::physics::billet::{BilletLaw, FlowStress};
 use crate::physics::blow::{BlowResult, SimOptions, simulate_blow_traced_from};
@@ -76,9 +78,25 @@ pub const CONFIRM_RESIDUAL: f64 = 0.01;
 /// Levenberg–Marquardt: most iterations, and the relative cost change that ends it.
 pub const MAX_ITERATIONS: usize = 12;
 pub const COST_RTOL: f64 = 1e-5;
-/// Finite-difference steps: in ln(scale), and in the contact instant (samples).
+/// Finite-difference steps: in ln(scale), in the contact instant (samples), and in
+/// ln(impact speed).
 const FD_LN_SCALE: f64 = 1e-4;
 const FD_CONTACT_SAMPLES: f64 = 1e-3;
+const FD_LN_SPEED: f64 = 1e-5;
+const FD_HEIGHT_M: f64 = 1e-5;
+const STEPS: Params = [FD_LN_SCALE, FD_CONTACT_SAMPLES, FD_LN_SPEED, FD_HEIGHT_M];
+/// Bounds of the fitted impact speed without an encoder, in ln(speed over the
+/// accelerometer's impulse, `FitProblem::approach`): the impulse counts the rebound too, so
+/// it reads high by up to the rebound's speed.
+pub const LN_SPEED_BOUNDS: (f64, f64) = (-1.0, 0.3);
+
+/// The parameters: ln(flow-stress scale), first contact in samples after the segmenter's
+/// contact sample, ln(impact speed over the approach's), and the start height less
+/// `FitProblem::h_start_m`, m. The third is fitted only without an encoder (`Setup::free`);
+/// with one it stays 0, the speed the encoder's approach gave. The fourth is never fitted:
+/// it stays 0, and enters the efficiency's 1σ where the start height is uncertain
+/// (`FitProblem::height_sd_m`).
+type Params = [f64; 4];
 /// Simulated time past the window's end beyond the last simulation's contact, s.
 const POST_MARGIN_S: f64 = 2e-3;
 /// Samples before the contact sample that enter the residual (the filters smear the rise).
@@ -143,6 +161,9 @@ pub struct FitProblem<'a> {
     /// The channels the blow has (issue 43): a missing channel's residuals are 0, and the
     /// model is fitted to the others.
     pub channels: Channels,
+    /// The start height's 1σ, m, where it is not measured (a blow without an encoder): it
+    /// enters the efficiency's 1σ (`efficiency_sd`).
+    pub height_sd_m: Option<f64>,
 }
 
 /// Which residuals an evaluation gives, per sample: the encoder alone, or the encoder, the
@@ -230,33 +251,32 @@ impl<'a> Setup<'a> {
         })
     }
 
-    /// Speed and encoder position at a contact `tau_s` after the contact sample.
-    fn contact_state(&self, tau_s: f64) -> (f64, f64) {
+    /// The parameters fitted: without an encoder the impact speed too.
+    fn free(&self) -> &'static [usize] {
+        if self.p.channels.has(Role::Disp) { &[0, 1] } else { &[0, 1, 2] }
+    }
+
+    /// Speed and encoder position at a contact `tau_s` after the contact sample, the
+    /// approach's speed scaled by `exp(ln_speed)`.
+    fn contact_state(&self, tau_s: f64, ln_speed: f64) -> (f64, f64) {
         let a = &self.p.approach;
-        (a.v_impact_mps + a.acc_mps2 * tau_s, a.x_contact_m + a.v_impact_mps * tau_s + 0.5 * a.acc_mps2 * tau_s * tau_s)
+        let v = a.v_impact_mps * ln_speed.exp();
+        (v + a.acc_mps2 * tau_s, a.x_contact_m + v * tau_s + 0.5 * a.acc_mps2 * tau_s * tau_s)
     }
 
-    fn plant(&self, scale: f64) -> Plant {
-        let pr = self.p.process;
-        let material = match pr.material {
-            FlowStress::Constant { sigma0_pa } => FlowStress::Constant { sigma0_pa: sigma0_pa * scale },
-            FlowStress::HanselSpittel { a_pa, m1, m2, m3, m4, temperature_c } => {
-                FlowStress::HanselSpittel { a_pa: a_pa * scale, m1, m2, m3, m4, temperature_c }
-            }
-        };
-        let law = BilletLaw::new(pr.billet.clone(), material, pr.friction, self.p.effects.load, self.p.blow_index);
-        Plant::new(self.p.machine, self.p.effects, Some(law), self.p.h_start_m)
+    fn plant(&self, scale: f64, dh_m: f64) -> Plant {
+        plant_of(self.p, scale, self.p.h_start_m + dh_m)
     }
 
-    /// Residuals at (ln scale, contact in samples after the contact sample).
-    fn eval(&self, u: [f64; 2], which: Residuals) -> Result<Eval, FitError> {
+    /// Residuals at `u` (`Params`).
+    fn eval(&self, u: Params, which: Residuals) -> Result<Eval, FitError> {
         let b = self.p.blow;
         let dt = b.period_s;
         let os = self.os as i64;
         let h = self.aa.half() as i64;
         let ic = b.i_contact as i64;
         let delta = u[1];
-        let (v0, x_c) = self.contact_state(delta * dt);
+        let (v0, x_c) = self.contact_state(delta * dt, u[2]);
         // The fine grid: point J at J dt/OS after the contact sample, τ = J dt/OS − δ dt
         // after contact. It spans the window's samples and the filter's half width.
         let j_lo = (self.k0 as i64 - ic) * os - h;
@@ -269,7 +289,7 @@ impl<'a> Setup<'a> {
         let t_sep = self.t_sep_s.get();
         let post_s = if t_sep.is_finite() { (tau(j_hi) - t_sep).max(0.0) + POST_MARGIN_S } else { tau(j_hi).max(0.0) };
         let opts = SimOptions { method: Method::Dopri5 { rtol: FIT_RTOL }, post_s, trace_dt_s: Some(fine_dt) };
-        let blow = simulate_blow_traced_from(&self.plant(u[0].exp()), v0, &opts, tau(j_first).max(0.0))
+        let blow = simulate_blow_traced_from(&self.plant(u[0].exp(), u[3]), v0, &opts, tau(j_first).max(0.0))
             .map_err(|e| FitError::Simulation(e.to_string()))?;
         self.t_sep_s.set(blow.contact_time_s);
         let acc0 = self.p.approach.acc_mps2;
@@ -339,10 +359,10 @@ impl<'a> Setup<'a> {
     }
 
     /// The ram's speed at the window's last sample from the approach and the integrated
-    /// accelerometer, for contact `tau_s` after the contact sample.
-    fn measured_ram_end_mps(&self, tau_s: f64) -> f64 {
+    /// accelerometer, for contact `tau_s` after the contact sample at the speed `ln_speed`.
+    fn measured_ram_end_mps(&self, tau_s: f64, ln_speed: f64) -> f64 {
         let b = self.p.blow;
-        let (v0, _) = self.contact_state(tau_s);
+        let (v0, _) = self.contact_state(tau_s, ln_speed);
         let s = &b.samples[b.i_contact..=self.k1];
         let trapezoids: f64 = s.windows(2).map(|w| 0.5 * (w[0].acc_mps2 + w[1].acc_mps2)).sum();
         // From contact to the contact sample, the approach's acceleration.
@@ -350,52 +370,95 @@ impl<'a> Setup<'a> {
     }
 }
 
+/// The plant of problem `p` with its sheet's flow stress scaled by `scale`, from start
+/// height `h_start_m`.
+fn plant_of(p: &FitProblem<'_>, scale: f64, h_start_m: f64) -> Plant {
+    let pr = p.process;
+    let material = match pr.material {
+        FlowStress::Constant { sigma0_pa } => FlowStress::Constant { sigma0_pa: sigma0_pa * scale },
+        FlowStress::HanselSpittel { a_pa, m1, m2, m3, m4, temperature_c } => {
+            FlowStress::HanselSpittel { a_pa: a_pa * scale, m1, m2, m3, m4, temperature_c }
+        }
+    };
+    let law = BilletLaw::new(pr.billet.clone(), material, pr.friction, p.effects.load, p.blow_index);
+    Plant::new(p.machine, p.effects, Some(law), h_start_m)
+}
+
 fn cost(r: &[f64]) -> f64 {
     r.iter().map(|x| x * x).sum()
 }
 
-/// `u` within the bounds of the scale and of the contact (`CONTACT_BOUNDS_SAMPLES`, or
-/// `CONTACT_BOUNDS_WITHOUT_LOAD_SAMPLES` for a blow without a load channel).
-fn clamp_u(u: [f64; 2], channels: Channels) -> [f64; 2] {
+/// `u` within the bounds of the scale, of the contact (`CONTACT_BOUNDS_SAMPLES`, or
+/// `CONTACT_BOUNDS_WITHOUT_LOAD_SAMPLES` for a blow without a load channel) and of the
+/// speed (`LN_SPEED_BOUNDS`).
+fn clamp_u(u: Params, channels: Channels) -> Params {
     let (lo, hi) = if channels.has(Role::Load) { CONTACT_BOUNDS_SAMPLES } else { CONTACT_BOUNDS_WITHOUT_LOAD_SAMPLES };
-    [u[0].clamp(SCALE_BOUNDS.0.ln(), SCALE_BOUNDS.1.ln()), u[1].clamp(lo, hi)]
+    [
+        u[0].clamp(SCALE_BOUNDS.0.ln(), SCALE_BOUNDS.1.ln()),
+        u[1].clamp(lo, hi),
+        u[2].clamp(LN_SPEED_BOUNDS.0, LN_SPEED_BOUNDS.1),
+        u[3],
+    ]
+}
+
+/// The forward-difference Jacobian's columns at `u` (evaluation `cur`) for the parameters
+/// `params`, and the evaluations they took.
+fn jacobian(
+    setup: &Setup<'_>,
+    u: Params,
+    cur: &Eval,
+    which: Residuals,
+    params: &[usize],
+) -> Result<Vec<(Vec<f64>, Eval)>, FitError> {
+    params
+        .iter()
+        .map(|&i| {
+            let mut up = u;
+            up[i] += STEPS[i];
+            let e = setup.eval(up, which)?;
+            Ok((e.r.iter().zip(&cur.r).map(|(a, b)| (a - b) / STEPS[i]).collect(), e))
+        })
+        .collect()
+}
+
+/// `JᵀJ` and `Jᵀr` of the columns `jac` and the residuals `r`.
+fn normal_equations(jac: &[(Vec<f64>, Eval)], r: &[f64]) -> (DMatrix<f64>, DVector<f64>) {
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let n = jac.len();
+    let a = DMatrix::from_fn(n, n, |i, j| dot(&jac[i].0, &jac[j].0));
+    let g = DVector::from_fn(n, |i, _| dot(&jac[i].0, r));
+    (a, g)
 }
 
 /// Levenberg–Marquardt from `u`: the optimum, its evaluation, its cost and the iterations.
 fn levenberg_marquardt(
     setup: &Setup<'_>,
-    mut u: [f64; 2],
+    mut u: Params,
     which: Residuals,
-) -> Result<([f64; 2], Eval, f64, usize), FitError> {
+) -> Result<(Params, Eval, f64, usize), FitError> {
     let mut cur = setup.eval(u, which)?;
     let mut c = cost(&cur.r);
     let mut lambda = 1e-3;
     let mut iterations = 0;
-    let steps = [FD_LN_SCALE, FD_CONTACT_SAMPLES];
     while iterations < MAX_ITERATIONS {
         iterations += 1;
-        // Forward-difference Jacobian, two columns.
-        let mut jac = [Vec::new(), Vec::new()];
-        for (i, col) in jac.iter_mut().enumerate() {
-            let mut up = u;
-            up[i] += steps[i];
-            let e = setup.eval(up, which)?;
-            *col = e.r.iter().zip(&cur.r).map(|(a, b)| (a - b) / steps[i]).collect();
-        }
-        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-        let (a00, a01, a11) = (dot(&jac[0], &jac[0]), dot(&jac[0], &jac[1]), dot(&jac[1], &jac[1]));
-        let (g0, g1) = (dot(&jac[0], &cur.r), dot(&jac[1], &cur.r));
+        let jac = jacobian(setup, u, &cur, which, setup.free())?;
+        let (a, g) = normal_equations(&jac, &cur.r);
         let mut improved = false;
         for _ in 0..8 {
-            let (b00, b11) = (a00 * (1.0 + lambda), a11 * (1.0 + lambda));
-            let det = b00 * b11 - a01 * a01;
-            if !(det.is_finite() && det > 0.0) {
+            let mut b = a.clone();
+            for i in 0..b.nrows() {
+                b[(i, i)] *= 1.0 + lambda;
+            }
+            let Some(step) = b.cholesky().map(|ch| ch.solve(&g)).filter(|d| d.iter().all(|x| x.is_finite())) else {
                 lambda *= 10.0;
                 continue;
+            };
+            let mut trial = u;
+            for (t, d) in trial.iter_mut().zip(step.iter()) {
+                *t -= d;
             }
-            let d0 = -(b11 * g0 - a01 * g1) / det;
-            let d1 = -(b00 * g1 - a01 * g0) / det;
-            let trial = clamp_u([u[0] + d0, u[1] + d1], setup.p.channels);
+            let trial = clamp_u(trial, setup.p.channels);
             let Ok(e) = setup.eval(trial, which) else {
                 lambda *= 10.0;
                 continue;
@@ -419,6 +482,53 @@ fn levenberg_marquardt(
     Ok((u, cur, c, iterations))
 }
 
+/// Without an encoder the fit also starts from the best of a grid of contact instants, a
+/// sample apart over the contact's bounds, this many of them by their cost at the start's
+/// scale and speed. The load's cost has a local minimum per period of the ring: at 5 kHz
+/// the hammer's 2 kHz ring spans 2.5 samples, and on the DAQ chain's tuning seed 11 the
+/// linear-phase filter's precursors put the segmenter's contact sample 4.5 samples early;
+/// from the locator's contact alone the fit ended 2 samples short with a residual of 16
+/// (`MAX_GOOD_RMS` is 5).
+pub const NO_ENCODER_GRID_STARTS: usize = 2;
+
+/// Rounds of `speed_start`.
+const SPEED_START_ROUNDS: usize = 2;
+
+/// Without an encoder, the start's impact speed: the one whose modelled change of the ram's
+/// speed over the window matches the accelerometer's, at `u0`'s scale and contact. The
+/// impulse alone (`no_encoder::impulse_approach`) also counts the rebound, which on a
+/// nearly elastic press blow doubles it: from there the fit found a wrong minimum (the DAQ
+/// chain's press, tuning seed 11, 20 and 100 kHz, the last blows: efficiency 0.06 and 0.14
+/// off). The model's ratio of the change to the speed carries its rebound.
+fn speed_start(setup: &Setup<'_>, mut u: Params) -> Params {
+    let tau_s = u[1] * setup.p.blow.period_s;
+    for _ in 0..SPEED_START_ROUNDS {
+        let Ok(e) = setup.eval(u, Residuals::Analogue) else { break };
+        let (v0, _) = setup.contact_state(tau_s, u[2]);
+        let modelled = e.ram_end_mps - v0;
+        let measured = setup.measured_ram_end_mps(tau_s, u[2]) - v0;
+        let v1 = measured / modelled * v0;
+        if !(v1 > 0.0 && modelled < 0.0) {
+            break;
+        }
+        u = clamp_u([u[0], u[1], u[2] + (v1 / v0).ln(), u[3]], setup.p.channels);
+    }
+    u
+}
+
+/// The `NO_ENCODER_GRID_STARTS` best contacts, a sample apart over the bounds, at `u0`'s
+/// scale and speed.
+fn contact_grid(setup: &Setup<'_>, u0: Params) -> Vec<Params> {
+    let (lo, hi) =
+        if setup.p.channels.has(Role::Load) { CONTACT_BOUNDS_SAMPLES } else { CONTACT_BOUNDS_WITHOUT_LOAD_SAMPLES };
+    let mut graded: Vec<(f64, Params)> = (lo as i64..=hi as i64)
+        .map(|d| [u0[0], d as f64, u0[2], u0[3]])
+        .filter_map(|u| setup.eval(u, Residuals::Analogue).ok().map(|e| (cost(&e.r), u)))
+        .collect();
+    graded.sort_by(|a, b| a.0.total_cmp(&b.0));
+    graded.into_iter().take(NO_ENCODER_GRID_STARTS).map(|(_, u)| u).collect()
+}
+
 /// Fit the blow, starting from flow-stress scale `scale0` and the contact `delta0` samples
 /// after the segmenter's contact sample, and, when `search_contact`, also from the optimum
 /// of the encoder's residuals alone (the better of the two is kept).
@@ -429,18 +539,30 @@ pub fn fit_blow(
     delta0: f64,
     search_contact: bool,
 ) -> Result<ModelFit, FitError> {
-    let u0 = clamp_u([scale0.max(1e-3).ln(), delta0], p.channels);
+    let u0 = clamp_u([scale0.max(1e-3).ln(), delta0, 0.0, 0.0], p.channels);
     let setup = window(p, encoder_resolution_m, u0)?;
+    let with_encoder = p.channels.has(Role::Disp);
+    // Without an encoder, the start's speed from the accelerometer through the model.
+    let u0 = if with_encoder { u0 } else { speed_start(&setup, u0) };
     let mut starts = vec![u0];
     // First the encoder alone: its cost is smooth in both parameters, where the load's has
     // a local minimum per period of the ring (a grid of contact instants at the start scale
     // found the wrong one at 10 kHz on the tuning seeds); its optimum is one more start.
-    if search_contact && let Ok((u1, ..)) = levenberg_marquardt(&setup, u0, Residuals::Encoder) {
+    if search_contact
+        && with_encoder
+        && let Ok((u1, ..)) = levenberg_marquardt(&setup, u0, Residuals::Encoder)
+    {
         starts.insert(0, u1);
     }
-    let mut best: Option<([f64; 2], Eval, f64, usize)> = None;
+    // Without the encoder's smooth cost: the best contacts of a grid a sample apart over
+    // the contact's bounds (`NO_ENCODER_GRID_STARTS`).
+    if search_contact && !with_encoder {
+        starts.extend(contact_grid(&setup, u0));
+    }
+    let which = if with_encoder { Residuals::All } else { Residuals::Analogue };
+    let mut best: Option<(Params, Eval, f64, usize)> = None;
     for st in starts {
-        let Ok(run) = levenberg_marquardt(&setup, st, Residuals::All) else { continue };
+        let Ok(run) = levenberg_marquardt(&setup, st, which) else { continue };
         if best.as_ref().is_none_or(|b| run.2 < b.2) {
             best = Some(run);
         }
@@ -450,12 +572,12 @@ pub fn fit_blow(
         None => return Err(FitError::Simulation("no start could be simulated".into())),
     };
     let tau_s = u[1] * p.blow.period_s;
-    let (v0_mps, x_contact_m) = setup.contact_state(tau_s);
+    let (v0_mps, x_contact_m) = setup.contact_state(tau_s, u[2]);
     let kinetic_in_j = cur.blow.energy.kinetic_in_j;
-    let v_meas = setup.measured_ram_end_mps(tau_s);
+    let v_meas = setup.measured_ram_end_mps(tau_s, u[2]);
     let ram_energy_residual = 0.5 * setup.m_ram_kg * (cur.ram_end_mps.powi(2) - v_meas.powi(2)) / kinetic_in_j;
     let set_offset_m = spring_back_set_offset(&setup, &cur, tau_s);
-    let efficiency_sd = efficiency_sd(&setup, u, &cur, c);
+    let efficiency_sd = efficiency_sd(&setup, u, &cur, c, which);
     Ok(ModelFit {
         efficiency_sd,
         scale: u[0].exp(),
@@ -484,30 +606,40 @@ const CORRELATED_SAMPLES: f64 = 0.5 / ANALYSIS_CUTOFF;
 /// to the efficiency through its derivatives. A model that fits the channels it was given
 /// leaves their noise in `s²`; one that misses the machine leaves its misfit there, and
 /// the sd grows with it. The Jacobian and the derivatives are forward differences at `u`
-/// (two more simulated blows).
-fn efficiency_sd(setup: &Setup<'_>, u: [f64; 2], cur: &Eval, c: f64) -> Option<f64> {
-    let steps = [FD_LN_SCALE, FD_CONTACT_SAMPLES];
+/// (a simulated blow per parameter, and one more for an uncertain start height).
+fn efficiency_sd(setup: &Setup<'_>, u: Params, cur: &Eval, c: f64, which: Residuals) -> Option<f64> {
     let eff0 = cur.blow.energy.efficiency();
-    let mut jac = [Vec::new(), Vec::new()];
-    let mut grad = [0.0; 2];
-    for i in 0..2 {
-        let mut up = u;
-        up[i] += steps[i];
-        let e = setup.eval(up, Residuals::All).ok()?;
-        jac[i] = e.r.iter().zip(&cur.r).map(|(a, b)| (a - b) / steps[i]).collect();
-        grad[i] = (e.blow.energy.efficiency() - eff0) / steps[i];
+    let mut params = setup.free().to_vec();
+    let free = params.len();
+    if setup.p.height_sd_m.is_some() {
+        params.push(3);
     }
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let (a00, a01, a11) = (dot(&jac[0], &jac[0]), dot(&jac[0], &jac[1]), dot(&jac[1], &jac[1]));
-    let det = a00 * a11 - a01 * a01;
+    let jac = jacobian(setup, u, cur, which, &params).ok()?;
+    let grad = DVector::from_iterator(
+        jac.len(),
+        jac.iter().zip(&params).map(|((_, e), &i)| (e.blow.energy.efficiency() - eff0) / STEPS[i]),
+    );
     // The residuals that carry information: a channel left out is 0 in every sample.
-    let n = cur.r.iter().filter(|r| **r != 0.0).count() as f64;
-    if !(det.is_finite() && det > 0.0) || n <= 2.0 {
+    let n = cur.r.iter().filter(|r| **r != 0.0).count();
+    if n <= free {
         return None;
     }
-    let s2 = c / (n - 2.0) * CORRELATED_SAMPLES;
-    let (c00, c01, c11) = (s2 * a11 / det, -s2 * a01 / det, s2 * a00 / det);
-    let var = grad[0] * grad[0] * c00 + 2.0 * grad[0] * grad[1] * c01 + grad[1] * grad[1] * c11;
+    let s2 = c / (n - free) as f64 * CORRELATED_SAMPLES;
+    let (a, _) = normal_equations(&jac[..free], &cur.r);
+    let a_inverse = a.cholesky()?.inverse();
+    let g = grad.rows(0, free);
+    let mut var = s2 * (g.transpose() * &a_inverse * g)[(0, 0)];
+    // A start height off by `dh` moves the fitted parameters by `−A⁻¹ Jᵀ J_h dh` as they
+    // take it up, and the efficiency by `g_h dh` plus their share: its 1σ times that
+    // profile's slope is the efficiency's part (the height is not fitted, so the data do not
+    // narrow it).
+    if let Some(sd) = setup.p.height_sd_m {
+        let dot = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>();
+        let j_h = &jac[free].0;
+        let b = DVector::from_iterator(free, jac[..free].iter().map(|(col, _)| dot(col, j_h)));
+        let slope = grad[free] - (g.transpose() * &a_inverse * b)[(0, 0)];
+        var += (slope * sd).powi(2);
+    }
     (var.is_finite() && var >= 0.0).then(|| var.sqrt())
 }
 
@@ -523,7 +655,7 @@ pub const NO_LOAD_WINDOW_MARGIN_S: f64 = 2e-3;
 /// driven by the screw the model does not hold): the window ends
 /// `NO_LOAD_WINDOW_FRACTION` of the model's contact time after contact, plus
 /// `NO_LOAD_WINDOW_MARGIN_S`, at the start `u0`.
-fn window<'a>(p: &'a FitProblem<'a>, encoder_resolution_m: f64, u0: [f64; 2]) -> Result<Setup<'a>, FitError> {
+fn window<'a>(p: &'a FitProblem<'a>, encoder_resolution_m: f64, u0: Params) -> Result<Setup<'a>, FitError> {
     let setup = Setup::new(p, encoder_resolution_m, None)?;
     if p.channels.has(Role::Load) {
         return Ok(setup);
@@ -546,8 +678,11 @@ pub fn analogue_residual(
     delta0: f64,
 ) -> Result<ModelResidual, FitError> {
     let setup = Setup::new(p, encoder_resolution_m, None)?;
-    let (u, cur, ..) =
-        levenberg_marquardt(&setup, clamp_u([scale0.max(1e-3).ln(), delta0], p.channels), Residuals::Analogue)?;
+    let (u, cur, ..) = levenberg_marquardt(
+        &setup,
+        clamp_u([scale0.max(1e-3).ln(), delta0, 0.0, 0.0], p.channels),
+        Residuals::Analogue,
+    )?;
     Ok(residual_by_channel(&setup, &cur, u[1] * p.blow.period_s))
 }
 

@@ -24,6 +24,7 @@ pub mod faults;
 pub mod fit;
 mod model_fit;
 pub mod modes;
+pub mod no_encoder;
 pub mod observer;
 pub mod plausibility;
 pub mod result;
@@ -109,13 +110,6 @@ pub enum EstimateError {
          [encoder] direction = \"up\" in the service file (--encoder-direction up for replay), or \"auto\""
     )]
     EncoderCountsUp { blow: u32, v_mps: f64 },
-    /// The encoder disagrees with the load and the accelerometer, which agree
-    /// (`faults::judge`): this version takes the impact speed and the heights from it, so the
-    /// blow is not estimated.
-    #[error(
-        "blow {blow}: {reason}; this version takes the impact speed from the encoder, so the blow is not estimated"
-    )]
-    EncoderOutvoted { blow: u32, reason: String },
 }
 
 /// Estimates blow after blow, tracking the billet's height from the process sheet.
@@ -293,9 +287,15 @@ impl Estimator {
         // A channel stuck through the blow is left out: the blow is estimated without it.
         let mut excluded = faults::failed_channels(blow);
         let blow = self.prepared(blow, &excluded);
+        if !blow.channels().has(Role::Disp) {
+            return self.estimate_without_encoder(&blow, excluded);
+        }
         self.channels_of(&blow)?;
         let (blow, approach) = self.approach(&blow)?;
         let (blow, approach, judged) = self.outvote(blow, approach, &mut excluded)?;
+        if !blow.channels().has(Role::Disp) {
+            return self.estimate_without_encoder(&blow, excluded);
+        }
         let blow = blow.as_ref();
         let channels = self.channels_of(blow)?;
         let with_load = channels.has(Role::Load);

@@ -6,6 +6,7 @@
 
 use super::approach::ApproachFit;
 use super::{Estimator, decimate, fit};
+use crate::signal::sample::Role;
 use crate::signal::segment::Blow;
 
 /// Where a blow's model fit starts: the start height, the flow-stress scale, the contact in
@@ -54,6 +55,9 @@ impl Estimator {
             daq_period_s: blow.period_s,
             approach,
             channels: blow.channels(),
+            // Without an encoder the start height is the sheet's, carried down by the model.
+            height_sd_m: (!blow.channels().has(Role::Disp))
+                .then_some(super::modes::SHEET_HEIGHT_SD_FRACTION * process.billet.height_m),
         };
         // Above the fit's rate the locator's contact, found in the finer samples, is already
         // within a fraction of a coarse sample: no second start is needed to find the basin
@@ -66,6 +70,7 @@ impl Estimator {
         // acceleration alone, and the smaller residual is the blow's.
         let mut residual = m.residual;
         if residual.load > fit::CONFIRM_RESIDUAL
+            && problem.channels.has(Role::Disp)
             && let Ok(r) = fit::analogue_residual(&problem, self.cfg.encoder_resolution_m, m.scale, m.contact_samples)
             && r.load < residual.load
         {
