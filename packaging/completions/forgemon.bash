@@ -471,7 +471,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__identify)
-            opts="-o -h --kind --reference --bare --process --out --initial --fit-blows --starts --seed --monte-carlo --report --help"
+            opts="-o -h --kind --reference --bare --process --out --initial --ram-kg --fit-blows --starts --seed --monte-carlo --report --help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 2 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -498,6 +498,10 @@ _forgemon() {
                     return 0
                     ;;
                 --initial)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --ram-kg)
                     COMPREPLY=($(compgen -f "${cur}"))
                     return 0
                     ;;

@@ -62,8 +62,9 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l reference
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l process -d 'Process sheet of the billet (default: DIR/process.toml)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -s o -l out -d 'Where to write the identified machine.toml' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l initial -d 'Prior machine: the centre of the search bounds and the first start (default: the paper\'s machine of the kind). The press\'s sensor stiffness is taken from it' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l ram-kg -d 'The ram\'s mass from the machine\'s data sheet, kg: references without a load channel (the accelerometer and the encoder alone) see the ram\'s acceleration, not a force, so this mass is held and anchors the others. Default: the --initial machine\'s' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l fit-blows -d 'Blow numbers to fit, e.g. 1 or 1,3 (default: all); the others are predicted and reported as held out' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l starts -d 'Local searches (the prior plus random starts)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l starts -d 'Local searches (the prior plus random starts). Default: 8, and without a load channel `RAM_FORCE_STARTS`' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l seed -d 'Seed of the random starts and the Monte Carlo draws (the same seed, the same fit)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l monte-carlo -d 'Monte Carlo draws for the load bands' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand identify" -l report -d 'The HTML report (default: the output with .html)' -r -F

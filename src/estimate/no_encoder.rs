@@ -26,6 +26,9 @@ use crate::signal::sample::Role;
 use crate::signal::segment::Blow;
 use std::collections::BTreeMap;
 
+/// Why a whole blow without an encoder is not estimated when the model could not be fitted.
+pub const UNFITTED: &str = "no ram encoder channel (disp_m), and the model could not be fitted to the load and the accelerometer (the billet's height is not known since a blow before failed, or the fit failed): the impact speed is not observed";
+
 /// Why a blow without an encoder reports no end height.
 pub const END_HEIGHT_UNOBSERVED: &str = "no encoder: the billet's height is the sheet's carried down by the model, not measured (a billet off its sheet's height by 1.6 mm stays off by that)";
 
@@ -74,6 +77,9 @@ impl Estimator {
         self.chain = None;
         self.unverified = true;
         if !complete {
+            // The impulse of a blow cut short is not the speed it struck at.
+            e.v_impact_mps = f64::NAN;
+            e.unobserved.insert("v_impact_mps".into(), "no encoder, and the blow is incomplete".into());
             self.h_m = None;
             return Ok(e);
         }
@@ -89,16 +95,13 @@ impl Estimator {
                 h_end_m
             }
             None => {
-                e.v_impact_mps = f64::NAN;
-                e.unobserved.insert("v_impact_mps".into(), "no encoder, and the model could not be fitted".into());
-                self.unfitted(&mut e)
+                self.forget_end();
+                return Err(EstimateError::Unobservable { blow: n, reason: UNFITTED });
             }
         };
         e.model_residual = check.map(|c| c.load);
         e.model_residual_by_phase = check.map(|c| c.load_by_phase);
-        if fitted.is_some() {
-            e.sensor_check = sensor::sensor_check(&self.machine, blow, e.v_impact_mps).ok();
-        }
+        e.sensor_check = sensor::sensor_check(&self.machine, blow, e.v_impact_mps).ok();
         self.settle(&mut e, blow, placed.first, tolerance_m, (0.0, h_start_m, h_end_m));
         Ok(e)
     }

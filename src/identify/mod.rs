@@ -22,7 +22,7 @@ use crate::physics::machine::Machine;
 use fit::{Run, Uncertainty};
 use heights::SheetCheck;
 use model::ParamSet;
-use objective::{Fidelity, Heights, Objective, Reference, Setting, Simulated};
+use objective::{Fidelity, Heights, Objective, Reference, Setting, Signal, Simulated};
 
 /// How to search.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -35,11 +35,14 @@ pub struct IdentifyConfig {
     /// The DAQ's anti-alias filter on the load channel (the initial machine file's `[daq]`):
     /// the model's load is read through it, as `diagnose` reads it.
     pub load_filter: LoadFilter,
+    /// What the references compare: the load, or without a load channel the ram's force,
+    /// whose mass is then held at the prior's (`ParamSet::holding`).
+    pub signal: Signal,
 }
 
 impl Default for IdentifyConfig {
     fn default() -> Self {
-        IdentifyConfig { starts: 8, seed: 1, monte_carlo: 200, load_filter: LoadFilter::None }
+        IdentifyConfig { starts: 8, seed: 1, monte_carlo: 200, load_filter: LoadFilter::None, signal: Signal::Load }
     }
 }
 
@@ -128,7 +131,12 @@ pub struct Identified {
     /// The sheet's measured heights against the encoder, one per blow that has both
     /// (`heights::cross_check`); the blows in doubt were left out of the fit.
     pub sheet_checks: Vec<SheetCheck>,
+    /// What the blows were compared by (`IdentifyConfig::signal`).
+    pub signal: Signal,
 }
+
+/// Why the ram's mass is held when the references have no load channel.
+pub const ANCHOR_NOTE: &str = "held at the data sheet's: without a load channel the data see the ram's acceleration, not a force, and this mass anchors the others";
 
 /// Why identification failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -167,7 +175,12 @@ pub fn identify(
         return Err(IdentifyError::NoReference);
     }
     let bare = matches!(setting, Setting::Bare);
-    let set = ParamSet::new(prior, bare);
+    // Without a load the data see the ram's acceleration, not a force: its mass, the data
+    // sheet's, anchors the others.
+    let set = match cfg.signal {
+        Signal::Load => ParamSet::new(prior, bare),
+        Signal::RamForce { .. } => ParamSet::new(prior, bare).holding(prior.ram_key()),
+    };
     // Every blow in order (a billet's height carries from blow to blow); the held-out ones
     // are simulated but not fitted.
     let mut all: Vec<(WithSpeedSd, bool)> =
@@ -195,7 +208,8 @@ pub fn identify(
     // error of the blow's input that the covariance does not hold.
     let obj = Objective::new(all_refs, fitted.clone(), setting, &prior)
         .with_heights(Heights::Encoder)
-        .with_effects(EffectSet { load_filter: cfg.load_filter, ..EffectSet::NONE });
+        .with_effects(EffectSet { load_filter: cfg.load_filter, ..EffectSet::NONE })
+        .with_signal(cfg.signal);
     let first = set.values_of(&prior);
     // Global stage: local searches on the ring-free envelope from every start; then the
     // full objective from where each ended (objective::Fidelity explains why).
@@ -291,6 +305,7 @@ pub fn identify(
         monte_carlo_runs: mc.len(),
         spectra,
         sheet_checks,
+        signal: cfg.signal,
     })
 }
 
@@ -331,6 +346,7 @@ impl Identified {
                     format!("# ± {:.3} % {}", self.uncertainty.rel_se[i] * 100.0, self.uncertainty.notes[i])
                 }
                 Some(i) => format!("# NOT DETERMINED: {}", self.uncertainty.notes[i]),
+                None if self.signal != Signal::Load && key == self.machine.ram_key() => format!("# {ANCHOR_NOTE}"),
                 None => "# held (not fitted)".to_string(),
             };
             let _ = writeln!(s, "{key} = {v:.6e}  {note}");

@@ -103,6 +103,12 @@ impl ParamSet {
         ParamSet { kind: prior.kind(), params, prior }
     }
 
+    /// The same set with `key` held at the prior's value (not fitted).
+    pub fn holding(mut self, key: &str) -> ParamSet {
+        self.params.retain(|p| p.key != key);
+        self
+    }
+
     pub fn len(&self) -> usize {
         self.params.len()
     }
@@ -154,7 +160,7 @@ pub fn get(m: &Machine, key: &str) -> f64 {
     }
 }
 
-fn set(m: &mut Machine, key: &str, v: f64) {
+pub fn set(m: &mut Machine, key: &str, v: f64) {
     match (m, key) {
         (Machine::Hammer(Hammer { m1_kg, .. }), "m1_kg") => *m1_kg = v,
         (Machine::Hammer(Hammer { m2_kg, .. }), "m2_kg") => *m2_kg = v,

@@ -15,7 +15,7 @@
 
 use crate::estimate::approach::ApproachFit;
 use crate::identify::model::default_prior;
-use crate::physics::blow::{SimOptions, TraceEnd, simulate_blow_sensor_until};
+use crate::physics::blow::{SimOptions, TraceEnd, simulate_blow_ram_until, simulate_blow_sensor_until};
 use crate::physics::effects::EffectSet;
 use crate::physics::integrator::Method;
 use crate::physics::machine::{Machine, MachineKind};
@@ -113,6 +113,15 @@ pub enum ReferenceError {
     NoLoad { label: String, peak_kn: f64 },
 }
 
+/// The accelerometer's mean over the approach window before contact (`fit_s`, less the
+/// anti-alias filter's reach, `approach::ACC_GUARD_SAMPLES`), m/s²; `None` without samples.
+fn approach_acceleration(blow: &Blow, fit_s: f64) -> Option<f64> {
+    let end = blow.i_contact.saturating_sub(crate::estimate::approach::ACC_GUARD_SAMPLES);
+    let start = end.saturating_sub((fit_s / blow.period_s).round() as usize);
+    let pre: Vec<f64> = blow.samples[start..end].iter().map(|s| s.acc_mps2).filter(|a| a.is_finite()).collect();
+    (!pre.is_empty()).then(|| pre.iter().sum::<f64>() / pre.len() as f64)
+}
+
 /// A measured reference blow, ready for the fit.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Reference {
@@ -173,13 +182,40 @@ impl Reference {
         blow_index: Option<usize>,
         fit_s: f64,
     ) -> Result<Reference, ReferenceError> {
+        Reference::of_signal(label, blow, blow_index, fit_s, Signal::Load)
+    }
+
+    /// `from_blow` comparing `signal`: the load sensor's, or, for a blow without a load
+    /// channel, the ram's force from its accelerometer (`Signal::RamForce`).
+    pub fn of_signal(
+        label: &str,
+        blow: &Blow,
+        blow_index: Option<usize>,
+        fit_s: f64,
+        signal: Signal,
+    ) -> Result<Reference, ReferenceError> {
         let approach = crate::estimate::approach::fit_impact_speed(&blow.samples, blow.i_contact, fit_s, blow.period_s)
             .map_err(|e| ReferenceError::NoSpeed { label: label.into(), reason: e.to_string() })?;
         let v0 = approach.v_impact_mps;
-        let load: Vec<f64> = blow.samples.iter().map(|s| s.load_n - blow.load_zero_n).collect();
+        let load: Vec<f64> = match signal {
+            Signal::Load => blow.samples.iter().map(|s| s.load_n - blow.load_zero_n).collect(),
+            Signal::RamForce { m_ram_kg } => {
+                let free = approach_acceleration(blow, fit_s).ok_or_else(|| ReferenceError::NoSpeed {
+                    label: label.into(),
+                    reason: "no accelerometer samples before contact".into(),
+                })?;
+                // Before contact the ram falls (`free`, its approach); from contact the model
+                // leaves its weight out (the hammer paper's eq. 1, as the renderers and the
+                // estimator's fit do), so the acceleration is all the billet's.
+                let weightless = |i: usize| if i < blow.i_contact { free } else { 0.0 };
+                blow.samples.iter().enumerate().map(|(i, s)| -m_ram_kg * (s.acc_mps2 - weightless(i))).collect()
+            }
+        };
         let (i_peak, peak) =
             load.iter().copied().enumerate().fold((0, f64::MIN), |a, (i, v)| if v > a.1 { (i, v) } else { a });
-        if let Some((raw_peak, run)) = super::clip::clipped(blow, i_peak) {
+        if signal == Signal::Load
+            && let Some((raw_peak, run)) = super::clip::clipped(blow, i_peak)
+        {
             return Err(ReferenceError::Clipped { label: label.into(), peak_kn: raw_peak * 1e-3, run });
         }
         let threshold = ALIGN_FRACTION * peak;
@@ -374,6 +410,21 @@ pub struct Objective {
     measured_spectra: Vec<Vec<f64>>,
     /// Where the billet blows' start heights come from.
     pub heights: Heights,
+    /// What the references' `load_n` holds: the load sensor's, or the ram's force.
+    pub signal: Signal,
+    /// The prior model's second mode, Hz (`ModePrior::mode2_hz`).
+    prior_mode2_hz: f64,
+}
+
+/// The force a reference compares (`Reference::load_n`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Signal {
+    /// The load sensor's (docs/interfaces.md §1 `load_N`).
+    Load,
+    /// Without a load channel: the ram's force, its mass (the data sheet's, held in the fit:
+    /// `ParamSet::holding`) times its deceleration from the approach, `−m (a − a_approach)`,
+    /// measured by the accelerometer and modelled from the ram's acceleration.
+    RamForce { m_ram_kg: f64 },
 }
 
 /// One reference simulated: the load at the measured samples and its spectrum.
@@ -424,7 +475,25 @@ impl Objective {
             f_max_hz,
             measured_spectra,
             heights: Heights::Sheet,
+            signal: Signal::Load,
+            prior_mode2_hz: prior.mode2_hz,
         }
+    }
+
+    /// The same references, whose `load_n` holds `signal`. The ram's force barely shows the
+    /// second mode (the billet between ram and lower tool filters the ring): its strongest
+    /// peak is the blow's own shape (117 Hz against the hammer's 2 kHz mode on
+    /// `tests/identify_without_load.rs`), so the envelope's window is the prior's mode.
+    pub fn with_signal(self, signal: Signal) -> Objective {
+        if signal == Signal::Load {
+            return Objective { signal, ..self };
+        }
+        let period_s = 1.0 / self.prior_mode2_hz;
+        let envelope_window: Vec<usize> =
+            self.refs.iter().map(|r| ((period_s / r.dt_s).round() as usize).max(1)).collect();
+        let measured_envelope =
+            self.refs.iter().zip(&envelope_window).map(|(r, w)| moving_average(&r.load_n, *w)).collect();
+        Objective { signal, mode2_hz: None, envelope_window, measured_envelope, ..self }
     }
 
     /// The same references with the start heights from `heights`.
@@ -530,7 +599,16 @@ impl Objective {
             // compared), never before the contact opens (`TraceEnd`).
             let threshold = ALIGN_FRACTION * r.peak_n;
             let end = TraceEnd { threshold_n: threshold, after_s: r.duration_s() - r.t_align_s };
-            let (res, trace) = simulate_blow_sensor_until(&plant, r.v0_mps, &opts, end).ok()?;
+            let (res, trace) = match self.signal {
+                Signal::Load => simulate_blow_sensor_until(&plant, r.v0_mps, &opts, end).ok()?,
+                Signal::RamForce { m_ram_kg } => {
+                    // The model's ram flies free of gravity (its blow starts at contact), so
+                    // its acceleration is all the billet's: a rigid-plastic billet pushes at
+                    // once, from the first sample.
+                    let (res, acc) = simulate_blow_ram_until(&plant, r.v0_mps, &opts, end).ok()?;
+                    (res, acc.iter().map(|a| -m_ram_kg * a).collect())
+                }
+            };
             h = res.forming.map(|f| f.h_end_m).or(h);
             // The DAQ's view: its anti-alias filter as the machine file declares it.
             let trace = self.effects.load_filter.apply(&trace, fine_dt, r.dt_s);

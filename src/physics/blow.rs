@@ -10,7 +10,7 @@ mod recorder;
 mod sensor;
 
 use recorder::{Record, Recorder, Trace, forming_indicators};
-pub use sensor::{FitBlow, simulate_blow_sensor, simulate_blow_sensor_until};
+pub use sensor::{FitBlow, simulate_blow_ram_until, simulate_blow_sensor, simulate_blow_sensor_until};
 
 /// Simulated time after the contact ends that a blow keeps running (docs/interfaces.md §6 `post`).
 pub const POST_WINDOW_S: f64 = 5e-3;

@@ -95,6 +95,14 @@ impl Machine {
         }
     }
 
+    /// The `machine.toml` key of the ram's mass (`ram_kg`).
+    pub fn ram_key(&self) -> &'static str {
+        match self {
+            Machine::Hammer(_) => "m1_kg",
+            Machine::ScrewPress(_) => "m_ram_kg",
+        }
+    }
+
     /// Frequency of the machine's second (fast) mode, Hz: the ~2 kHz ring of the lower
     /// tool on its spring (hammer) or the ~300 Hz tool-against-ram mode (press).
     pub fn second_mode_hz(&self) -> f64 {

@@ -75,6 +75,25 @@ pub fn simulate_blow_sensor_until(
     Ok((blow, sensor))
 }
 
+/// `simulate_blow_sensor_until`'s blow with the ram's kinematic acceleration at each trace
+/// sample in place of the sensor's load, m/s² (`identify` without a load channel, whose data
+/// are the ram's accelerometer). `end` still watches the sensor's load. It runs on the
+/// specialised plant with every output traced: the exact sensor points do not hold the ram.
+pub fn simulate_blow_ram_until(
+    plant: &Plant,
+    v0_mps: f64,
+    opts: &SimOptions,
+    end: TraceEnd,
+) -> Result<(FitBlow, Vec<f64>), BlowError> {
+    let (blow, _, trace) =
+        run_until(plant, v0_mps, opts, 0.0, Trace::Outputs(Vec::new()), Path::Specialised, Some(end), false)?;
+    let acc = match trace {
+        Trace::Outputs(v) => v.iter().map(|p| p.out.ram_acc_mps2).collect(),
+        Trace::Sensor(_) => Vec::new(),
+    };
+    Ok((blow, acc))
+}
+
 /// The fits' sensor-only blow (`Path::Exact`), to `end` when given, with its peak when
 /// `peak` is.
 fn sensor_run(
