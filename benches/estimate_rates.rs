@@ -110,7 +110,7 @@ fn latency_by_mode(c: &mut Criterion) {
     g.sample_size(20);
     for (name, hammer) in [("hammer", true), ("press", false)] {
         for rate in [100e3, 5e3] {
-            for without in [None, Some(Role::Load), Some(Role::Acc)] {
+            for without in [None, Some(Role::Load), Some(Role::Acc), Some(Role::Disp)] {
                 let (m, p, cut) = blows_without(hammer, rate, without);
                 let mut warm = Estimator::new(m, Some(p.clone()), EstimatorConfig::for_kind(m.kind()));
                 warm.estimate(&cut[0]).unwrap();
