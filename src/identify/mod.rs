@@ -11,6 +11,7 @@ pub mod fit;
 pub mod heights;
 pub mod model;
 pub mod objective;
+pub mod reference;
 pub mod report;
 pub mod speed;
 
