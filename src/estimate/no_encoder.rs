@@ -3,19 +3,20 @@
 //!
 //! Without an encoder there is no approach parabola, so the impact speed is fitted with the
 //! model: the fit (`fit`) takes ln(speed) as a third parameter beside the flow-stress scale
-//! and the contact instant, on the load's and the acceleration's residuals alone. Its start
-//! is the accelerometer's impulse over the blow, `−∫a dt` from contact to the blow's end,
-//! which counts the rebound too and so reads high by up to the rebound's speed
-//! (`fit::LN_SPEED_BOUNDS`). The accelerometer's integral fixes the ram's change of speed,
-//! and the load's level and duration the flow stress and the speed it stopped from: a
-//! rigid-plastic billet under a hammer ram stops it in `m v₀ / F`.
+//! and the contact instant, on the load's and the acceleration's residuals alone. Its first
+//! guess is the accelerometer's impulse over the blow, `−∫a dt` from contact to the blow's
+//! end (`impulse_approach`), which counts the rebound too; the fit's start then takes the
+//! rebound through the model (`fit::starts`). The accelerometer's integral fixes the ram's
+//! change of speed, and the load's level and duration the flow stress and the speed it
+//! stopped from: a rigid-plastic billet under a hammer ram stops it in `m v₀ / F`.
 //!
 //! Heights come from the model's chain: a billet's first blow starts at the sheet's height,
 //! each later blow at the fitted end of the one before (`HeightSource::Model`). A new billet
 //! is known by its signal, or by an idle gap longer than `EstimatorConfig::idle_new_billet_s`
 //! (there is no contact position to show a taller billet). The end height is the model's,
-//! not a measurement: it is reported with its source, and the next blow on an encoder takes
-//! the billet up again from the sheet or the model, its offset unknown.
+//! not a measurement, so it is not reported (`h_end_m` is `null`, `unobserved` says why);
+//! the next blow on an encoder takes the billet up again from the sheet or the model, its
+//! offset unknown.
 
 use super::approach::{ACC_GUARD_SAMPLES, ApproachError, ApproachFit, MIN_FIT_SAMPLES};
 use super::billet::BilletCheck;
@@ -30,7 +31,7 @@ use std::collections::BTreeMap;
 pub const UNFITTED: &str = "no ram encoder channel (disp_m), and the model could not be fitted to the load and the accelerometer (the billet's height is not known since a blow before failed, or the fit failed): the impact speed is not observed";
 
 /// Why a blow without an encoder reports no end height.
-pub const END_HEIGHT_UNOBSERVED: &str = "no encoder: the billet's height is the sheet's carried down by the model, not measured (a billet off its sheet's height by 1.6 mm stays off by that)";
+pub const END_HEIGHT_UNOBSERVED: &str = "no encoder: the billet's height is the sheet's carried down by the model, not measured (a billet off its sheet's height stays off by as much)";
 
 impl Estimator {
     /// Estimate `blow`, which has no encoder (none configured, or left out: `excluded`).
@@ -137,8 +138,9 @@ impl Estimator {
 
 /// The approach without an encoder: the accelerometer's mean over the window `fit_s` before
 /// contact (less `ACC_GUARD_SAMPLES`, the anti-alias filter's reach), and as the impact
-/// speed the impulse `−∫a dt` from the contact sample to the blow's end, less that mean's
-/// share (the fit's start, `fit::LN_SPEED_BOUNDS`). No position: `x_contact_m` is 0.
+/// speed the impulse `−∫a dt` from the contact sample to the blow's end: the fit's first
+/// guess, high by up to the rebound's speed (`fit::LN_SPEED_BOUNDS`). No position:
+/// `x_contact_m` is 0.
 pub fn impulse_approach(blow: &Blow, fit_s: f64) -> Result<ApproachFit, ApproachError> {
     let end = blow.i_contact.saturating_sub(ACC_GUARD_SAMPLES);
     let start = end.saturating_sub((fit_s / blow.period_s).round() as usize);
