@@ -94,8 +94,12 @@ const FD_LN_SPEED: f64 = 1e-5;
 const FD_HEIGHT_M: f64 = 1e-5;
 const STEPS: Params = [FD_LN_SCALE, FD_CONTACT_SAMPLES, FD_LN_SPEED, FD_HEIGHT_M];
 /// Bounds of the fitted impact speed without an encoder, in ln(speed over the
-/// accelerometer's impulse, `FitProblem::approach`): the impulse counts the rebound too, so
-/// it reads high by up to the rebound's speed.
+/// accelerometer's impulse, `FitProblem::approach`). The impulse counts the rebound too, so
+/// it reads high by up to the rebound's speed: at most the impact speed itself (a wholly
+/// elastic blow), an impulse of 2 v₀, ln ½ = −0.69; the lower bound leaves −1. It reads
+/// low only by what the window's end misses and the accelerometer's noise and bias, a few
+/// per cent; the upper bound leaves 0.3. Reasoned from the blow's momentum, not measured:
+/// the fits of `tests/degraded_sensing.rs` (tuning seeds) ended inside both.
 pub const LN_SPEED_BOUNDS: (f64, f64) = (-1.0, 0.3);
 
 /// The parameters: ln(flow-stress scale), first contact in samples after the segmenter's
