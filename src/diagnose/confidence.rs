@@ -33,8 +33,11 @@ use super::blowset::{BlowSet, mean};
 use super::evidence::{ALPHA, equivalent, improves};
 use super::verdict::{MIN_SHRINK, NOISE_FACTOR, decide, level_only};
 
-/// Holdout resamples: the agreement's standard error is at most 0.5/√400 = 2.5 points.
-pub const RESAMPLES: usize = 400;
+/// Holdout resamples: the agreement's Monte Carlo standard error is at most 0.5/√4000 =
+/// 0.8 points (2.5 with 400), so that the draw itself rarely decides which side of
+/// `MIN_AGREEMENT` a verdict falls. Each costs one `decide` on per-blow errors already
+/// computed.
+pub const RESAMPLES: usize = 4000;
 /// Calibration resamples refitted: each a local search over the calibration blows.
 pub const REFITS: usize = 16;
 /// Below this share of resamples agreeing, the verdict is "uncertain between A and B".
@@ -455,18 +458,18 @@ mod tests {
         let clearance = fitted("clearance", 1, &BASE.map(|x| 0.3 * x));
         let scores = Scores { machine: &m, base_hold: &BASE, noise_nrmse: 0.005, singles: &[], pairs: &[] };
         let counts = |v: &[(&str, usize)]| v.iter().map(|(k, c)| (k.to_string(), *c)).collect::<Vec<_>>();
-        let split = counts(&[("clearance", 249), ("clearance+foundation", 150), ("none", 1)]);
+        let split = counts(&[("clearance", 2490), ("clearance+foundation", 1500), ("none", 10)]);
         let c = summarise(&scores, Some(&clearance), &[], split, &[], Vec::new(), 0);
         assert!(c.uncertain_between.is_some(), "{c:?}");
         assert_eq!(c.settled, vec!["clearance".to_string()]);
         assert_eq!(c.effects[0].0, "clearance");
-        assert!((c.effects[0].1 - 399.0 / 400.0).abs() < 1e-12, "{c:?}");
+        assert!((c.effects[0].1 - 3990.0 / 4000.0).abs() < 1e-12, "{c:?}");
         assert_eq!(c.to_json()["settled"], serde_json::json!(["clearance"]));
-        let three = counts(&[("none", 135), ("clearance", 133), ("clearance+foundation", 132)]);
+        let three = counts(&[("none", 1350), ("clearance", 1330), ("clearance+foundation", 1320)]);
         let c = summarise(&scores, Some(&clearance), &[], three, &[], Vec::new(), 0);
         assert!(c.settled.is_empty(), "{c:?}");
         // "none" settles on nothing, however sure.
-        let c = summarise(&scores, None, &[], counts(&[("none", 400)]), &[], Vec::new(), 0);
+        let c = summarise(&scores, None, &[], counts(&[("none", RESAMPLES)]), &[], Vec::new(), 0);
         assert!(c.settled.is_empty() && c.effects.is_empty(), "{c:?}");
     }
 
