@@ -10,6 +10,7 @@ pub mod daemon;
 pub mod daq;
 pub mod diagnose;
 pub mod estimate;
+pub mod history;
 pub mod identify;
 pub mod physics;
 pub mod pipeline;

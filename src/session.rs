@@ -16,6 +16,7 @@
 //! (the service) or stops (replay).
 
 use crate::alert::AlertConfig;
+use crate::config::history::{Trace, trace_text};
 use crate::config::parse_machine;
 use crate::estimate::BlowEstimate;
 use crate::estimate::billet_book::BilletSummary;
@@ -42,6 +43,11 @@ pub const SERVICE_CONFIG_NAME: &str = "service.toml";
 /// they are set (`Session::set_absent`), so that a replay does not wait for them.
 pub const CHANNELS_CONFIG_NAME: &str = "channels.toml";
 
+/// What the blows from here on are forged as (issue 44: part id, lot, die set), recorded
+/// when set (`Session::set_trace`): at the start from `[part]`, and at a new billet given
+/// its own. A replay takes it where it is recorded, and the history reads it.
+pub const PART_CONFIG_NAME: &str = "part.toml";
+
 /// The text of `CHANNELS_CONFIG_NAME` for `absent`.
 pub fn channels_text(absent: Channels) -> String {
     let names: Vec<String> = absent.names().iter().map(|n| format!("\"{n}\"")).collect();
@@ -66,6 +72,20 @@ pub fn is_new_billet_marker(st: &Status) -> bool {
     st.source == CONTROL_SOURCE && st.state == NEW_BILLET_STATE
 }
 
+/// State of the marker that says the dies were changed here (issue 44): a new die set's
+/// life starts (`history::die`), under the `part.toml` recorded just before it.
+pub const DIE_CHANGE_STATE: &str = "die_change";
+
+/// The status message that marks a die change in a recording.
+pub fn die_change_marker() -> Status {
+    Status { source: CONTROL_SOURCE.into(), state: DIE_CHANGE_STATE.into(), ..Default::default() }
+}
+
+/// Whether `st` is the die-change marker.
+pub fn is_die_change_marker(st: &Status) -> bool {
+    st.source == CONTROL_SOURCE && st.state == DIE_CHANGE_STATE
+}
+
 /// The log time a blow's or a billet's messages are recorded at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stamp {
@@ -86,6 +106,8 @@ pub enum Outcome {
     Billet { summary: Box<BilletSummary>, log_ns: i64 },
     /// A new billet started here (its marker recorded).
     NewBillet,
+    /// The blows from here on are forged as this (a new billet given its own, recorded).
+    Forged(Trace),
 }
 
 /// How a session's stream ended (`Session::finish`).
@@ -106,6 +128,10 @@ pub struct Session {
     events: Vec<PipelineEvent>,
     /// A new billet announced for a device time the samples have not reached yet.
     pending_billet: Option<i64>,
+    /// What the blows are forged as now; each billet's summary carries it.
+    trace: Trace,
+    /// What the next billet started by a signal is forged as, when it was given.
+    next_trace: Option<Trace>,
     writer: Option<RecordWriter>,
     /// The recording's state when it was finished (`recording_health` after `finish`).
     finished_health: Option<crate::record::RecordingHealth>,
@@ -122,6 +148,8 @@ impl Session {
             merged: Vec::new(),
             events: Vec::new(),
             pending_billet: None,
+            trace: Trace::default(),
+            next_trace: None,
             writer,
             finished_health: None,
             stamp,
@@ -179,6 +207,41 @@ impl Session {
             }
             Some(at) => self.pending_billet = Some(at),
         }
+    }
+
+    /// The blows from here on are forged as `trace` (already checked): recorded now.
+    pub fn set_trace(&mut self, trace: Trace, log_ns: i64) {
+        let text = trace_text(&trace);
+        self.trace = trace;
+        self.record("the part's trace", |w| w.write_config(log_ns, PART_CONFIG_NAME, &text));
+    }
+
+    /// The dies were changed: forged as `trace` from here on (its `die_set` the new set's
+    /// name), then the die-change marker, both recorded now.
+    pub fn change_dies(&mut self, trace: Trace, log_ns: i64) {
+        self.set_trace(trace, log_ns);
+        self.dies_changed(log_ns);
+    }
+
+    /// The die-change marker alone (a replay, which took the trace from its own marker).
+    pub fn dies_changed(&mut self, log_ns: i64) {
+        self.record("the die-change marker", |w| w.write_status(log_ns, &die_change_marker()));
+    }
+
+    /// The next billet a signal starts (`new_billet`) is forged as `trace`: recorded just
+    /// after its marker.
+    pub fn trace_next_billet(&mut self, trace: Trace) {
+        self.next_trace = Some(trace);
+    }
+
+    /// What the blows are forged as now.
+    pub fn trace(&self) -> &Trace {
+        &self.trace
+    }
+
+    /// What the next billet a signal starts is forged as: as given for it, or as now.
+    pub fn next_trace(&self) -> &Trace {
+        self.next_trace.as_ref().unwrap_or(&self.trace)
     }
 
     /// Judge the following blows against `recipe` (already checked), whose text is `text`.
@@ -266,6 +329,10 @@ impl Session {
         // The billet that ended is reported before the marker of the one that starts.
         self.drain(log_ns, out);
         self.record("the new-billet marker", |w| w.write_status(log_ns, &new_billet_marker()));
+        if let Some(trace) = self.next_trace.take() {
+            self.set_trace(trace.clone(), log_ns);
+            out.push(Outcome::Forged(trace));
+        }
         out.push(Outcome::NewBillet);
     }
 
@@ -285,7 +352,8 @@ impl Session {
                     }
                     out.push(Outcome::Blow { estimate, log_ns: at });
                 }
-                PipelineEvent::Billet(summary) => {
+                PipelineEvent::Billet(mut summary) => {
+                    summary.trace = self.trace.clone();
                     let at = self.at(log_ns, summary.t_end_s);
                     self.record("a billet's summary", |w| w.write_billet(at, &summary));
                     out.push(Outcome::Billet { summary, log_ns: at });

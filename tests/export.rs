@@ -22,7 +22,7 @@ const STEEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/config/steel-16NiCrMo1
 const INSTALL: &str = "python3 -m pip install pandas pyarrow";
 
 /// docs/interfaces.md §5's fields, then the billet, the file and the time, then the additions.
-const COLUMNS: [&str; 26] = [
+const COLUMNS: [&str; 29] = [
     "file",
     "wall_time",
     "billet",
@@ -49,6 +49,9 @@ const COLUMNS: [&str; 26] = [
     "h_start_m",
     "residual",
     "method",
+    "part_id",
+    "lot",
+    "die_set",
 ];
 
 fn forgemon(args: &[&str]) -> Output {
@@ -180,6 +183,10 @@ fn pandas_and_pyarrow_read_back_the_replayed_results_of_every_file_and_billet() 
         "2",
         "--interval",
         "0.3",
+        "--lot",
+        "L4711",
+        "--die",
+        "D17",
         "--dir",
         demo_dir.to_str().expect("utf-8"),
     ]));
@@ -230,6 +237,11 @@ fn pandas_and_pyarrow_read_back_the_replayed_results_of_every_file_and_billet() 
         for (row, (w, t_ns, file)) in rows.iter().zip(&want) {
             let wall = if format == "csv" { Value::String(rfc3339(*t_ns)) } else { Value::Null };
             assert_row(row, w, file, *t_ns, &wall);
+            // The demo forged lot L4711 on die set D17 (`--lot`, `--die`); the replayed
+            // captures were forged as nothing recorded.
+            let demo = *file == demo_file.as_path();
+            let (lot, die) = if demo { (Value::from("L4711"), Value::from("D17")) } else { (Value::Null, Value::Null) };
+            assert_eq!((&row["lot"], &row["die_set"], &row["part_id"]), (&lot, &die, &Value::Null), "{format}");
         }
     }
     // The Parquet columns are typed: a UTC timestamp, unsigned counts, nullable doubles.

@@ -11,7 +11,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The top-level modules, bottom to top: each may use only those before it.
-const LAYERS: [&str; 19] = [
+const LAYERS: [&str; 20] = [
     "physics",
     "signal",
     "synth",
@@ -28,6 +28,7 @@ const LAYERS: [&str; 19] = [
     "acquire",
     "config",
     "session",
+    "history",
     "diagnose",
     "daemon",
     "cli",

@@ -152,7 +152,13 @@ fn child_writer(mnt: &Path) {
 }
 
 fn recording_files(dir: &Path) -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(dir).unwrap().flatten().map(|e| e.path()).collect();
+    // The history database lives there too (`history.sqlite`, its WAL beside it).
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("history.sqlite")))
+        .collect();
     v.sort();
     v
 }

@@ -107,6 +107,11 @@ fn billet(n: u32, whole: bool) -> BilletSummary {
         alerts: if whole { 1 } else { 0 },
         checked_blows: u32::from(!whole),
         finished: whole,
+        trace: forgemon::estimate::billet_book::Trace {
+            part_id: whole.then(|| format!("P-{n:04}")),
+            lot: whole.then(|| "4711".into()),
+            die_set: None,
+        },
     }
 }
 
@@ -321,6 +326,9 @@ fn python_mcap_protobuf_decodes_every_channel() {
         assert_eq!(d["alerts"].as_u64(), Some(u64::from(b.alerts)), "billet {n}");
         assert_eq!(d["checked_blows"].as_u64(), Some(u64::from(b.checked_blows)), "billet {n}");
         assert_eq!(d["finished"].as_bool(), Some(b.finished), "billet {n}");
+        assert_eq!(d["part_id"].as_str(), b.trace.part_id.as_deref(), "billet {n}");
+        assert_eq!(d["lot"].as_str(), b.trace.lot.as_deref(), "billet {n}");
+        assert_eq!(d["die_set"].as_str(), b.trace.die_set.as_deref(), "billet {n}");
     }
 
     let configs = topics["/config"]["messages"].as_array().expect("config");

@@ -15,7 +15,7 @@ mod common;
 use std::process::Command;
 use std::time::Duration;
 
-use common::{files_in, free_port, spawn_service};
+use common::{free_port, spawn_service};
 
 use forgemon::config::{parse_machine, parse_process};
 use forgemon::physics::EffectSet;
@@ -213,7 +213,7 @@ gain = {}
     // SIGTERM finishes the recording.
     Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
     let _ = child.wait();
-    let rec = files_in(&dir.join("rec"));
+    let rec = common::recordings_in(&dir.join("rec"));
     assert_eq!(rec.len(), 1, "{rec:?}");
     let out = Command::new(env!("CARGO_BIN_EXE_forgemon"))
         .args(["replay", rec[0].to_str().unwrap(), "--machine", HAMMER, "--json"])

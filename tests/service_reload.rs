@@ -120,8 +120,8 @@ fn a_reload_with_a_missing_machine_file_takes_nothing_and_a_new_listen_address_n
     let log = std::fs::read_to_string(&log).expect("the log");
     assert!(log.contains("nothing reloaded") && log.contains("adopted.machine.toml"), "{log}");
     assert!(log.contains("taken only at a restart: http.listen"), "{log}");
-    // The start's machine and service files, then only the service file of the second
+    // The start's machine and service files and its part trace, then only the service file of the second
     // reload (its alert rule taken): the failed reload recorded nothing.
     let configs = recorded_configs(&dir.path().join("rec"));
-    assert_eq!(configs, ["machine.toml", "service.toml", "service.toml"], "{configs:?}");
+    assert_eq!(configs, ["machine.toml", "service.toml", "part.toml", "service.toml"], "{configs:?}");
 }

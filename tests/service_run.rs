@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
 
-use common::{files_in, free_port, http_get, spawn_service};
+use common::{free_port, http_get, spawn_service};
 
 use forgemon::acquire::ChannelSpec;
 use forgemon::config::parse_process;
@@ -134,7 +134,7 @@ fn status(port: u16) -> serde_json::Value {
 }
 
 fn recordings(dir: &Path) -> Vec<PathBuf> {
-    files_in(&dir.join("rec"))
+    common::recordings_in(&dir.join("rec"))
 }
 
 /// Drive `billets` billets of eight blows, `interval_s` apart, into the pty master in real

@@ -31,6 +31,9 @@ _forgemon() {
             forgemon,help)
                 cmd="forgemon__subcmd__help"
                 ;;
+            forgemon,history)
+                cmd="forgemon__subcmd__history"
+                ;;
             forgemon,identify)
                 cmd="forgemon__subcmd__identify"
                 ;;
@@ -70,6 +73,9 @@ _forgemon() {
             forgemon__subcmd__help,help)
                 cmd="forgemon__subcmd__help__subcmd__help"
                 ;;
+            forgemon__subcmd__help,history)
+                cmd="forgemon__subcmd__help__subcmd__history"
+                ;;
             forgemon__subcmd__help,identify)
                 cmd="forgemon__subcmd__help__subcmd__identify"
                 ;;
@@ -94,6 +100,30 @@ _forgemon() {
             forgemon__subcmd__help,teach)
                 cmd="forgemon__subcmd__help__subcmd__teach"
                 ;;
+            forgemon__subcmd__help__subcmd__history,query)
+                cmd="forgemon__subcmd__help__subcmd__history__subcmd__query"
+                ;;
+            forgemon__subcmd__help__subcmd__history,rebuild)
+                cmd="forgemon__subcmd__help__subcmd__history__subcmd__rebuild"
+                ;;
+            forgemon__subcmd__history,help)
+                cmd="forgemon__subcmd__history__subcmd__help"
+                ;;
+            forgemon__subcmd__history,query)
+                cmd="forgemon__subcmd__history__subcmd__query"
+                ;;
+            forgemon__subcmd__history,rebuild)
+                cmd="forgemon__subcmd__history__subcmd__rebuild"
+                ;;
+            forgemon__subcmd__history__subcmd__help,help)
+                cmd="forgemon__subcmd__history__subcmd__help__subcmd__help"
+                ;;
+            forgemon__subcmd__history__subcmd__help,query)
+                cmd="forgemon__subcmd__history__subcmd__help__subcmd__query"
+                ;;
+            forgemon__subcmd__history__subcmd__help,rebuild)
+                cmd="forgemon__subcmd__history__subcmd__help__subcmd__rebuild"
+                ;;
             *)
                 ;;
         esac
@@ -101,7 +131,7 @@ _forgemon() {
 
     case "${cmd}" in
         forgemon)
-            opts="-h -V --help --version simulate identify diagnose replay import export inspect run demo simulate-device advise teach help"
+            opts="-h -V --help --version simulate identify diagnose replay import export history inspect run demo simulate-device advise teach help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 1 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -157,7 +187,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__demo)
-            opts="-h --billets --interval --dir --fast --http --plc --foxglove --mqtt --opcua --recipe --target --settings --without --dead --help"
+            opts="-h --billets --interval --dir --fast --http --plc --foxglove --mqtt --opcua --recipe --target --settings --without --dead --lot --die --help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 2 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -212,6 +242,14 @@ _forgemon() {
                     return 0
                     ;;
                 --dead)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --lot)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --die)
                     COMPREPLY=($(compgen -f "${cur}"))
                     return 0
                     ;;
@@ -275,7 +313,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__help)
-            opts="simulate identify diagnose replay import export inspect run demo simulate-device advise teach help"
+            opts="simulate identify diagnose replay import export history inspect run demo simulate-device advise teach help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 2 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -347,6 +385,48 @@ _forgemon() {
         forgemon__subcmd__help__subcmd__help)
             opts=""
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__help__subcmd__history)
+            opts="query rebuild"
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__help__subcmd__history__subcmd__query)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__help__subcmd__history__subcmd__rebuild)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
             fi
@@ -463,6 +543,148 @@ _forgemon() {
                 return 0
             fi
             case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history)
+            opts="-h --help query rebuild help"
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 2 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__help)
+            opts="query rebuild help"
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__help__subcmd__help)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__help__subcmd__query)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__help__subcmd__rebuild)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__query)
+            opts="-h --db --table --since --until --part --lot --die --recipe --nok --limit --json --help"
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                --db)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --table)
+                    COMPREPLY=($(compgen -W "blows billets" -- "${cur}"))
+                    return 0
+                    ;;
+                --since)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --until)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --part)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --lot)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --die)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --recipe)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --limit)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__rebuild)
+            opts="-h --db --keep-days --help"
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                --db)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --keep-days)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
                 *)
                     COMPREPLY=()
                     ;;

@@ -93,6 +93,13 @@ pub struct DemoArgs {
     /// alert naming it, and estimates the blows without it.
     #[arg(long, value_name = "CHANNEL@SECONDS", value_parser = parse_dead)]
     pub dead: Option<(Role, f64)>,
+    /// The lot the billets come from (`[part] lot`): on every blow and billet in the
+    /// history database (`--dir`/history.sqlite) and the recording.
+    #[arg(long, value_name = "LOT", value_parser = parse_id)]
+    pub lot: Option<String>,
+    /// The die set in the hammer (`[part] die_set`), as --lot.
+    #[arg(long, value_name = "DIE_SET", value_parser = parse_id)]
+    pub die: Option<String>,
 }
 
 fn parse_dead(s: &str) -> Result<(Role, f64), String> {
@@ -107,6 +114,11 @@ fn parse_dead(s: &str) -> Result<(Role, f64), String> {
 
 fn parse_channel(s: &str) -> Result<Role, String> {
     Role::from_short(s).ok_or_else(|| "must be one of load, acc, disp".to_string())
+}
+
+/// A lot or die set as `[part]` takes it.
+fn parse_id(s: &str) -> Result<String, String> {
+    crate::config::history::check_id(s).map(str::to_string)
 }
 
 /// The DAQ's channels: 1 N, 1 µm and 1 mm/s² per count.
@@ -212,6 +224,7 @@ fn parts(args: &DemoArgs, opcua: Option<crate::config::opcua::OpcuaConfig>) -> a
         }),
         uplink_mqtt: uplink,
         absent_channels: args.without.map_or(Channels::NONE, |r| Channels::NONE.with(r, true)),
+        part: crate::config::history::Trace { part_id: None, lot: args.lot.clone(), die_set: args.die.clone() },
         ..ServiceConfig::minimal(PathBuf::from("hammer-lg1000.machine.toml"), args.dir.clone())
     };
     // No new-billet signal: the service finds each billet from the encoder (issue 22), so it

@@ -1,7 +1,8 @@
 //! `forgemon export RECORDING_OR_DIR... (--csv OUT.csv | --parquet OUT.parquet)`: the blow
 //! results of recordings as one table for the quality department (issue 19 §4), one row per
 //! blow across files and billets: every docs/interfaces.md §5 field, the billet and the blow on
-//! it, the file and the wall-clock time the result was recorded at (the MCAP log time).
+//! it, the file and the wall-clock time the result was recorded at (the MCAP log time),
+//! and what it was forged as (part id, lot, die set: the recording's `part.toml`).
 //!
 //! The rows are the results the recordings hold, read with the project's reader
 //! (`record::RecordReader`), not estimated again. A directory stands for the recordings in
@@ -23,8 +24,10 @@ use clap::Args;
 use serde::Serialize;
 
 use super::inspect::{EXIT_CORRUPT_INPUT, input_status};
+use crate::config::history::{Trace, parse_trace_text};
 use crate::estimate::BlowEstimate;
 use crate::record::{Payload, RecordReader};
+use crate::session::PART_CONFIG_NAME;
 
 #[derive(Debug, Args)]
 pub struct ExportArgs {
@@ -84,10 +87,19 @@ pub struct ExportRow {
     pub h_start_m: Option<f64>,
     pub residual: Option<f64>,
     pub method: Option<&'static str>,
+    /// What the blow was forged as (the recording's `part.toml` in force; issue 44).
+    pub part_id: Option<String>,
+    pub lot: Option<String>,
+    pub die_set: Option<String>,
 }
 
 impl ExportRow {
     pub fn new(file: &Path, log_time_ns: i64, r: &BlowEstimate) -> Self {
+        Self::forged_as(file, log_time_ns, r, &Trace::default())
+    }
+
+    /// The row of `r`, forged as `trace`.
+    pub fn forged_as(file: &Path, log_time_ns: i64, r: &BlowEstimate, trace: &Trace) -> Self {
         ExportRow {
             file: file.display().to_string(),
             wall_time: rfc3339_ns(log_time_ns),
@@ -116,6 +128,9 @@ impl ExportRow {
             h_start_m: r.h_start_m,
             residual: r.residual,
             method: r.method.map(|m| m.as_str()),
+            part_id: trace.part_id.clone(),
+            lot: trace.lot.clone(),
+            die_set: trace.die_set.clone(),
         }
     }
 }
@@ -133,7 +148,11 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     }
     let mut rows = Vec::new();
     let mut corrupt = false;
+    // What the blows are forged as, from each recording's `part.toml` (every file of a run
+    // starts with the one in force).
     for (file, listed) in &files {
+        // A file without one was forged as nothing recorded.
+        let mut trace = Trace::default();
         // A file named on the command line must be a recording; one of a directory's that
         // cannot be read (empty, not MCAP) is named and skipped.
         let mut reader = match RecordReader::open(file) {
@@ -147,11 +166,16 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
         };
         for m in reader.by_ref() {
             match m {
-                Ok(m) => {
-                    if let Payload::Result(r) = &m.payload {
-                        rows.push(ExportRow::new(file, m.log_time_ns, r));
-                    }
-                }
+                Ok(m) => match &m.payload {
+                    Payload::Result(r) => rows.push(ExportRow::forged_as(file, m.log_time_ns, r, &trace)),
+                    Payload::Config(c) if c.name == PART_CONFIG_NAME => match parse_trace_text(&c.text) {
+                        Ok(t) => trace = t,
+                        Err(why) => {
+                            eprintln!("forgemon: {}: a recorded {PART_CONFIG_NAME} left out: {why}", file.display())
+                        }
+                    },
+                    _ => {}
+                },
                 Err(e) => {
                     eprintln!("forgemon: {}: the rest of the file skipped: {e}", file.display());
                     corrupt = true;
@@ -231,6 +255,9 @@ fn schema() -> Schema {
         f64_col("h_start_m", true),
         f64_col("residual", true),
         str_col("method", true),
+        str_col("part_id", true),
+        str_col("lot", true),
+        str_col("die_set", true),
     ])
 }
 
@@ -273,6 +300,9 @@ fn batch(rows: &[ExportRow]) -> anyhow::Result<RecordBatch> {
         f64s(rows, |r| r.h_start_m),
         f64s(rows, |r| r.residual),
         strs(rows, |r| r.method),
+        strs(rows, |r| r.part_id.as_deref()),
+        strs(rows, |r| r.lot.as_deref()),
+        strs(rows, |r| r.die_set.as_deref()),
     ];
     Ok(RecordBatch::try_new(Arc::new(schema()), columns)?)
 }

@@ -10,6 +10,7 @@ pub mod advise;
 pub mod demo;
 pub mod diagnose;
 pub mod export;
+pub mod history;
 pub mod identify;
 pub mod import;
 pub mod inspect;
@@ -43,6 +44,8 @@ pub enum Command {
     Import(import::ImportArgs),
     /// Write the blow results of recordings as one table (CSV or Parquet), a row per blow.
     Export(export::ExportArgs),
+    /// The quality record: query the history database, or rebuild it from recordings.
+    History(history::HistoryArgs),
     /// Say what a recording holds: sources, rates, duration, blows, gaps, drops, alerts.
     Inspect(inspect::InspectArgs),
     /// The always-on service: acquire, segment, estimate, alert, record.
@@ -66,6 +69,7 @@ impl Cli {
             Command::Replay(args) => replay::run(args),
             Command::Import(args) => import::run(args),
             Command::Export(args) => export::run(args),
+            Command::History(args) => history::run(args),
             Command::Inspect(args) => inspect::run(args),
             Command::Run(args) => run::run(args),
             Command::Demo(args) => demo::run(args),

@@ -13,6 +13,7 @@ use clap::Args;
 
 use super::progress::Progress;
 use super::{parse_process_warn, read_text};
+use crate::config::history::{Trace, parse_trace_text};
 use crate::config::parse_machine;
 use crate::config::service::parse_tuning;
 use crate::daemon::tuned_config;
@@ -22,8 +23,8 @@ use crate::pipeline::{Feeder, Pipeline};
 use crate::record::reader::ReadMode;
 use crate::record::{Payload, RecordReader, RecordWriter, Rotation};
 use crate::session::{
-    CHANNELS_CONFIG_NAME, End, MACHINE_CONFIG_NAME, Outcome, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME, Session, Stamp,
-    is_new_billet_marker, parse_channels_text,
+    CHANNELS_CONFIG_NAME, End, MACHINE_CONFIG_NAME, Outcome, PART_CONFIG_NAME, RECIPE_CONFIG_NAME, SERVICE_CONFIG_NAME,
+    Session, Stamp, is_die_change_marker, is_new_billet_marker, parse_channels_text,
 };
 use crate::signal::sample::{Channels, SampleBatch};
 
@@ -86,6 +87,8 @@ enum Input {
         ahead: Vec<SampleBatch>,
         /// The channels no source carried (`session::CHANNELS_CONFIG_NAME`), when recorded.
         absent: Option<Channels>,
+        /// What the blows were forged as at the start (`session::PART_CONFIG_NAME`).
+        trace: Option<Trace>,
         /// The directory's recordings after this one, in name order (a rotated run).
         rest: Vec<PathBuf>,
         /// Whether unreadable files before this one were skipped.
@@ -104,6 +107,8 @@ struct Stored {
     recipe: Option<String>,
     /// The channels none of the live run's sources carried (`session::CHANNELS_CONFIG_NAME`).
     absent: Option<Channels>,
+    /// What the blows were forged as at the start (`session::PART_CONFIG_NAME`).
+    trace: Option<Trace>,
 }
 
 /// A configuration file's text and where it came from (for error messages).
@@ -291,12 +296,16 @@ impl<W: Write> Replay<W> {
                     })?;
                 }
             }
-            Input::Recording { reader, ahead, rest, skipped, absent } => {
+            Input::Recording { reader, ahead, rest, skipped, absent, trace } => {
                 self.end = End::Stopped;
                 self.progress = Progress::over(std::iter::once(reader.path()).chain(rest.iter().map(PathBuf::as_path)));
                 // The channels none of the live run's sources carried, as it recorded them.
                 if let Some(absent) = absent {
                     self.session.set_absent(absent, 0);
+                }
+                // What the live run's first blows were forged as.
+                if let Some(trace) = trace {
+                    self.session.set_trace(trace, 0);
                 }
                 for batch in &ahead {
                     self.batch(batch)?;
@@ -342,6 +351,8 @@ impl<W: Write> Replay<W> {
                     self.session.new_billet(None, log_ns, &mut self.outcomes);
                     self.handle()?;
                 }
+                // The dies were changed here (`POST /die`).
+                Payload::Status(st) if is_die_change_marker(&st) => self.session.dies_changed(log_ns),
                 // The live run switched recipes here (`POST /recipe`); a rotated file
                 // repeats the same text, which changes nothing.
                 Payload::Config(c) if c.name == RECIPE_CONFIG_NAME && args.recipe.is_none() => {
@@ -354,6 +365,13 @@ impl<W: Write> Replay<W> {
                 Payload::Config(c) if c.name == MACHINE_CONFIG_NAME && args.machine.is_none() => {
                     let origin = format!("{} (machine.toml stored in it)", args.input.display());
                     self.session.set_model(&origin, &c.text, log_ns).map_err(anyhow::Error::msg)?;
+                }
+                // The part, lot or die set changed here (`[part]` at the start, a new
+                // billet's own); a rotated file repeats the same, which changes nothing.
+                Payload::Config(c) if c.name == PART_CONFIG_NAME => {
+                    let trace = parse_trace_text(&c.text)
+                        .map_err(|why| anyhow::anyhow!("{} (part.toml stored in it): {why}", args.input.display()))?;
+                    self.session.set_trace(trace, log_ns);
                 }
                 // The live run reloaded its alert rules here (SIGHUP); a rotated file
                 // repeats the same text, which changes nothing.
@@ -419,7 +437,7 @@ impl<W: Write> Replay<W> {
                         cut.t_contact_s
                     ));
                 }
-                Outcome::NewBillet => {}
+                Outcome::NewBillet | Outcome::Forged(_) => {}
             }
         }
         Ok(())
@@ -503,8 +521,9 @@ fn open_input(path: &Path, mode: ReadMode) -> anyhow::Result<(Input, Stored)> {
         while let Some(first) = files.next() {
             match open_recording(&first, mode) {
                 Ok((reader, ahead, stored)) => {
-                    let absent = stored.absent;
-                    return Ok((Input::Recording { reader, ahead, rest: files.collect(), skipped, absent }, stored));
+                    let (absent, trace) = (stored.absent, stored.trace.clone());
+                    let rest = files.collect();
+                    return Ok((Input::Recording { reader, ahead, rest, skipped, absent, trace }, stored));
                 }
                 Err(e) => {
                     eprintln!("forgemon: skipped {}: {}", first.display(), super::error_message(&e));
@@ -525,14 +544,15 @@ fn open_input(path: &Path, mode: ReadMode) -> anyhow::Result<(Input, Stored)> {
             service: None,
             recipe: None,
             absent: None,
+            trace: None,
         };
         return Ok((Input::Files(super::capture_dir_files(path)?), stored));
     }
     let name = path.to_string_lossy();
     if name.ends_with(".mcap") || name.ends_with(".mcap.part") {
         let (reader, ahead, stored) = open_recording(path, mode)?;
-        let absent = stored.absent;
-        return Ok((Input::Recording { reader, ahead, rest: Vec::new(), skipped: false, absent }, stored));
+        let (absent, trace) = (stored.absent, stored.trace.clone());
+        return Ok((Input::Recording { reader, ahead, rest: Vec::new(), skipped: false, absent, trace }, stored));
     }
     if !path.exists() {
         bail!("{}: no such file or directory", path.display());
@@ -558,6 +578,11 @@ fn open_recording(path: &Path, mode: ReadMode) -> anyhow::Result<(Box<RecordRead
             Payload::Config(c) if c.name == SERVICE_CONFIG_NAME => stored.service = Some(c.text),
             Payload::Config(c) if c.name == RECIPE_CONFIG_NAME => stored.recipe = Some(c.text),
             Payload::Config(c) if c.name == CHANNELS_CONFIG_NAME => stored.absent = parse_channels_text(&c.text),
+            Payload::Config(c) if c.name == PART_CONFIG_NAME => {
+                let trace = parse_trace_text(&c.text)
+                    .map_err(|why| anyhow::anyhow!("{} ({PART_CONFIG_NAME} stored in it): {why}", path.display()))?;
+                stored.trace = Some(trace);
+            }
             _ => {}
         }
     }

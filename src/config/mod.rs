@@ -10,6 +10,7 @@
 pub mod advisor;
 mod can;
 mod document;
+pub mod history;
 pub mod limits;
 pub mod machine;
 pub mod opcua;

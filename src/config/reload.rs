@@ -41,6 +41,9 @@ pub fn needs_restart(old: &ServiceConfig, new: &ServiceConfig) -> Vec<&'static s
         absent_channels: _,
         advisor,
         uplink_mqtt,
+        history,
+        part,
+        die_life,
     } = new;
     let changed = [
         ("process", *process_path != old.process_path),
@@ -68,6 +71,9 @@ pub fn needs_restart(old: &ServiceConfig, new: &ServiceConfig) -> Vec<&'static s
         ("sources", *sources != old.sources),
         ("advisor", *advisor != old.advisor),
         ("uplink.mqtt", *uplink_mqtt != old.uplink_mqtt),
+        ("history", *history != old.history),
+        ("part", *part != old.part),
+        ("die_life", *die_life != old.die_life),
     ];
     changed.into_iter().filter(|(_, c)| *c).map(|(key, _)| key).collect()
 }

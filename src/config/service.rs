@@ -184,6 +184,12 @@ pub struct ServiceConfig {
     pub advisor: Option<super::advisor::AdvisorConfig>,
     /// `[uplink.mqtt]`: publish Sparkplug B to this broker (docs/interfaces.md §10, `uplink.rs`).
     pub uplink_mqtt: Option<super::uplink::MqttUplink>,
+    /// `[history]`: the quality record's database (on by default), `None` when disabled.
+    pub history: Option<super::history::HistoryConfig>,
+    /// `[part]`: the part, lot and die set until they are set at run time.
+    pub part: super::history::Trace,
+    /// `[die_life]`: when a die set is due.
+    pub die_life: super::history::DieLifeConfig,
 }
 
 impl ServiceConfig {
@@ -196,7 +202,7 @@ impl ServiceConfig {
             machine_path,
             process_path: None,
             recipe_path: None,
-            recording_dir,
+            recording_dir: recording_dir.clone(),
             rotate_bytes: DEFAULT_ROTATE_BYTES,
             rotate_seconds: DEFAULT_ROTATE_SECONDS,
             keep_bytes: None,
@@ -221,6 +227,9 @@ impl ServiceConfig {
             absent_channels: Channels::NONE,
             advisor: None,
             uplink_mqtt: None,
+            history: Some(super::history::HistoryConfig::in_dir(&recording_dir)),
+            part: super::history::Trace::default(),
+            die_life: super::history::DieLifeConfig::default(),
         }
     }
 }
@@ -240,6 +249,9 @@ struct RawService {
     billets: Option<RawBillets>,
     encoder: Option<RawEncoder>,
     advisor: Option<super::advisor::RawAdvisor>,
+    history: Option<super::history::RawHistory>,
+    part: Option<super::history::RawPart>,
+    die_life: Option<super::history::RawDieLife>,
     /// Each read by its `kind` (`source.rs`).
     sources: Vec<IgnoredAny>,
     /// Read by `uplink.rs`.
@@ -350,11 +362,15 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
     let sources = parse_sources(&doc, raw.sources.len(), base)?;
     let absent_channels = absent_channels(&sources);
     let advisor = super::advisor::parse_advisor(&doc, raw.advisor.as_ref())?;
+    let recording_dir = path(&raw.recording.dir);
+    let history = super::history::parse_history(&doc, raw.history.as_ref(), &recording_dir, &path)?;
+    let part = super::history::parse_part(&doc, raw.part.as_ref())?;
+    let die_life = super::history::parse_die_life(&doc, raw.die_life.as_ref())?;
     Ok(ServiceConfig {
         machine_path: path(&raw.machine),
         process_path: raw.process.as_deref().map(path),
         recipe_path: raw.recipe.as_deref().map(path),
-        recording_dir: path(&raw.recording.dir),
+        recording_dir,
         rotate_bytes,
         rotate_seconds,
         keep_bytes: raw
@@ -386,6 +402,9 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         absent_channels,
         advisor,
         uplink_mqtt: super::uplink::parse_uplink(&doc)?,
+        history,
+        part,
+        die_life,
     })
 }
 

@@ -10,8 +10,10 @@
 
 pub mod advisor;
 pub mod dashboard;
+pub mod die_life;
 pub mod faces;
 pub mod foxglove;
+mod history;
 pub mod http_server;
 pub mod idle;
 pub mod live;
@@ -72,7 +74,7 @@ pub struct ServiceParts {
 }
 
 /// Commands to the running service (from the status endpoint or a front end).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Control {
     /// A new billet is in the dies (an operator's button, a PLC input, the simulator):
     /// now (`None`), or from the source's sample at this device time on, so that samples
@@ -80,6 +82,12 @@ pub enum Control {
     NewBillet { at_device_ns: Option<i64> },
     /// The operator acknowledged the latched alert (`POST /ack`, the PLC's coil 0).
     Acknowledge,
+    /// A new billet, as `NewBillet`, forged as the trace in force changed by `change`
+    /// (`POST /billet` with a body, the PLC's part block, OPC UA).
+    NewBilletAs { at_device_ns: Option<i64>, change: Box<crate::config::history::TraceUpdate> },
+    /// The dies were changed (`POST /die`): a new die set's life starts, forged as the trace
+    /// in force changed by this (its `die_set` the new set's name).
+    DieChange(Box<crate::config::history::TraceUpdate>),
 }
 
 /// A front end's callback for each blow.
@@ -106,7 +114,7 @@ pub struct Hooks {
 }
 
 /// Every face `serve` starts, by its config section (`faces.rs`). A new face is one line.
-pub const FACES: [(&str, faces::Start); 8] = [
+pub const FACES: [(&str, faces::Start); 9] = [
     ("http", dashboard::face),
     ("foxglove", foxglove::face),
     ("plc_server", plc_server::face),
@@ -115,6 +123,7 @@ pub const FACES: [(&str, faces::Start); 8] = [
     ("advisor", advisor::face),
     ("alerts.webhook", sinks::webhook_face),
     ("alerts.plc_coil", sinks::coil_face),
+    ("history", history::face),
 ];
 
 /// What the service did, when it stops.
@@ -195,8 +204,15 @@ pub async fn serve(
     let (pipeline, recipe_text) = pipeline_with_recipe(&parts, &mut writer, &status)?;
     let mut session = Session::new(pipeline, Some(writer), Stamp::Arrival);
     session.set_absent(cfg.absent_channels, 0);
+    // Always recorded, unset parts too: a replay or a history rebuild from here on forgets
+    // what an earlier run set.
+    session.set_trace(cfg.part.clone(), host_now_ns());
+    status.lock().map(|mut s| s.part = cfg.part.clone()).ok();
     let in_force = reload::InForce::new(&parts, recipe_text);
-    let service = service::Service::new(session, status, live.clone(), hooks, in_force, cfg.min_free_bytes);
+    let history = cfg.history.as_ref().map(|h| h.path.clone());
+    let dies = die_life::DieLife::start(cfg.die_life, history, cfg.part.die_set.as_deref(), host_now_ns());
+    status.lock().map(|mut s| s.die_life = dies.status()).ok();
+    let service = service::Service::new(session, status, live.clone(), hooks, in_force, cfg.min_free_bytes, dies);
     let rx = queue::SourceQueue::new(rx, parts.backpressure);
     tracing::info!(listen = %cfg.http_listen, dir = %cfg.recording_dir.display(), "forgemon service ready");
     let summary = run_loop(service, rx, control_rx, recipe_rx, stop, &shutdown).await?;

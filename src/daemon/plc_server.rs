@@ -112,7 +112,7 @@ impl Warnings {
         match kind {
             AlertKind::ModelHealth => self.model_health = true,
             AlertKind::Sensor => self.sensor = true,
-            AlertKind::ElasticBlow | AlertKind::Nok | AlertKind::Storage => {}
+            AlertKind::ElasticBlow | AlertKind::Nok | AlertKind::Storage | AlertKind::DieLife => {}
         }
     }
 }
@@ -308,10 +308,11 @@ impl Service for ImageService {
         } else {
             let image = *self.image.borrow();
             answer(&image, req.request, |c| {
+                let said = format!("{c:?}");
                 let sent = self.control.try_send(c).is_ok();
                 if sent {
                     self.stats.commands.fetch_add(1, Ordering::Relaxed);
-                    tracing::info!(command = ?c, "PLC coil");
+                    tracing::info!(command = said, "PLC coil");
                 }
                 sent
             })

@@ -41,6 +41,8 @@ pub(super) struct Service {
     storage_level: StorageLevel,
     /// The number of the last blow reported, for alerts that are not a blow's.
     last_blow: u32,
+    /// The die set in the hammer and what it has taken.
+    dies: super::die_life::DieLife,
 }
 
 /// The recording's disk, from good to worst.
@@ -61,6 +63,7 @@ impl Service {
         hooks: Hooks,
         in_force: InForce,
         min_free_bytes: u64,
+        dies: super::die_life::DieLife,
     ) -> Self {
         Service {
             session,
@@ -73,6 +76,7 @@ impl Service {
             min_free_bytes,
             storage_level: StorageLevel::Ok,
             last_blow: 0,
+            dies,
         }
     }
 
@@ -121,6 +125,28 @@ impl Service {
             Control::NewBillet { at_device_ns } => {
                 self.session.new_billet(at_device_ns, host_now_ns(), &mut self.outcomes);
                 self.serve();
+            }
+            Control::NewBilletAs { at_device_ns, change } => {
+                let trace = change.apply(self.session.next_trace());
+                self.session.trace_next_billet(trace);
+                self.session.new_billet(at_device_ns, host_now_ns(), &mut self.outcomes);
+                self.serve();
+            }
+            Control::DieChange(change) => {
+                let trace = change.apply(self.session.trace());
+                let now = host_now_ns();
+                self.dies.change(trace.die_set.as_deref(), now);
+                tracing::info!(die_set = trace.die_set, "die change");
+                self.session.change_dies(trace.clone(), now);
+                let dies = self.dies.status();
+                self.status
+                    .lock()
+                    .map(|mut s| {
+                        s.part = trace;
+                        s.die_life = dies;
+                    })
+                    .ok();
+                self.publish_status();
             }
             Control::Acknowledge => {
                 if self.status.lock().map(|mut s| s.acknowledge()).unwrap_or(false) {
@@ -296,9 +322,17 @@ impl Service {
                         f(&msg);
                     }
                 }
+                Outcome::Forged(trace) => self.dies.struck_on(trace.die_set.as_deref()),
                 Outcome::NewBillet => {
                     let billets = self.session.pipeline_mut().billets();
-                    self.status.lock().map(|mut s| s.billets = u64::from(billets)).ok();
+                    let part = self.session.trace().clone();
+                    self.status
+                        .lock()
+                        .map(|mut s| {
+                            s.billets = u64::from(billets);
+                            s.part = part;
+                        })
+                        .ok();
                     self.live.publish(LiveEvent::NewBillet);
                     tracing::info!("new billet");
                 }
@@ -322,6 +356,9 @@ impl Service {
                 s.last_result_latency_ms = Some(latency_ms);
             })
             .ok();
+        let die_alert = self.dies.on_blow(estimate, log_time_ns);
+        let dies = self.dies.status();
+        self.status.lock().map(|mut s| s.die_life = dies).ok();
         if let Some(alert) = &estimate.alert {
             self.summary.alerts += 1;
             tracing::warn!(kind = alert.kind.as_str(), blow = alert.blow, "{}", alert.reason);
@@ -334,6 +371,9 @@ impl Service {
         }
         self.publish_status();
         self.live.publish(LiveEvent::Blow(Arc::new(estimate.clone())));
+        if let Some(alert) = die_alert {
+            self.raise(alert);
+        }
     }
 
     fn on_billet(&mut self, b: &BilletSummary) {

@@ -113,6 +113,14 @@ pub struct StatusSnapshot {
     pub recording: String,
     /// The recording's state and its disk (filled every second).
     pub storage: StorageStatus,
+    /// What the blows are forged as now (`[part]`, `POST /billet`'s body): part id, lot,
+    /// die set, each absent until set.
+    pub part: crate::estimate::billet_book::Trace,
+    /// The die set in the hammer: what it has taken, where it stands against `[die_life]`.
+    pub die_life: super::die_life::DieLifeStatus,
+    /// The history database's writer (`[history]`, filled every second): rows written,
+    /// messages dropped by its full queue or a failed write; `None` when it is off.
+    pub history: Option<crate::history::writer::HistoryStatus>,
     /// What the dashboard shows beyond this (`GET /dashboard/state`), not in `/status`.
     #[serde(skip)]
     pub board: Board,
@@ -147,6 +155,9 @@ impl StatusSnapshot {
             merge: MergeStats::default(),
             recording: String::new(),
             storage: StorageStatus::default(),
+            history: None,
+            part: Default::default(),
+            die_life: Default::default(),
             board: Board::default(),
         }
     }
@@ -252,10 +263,43 @@ async fn metrics_text(State(s): State<SharedStatus>) -> impl IntoResponse {
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], body)
 }
 
-async fn new_billet(State(tx): State<tokio::sync::mpsc::Sender<super::Control>>) -> impl IntoResponse {
-    match tx.try_send(super::Control::NewBillet { at_device_ns: None }) {
-        Ok(()) => (StatusCode::ACCEPTED, "new billet\n"),
-        Err(_) => (StatusCode::SERVICE_UNAVAILABLE, "the service is busy or stopping\n"),
+/// `POST /die`: the dies were changed; a JSON body as `POST /billet`'s names the new set
+/// (`{"die_set": "18"}`; without one, the same name starts again from zero).
+async fn die_change(
+    State(tx): State<tokio::sync::mpsc::Sender<super::Control>>,
+    body: axum::body::Bytes,
+) -> impl IntoResponse {
+    let change = if body.iter().all(u8::is_ascii_whitespace) {
+        crate::config::history::TraceUpdate::default()
+    } else {
+        match crate::config::history::TraceUpdate::from_json(&body) {
+            Ok(change) => change,
+            Err(why) => return (StatusCode::BAD_REQUEST, format!("POST /die: {why}\n")),
+        }
+    };
+    match tx.try_send(super::Control::DieChange(Box::new(change))) {
+        Ok(()) => (StatusCode::ACCEPTED, "die change\n".to_string()),
+        Err(_) => (StatusCode::SERVICE_UNAVAILABLE, "the service is busy or stopping\n".to_string()),
+    }
+}
+
+/// `POST /billet`: a new billet now; a JSON body (`{"part_id": .., "lot": .., "die_set":
+/// ..}`, each a string or null, any left out) also says what it is forged as.
+async fn new_billet(
+    State(tx): State<tokio::sync::mpsc::Sender<super::Control>>,
+    body: axum::body::Bytes,
+) -> impl IntoResponse {
+    let control = if body.iter().all(u8::is_ascii_whitespace) {
+        super::Control::NewBillet { at_device_ns: None }
+    } else {
+        match crate::config::history::TraceUpdate::from_json(&body) {
+            Ok(change) => super::Control::NewBilletAs { at_device_ns: None, change: Box::new(change) },
+            Err(why) => return (StatusCode::BAD_REQUEST, format!("POST /billet: {why}\n")),
+        }
+    };
+    match tx.try_send(control) {
+        Ok(()) => (StatusCode::ACCEPTED, "new billet\n".to_string()),
+        Err(_) => (StatusCode::SERVICE_UNAVAILABLE, "the service is busy or stopping\n".to_string()),
     }
 }
 
@@ -272,7 +316,7 @@ pub fn routes(
         .route("/status", get(status_json))
         .route("/metrics", get(metrics_text))
         .with_state(status)
-        .merge(Router::new().route("/billet", post(new_billet)).with_state(control))
+        .merge(Router::new().route("/billet", post(new_billet)).route("/die", post(die_change)).with_state(control))
         .merge(more)
         .layer(axum::middleware::from_fn_with_state(token, require_token))
 }

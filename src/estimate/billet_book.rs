@@ -8,6 +8,20 @@ use serde::Serialize;
 
 use super::result::{BlowClass, BlowEstimate};
 
+/// What a billet is forged as (issue 44): the part's id, its lot and the die set, as set
+/// by the operator, the PLC, OPC UA or `[part]` (the session stamps each summary with the
+/// trace in force on its blows). Each is absent until set.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Trace {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub part_id: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lot: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub die_set: Option<String>,
+}
+
 /// What one billet took. Energies add up the complete blows only; `incomplete_blows`
 /// says how many blows they leave out (`energies_partial`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -50,6 +64,9 @@ pub struct BilletSummary {
     pub checked_blows: u32,
     /// Whether the next billet started; `false`: the run ended with this one in the dies.
     pub finished: bool,
+    /// What it was forged as; absent parts are left out of its JSON.
+    #[serde(flatten)]
+    pub trace: Trace,
 }
 
 impl BilletSummary {
@@ -74,6 +91,7 @@ impl BilletSummary {
             alerts: 0,
             checked_blows: 0,
             finished: false,
+            trace: Trace::default(),
         }
     }
 
@@ -111,6 +129,12 @@ impl std::fmt::Display for BilletSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let mm = |h: Option<f64>| h.map_or("-".to_string(), |h| format!("{:.2}", h * 1e3));
         write!(f, "billet {}", self.billet)?;
+        let t = &self.trace;
+        for (word, v) in [("part", &t.part_id), ("lot", &t.lot), ("die set", &t.die_set)] {
+            if let Some(v) = v {
+                write!(f, " {word} {v}")?;
+            }
+        }
         if !self.finished {
             write!(f, " (in the dies at the end)")?;
         }

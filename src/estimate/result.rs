@@ -23,6 +23,8 @@ pub enum AlertKind {
     Nok,
     /// From the service, not a blow: the recording's disk is low or a write failed.
     Storage,
+    /// From the service: a die set reached its warning or its limit (`[die_life]`).
+    DieLife,
 }
 
 impl AlertKind {
@@ -33,6 +35,7 @@ impl AlertKind {
             AlertKind::Sensor => "sensor",
             AlertKind::Nok => "nok",
             AlertKind::Storage => "storage",
+            AlertKind::DieLife => "die_life",
         }
     }
 }

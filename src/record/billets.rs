@@ -1,7 +1,7 @@
 //! The `/billets` channel's message (issue 22): a billet's summary to and from its protobuf
 //! form, field for field.
 
-use crate::estimate::billet_book::BilletSummary;
+use crate::estimate::billet_book::{BilletSummary, Trace};
 
 use super::schema::pb;
 
@@ -26,6 +26,9 @@ pub(crate) fn to_pb(b: &BilletSummary) -> pb::BilletSummary {
         alerts: b.alerts,
         checked_blows: b.checked_blows,
         finished: b.finished,
+        part_id: b.trace.part_id.clone(),
+        lot: b.trace.lot.clone(),
+        die_set: b.trace.die_set.clone(),
     }
 }
 
@@ -50,5 +53,6 @@ pub(crate) fn from_pb(b: pb::BilletSummary) -> BilletSummary {
         alerts: b.alerts,
         checked_blows: b.checked_blows,
         finished: b.finished,
+        trace: Trace { part_id: b.part_id, lot: b.lot, die_set: b.die_set },
     }
 }

@@ -213,6 +213,7 @@ fn alert_from_pb(a: pb::Alert) -> Result<Alert, DecodeError> {
         "sensor" => AlertKind::Sensor,
         "nok" => AlertKind::Nok,
         "storage" => AlertKind::Storage,
+        "die_life" => AlertKind::DieLife,
         _ => return Err(DecodeError::UnknownAlertKind { kind: a.kind }),
     };
     Ok(Alert { kind, blow: a.blow, reason: a.reason, figures: a.figures })
@@ -445,7 +446,7 @@ mod wire {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use std::collections::BTreeMap;
 
     use super::*;
@@ -631,6 +632,11 @@ mod tests {
             alerts: 1,
             checked_blows: 0,
             finished: with_optional,
+            trace: crate::estimate::billet_book::Trace {
+                part_id: with_optional.then(|| "P-000417".into()),
+                lot: with_optional.then(|| "4711".into()),
+                die_set: with_optional.then(|| "17".into()),
+            },
         }
     }
 

@@ -132,6 +132,15 @@ pub fn files_in(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
     v
 }
 
+/// The recordings in `dir` (`*.mcap`, `*.mcap.part`), sorted by name: the directory also
+/// holds the history database (`history.sqlite`, issue 44).
+pub fn recordings_in(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    files_in(dir)
+        .into_iter()
+        .filter(|p| p.to_str().is_some_and(|s| s.ends_with(".mcap") || s.ends_with(".mcap.part")))
+        .collect()
+}
+
 /// The first MCAP recording in `dir`, by name.
 pub fn first_recording(dir: &std::path::Path) -> std::path::PathBuf {
     files_in(dir).into_iter().find(|p| p.extension().is_some_and(|x| x == "mcap")).expect("an mcap file")

@@ -83,7 +83,8 @@ def describe(schema_name, msg):
         return alert_dict(msg)
     if schema_name == "forgemon.BilletSummary":
         out = {field.name: getattr(msg, field.name) for field in msg.DESCRIPTOR.fields}
-        for name in ("h_start_m", "h_start_off_sheet_m", "h_end_m", "friction_J", "efficiency", "first_hard_blow"):
+        for name in ("h_start_m", "h_start_off_sheet_m", "h_end_m", "friction_J", "efficiency", "first_hard_blow",
+                     "part_id", "lot", "die_set"):
             out[name] = optional(msg, name)
         return out
     # The small messages (blow boundary, gap, status, config file): every scalar field,

@@ -1,0 +1,256 @@
+//! `forgemon history {query, rebuild}`: the quality record (issue 44) from the command line.
+//! `rebuild` makes the database from recordings by the function the service writes it with
+//! (`history::History::ingest`); `query` prints a table's rows under filters.
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, bail};
+use clap::{Args, Subcommand};
+
+use super::inspect::{EXIT_CORRUPT_INPUT, input_status, recordings};
+use crate::history::query::{Filter, Table, open_read, rows};
+use crate::history::{History, Ingested};
+use crate::record::RecordReader;
+
+#[derive(Debug, Args)]
+pub struct HistoryArgs {
+    #[command(subcommand)]
+    pub command: HistoryCommand,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum HistoryCommand {
+    /// Print the blows (or billets) of the history database, oldest first.
+    Query(QueryArgs),
+    /// Make the history database from recordings: MCAP is the source of truth. Into an
+    /// existing database it adds only the rows it lacks.
+    Rebuild(RebuildArgs),
+}
+
+/// The filters every reading verb takes.
+#[derive(Debug, Args)]
+pub struct FilterArgs {
+    /// Rows at or after this time: RFC 3339 (2026-11-30T06:00:00Z) or a UTC date (2026-11-30).
+    #[arg(long, value_name = "TIME")]
+    pub since: Option<String>,
+    /// Rows before this time (as --since).
+    #[arg(long, value_name = "TIME")]
+    pub until: Option<String>,
+    /// Only this part id.
+    #[arg(long, value_name = "ID")]
+    pub part: Option<String>,
+    /// Only this lot.
+    #[arg(long, value_name = "LOT")]
+    pub lot: Option<String>,
+    /// Only this die set.
+    #[arg(long, value_name = "DIE_SET")]
+    pub die: Option<String>,
+    /// Only blows judged by this recipe.
+    #[arg(long, value_name = "NAME")]
+    pub recipe: Option<String>,
+}
+
+#[derive(Debug, Args)]
+pub struct QueryArgs {
+    /// The history database (`[history] path`; by default `history.sqlite` in the recording
+    /// directory).
+    #[arg(long, value_name = "DB")]
+    pub db: PathBuf,
+    /// Which table.
+    #[arg(long, value_enum, default_value = "blows")]
+    pub table: Table,
+    #[command(flatten)]
+    pub filter: FilterArgs,
+    /// Only blows judged NOK, or billets with one.
+    #[arg(long)]
+    pub nok: bool,
+    /// At most this many rows.
+    #[arg(long, value_name = "N")]
+    pub limit: Option<u64>,
+    /// One JSON object per row (every column) instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct RebuildArgs {
+    /// Recordings (.mcap, .mcap.part), or directories of them, in the order they were written.
+    #[arg(required = true, value_name = "RECORDING_OR_DIR")]
+    pub inputs: Vec<PathBuf>,
+    /// The database to write (created if missing).
+    #[arg(long, value_name = "DB")]
+    pub db: PathBuf,
+    /// Delete rows older than this many days before the newest (as `[history] keep_days`).
+    #[arg(long, value_name = "DAYS")]
+    pub keep_days: Option<f64>,
+}
+
+pub fn run(args: HistoryArgs) -> anyhow::Result<ExitCode> {
+    match args.command {
+        HistoryCommand::Query(a) => query(a),
+        HistoryCommand::Rebuild(a) => rebuild(a),
+    }
+}
+
+/// `--since`/`--until`'s text as ns since the epoch.
+pub(crate) fn parse_time(flag: &str, text: &str) -> anyhow::Result<i64> {
+    let t = chrono::DateTime::parse_from_rfc3339(text).map(|t| t.to_utc()).or_else(|_| {
+        chrono::NaiveDate::parse_from_str(text, "%Y-%m-%d")
+            .map(|d| d.and_hms_opt(0, 0, 0).unwrap_or_default().and_utc())
+    });
+    let t = t.map_err(|_| {
+        anyhow::anyhow!("{flag} {text}: not a time; give RFC 3339 (2026-11-30T06:00:00Z) or a date (2026-11-30)")
+    })?;
+    t.timestamp_nanos_opt().with_context(|| format!("{flag} {text}: out of range"))
+}
+
+impl FilterArgs {
+    pub(crate) fn filter(&self) -> anyhow::Result<Filter> {
+        Ok(Filter {
+            since_ns: self.since.as_deref().map(|t| parse_time("--since", t)).transpose()?,
+            until_ns: self.until.as_deref().map(|t| parse_time("--until", t)).transpose()?,
+            part_id: self.part.clone(),
+            lot: self.lot.clone(),
+            die_set: self.die.clone(),
+            recipe: self.recipe.clone(),
+            ..Filter::default()
+        })
+    }
+}
+
+/// A database that must already be there, named if it is not.
+pub(crate) fn existing(db: &Path) -> anyhow::Result<()> {
+    if !db.is_file() {
+        bail!(
+            "{}: no history database there (the service writes it to [history] path; forgemon history rebuild makes one)",
+            db.display()
+        );
+    }
+    Ok(())
+}
+
+fn query(a: QueryArgs) -> anyhow::Result<ExitCode> {
+    existing(&a.db)?;
+    let filter = Filter { nok: a.nok, limit: a.limit, ..a.filter.filter()? };
+    let conn = open_read(&a.db)?;
+    let found = rows(&conn, &a.db, a.table, &filter)?;
+    let mut out = super::out::stdout();
+    if a.json {
+        for r in &found {
+            writeln!(out, "{}", serde_json::Value::Object(r.clone()))?;
+        }
+    } else {
+        print_table(&mut out, a.table, &found)?;
+    }
+    out.flush()?;
+    eprintln!("forgemon: {} {}", found.len(), a.table.name());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The columns the text table shows; `--json` gives every one.
+fn shown(table: Table) -> &'static [&'static str] {
+    match table {
+        Table::Blows => &[
+            "wall_time",
+            "part_id",
+            "lot",
+            "die_set",
+            "billet",
+            "billet_blow",
+            "efficiency",
+            "plastic_J",
+            "class",
+            "judgement",
+        ],
+        Table::Billets => &[
+            "wall_time",
+            "part_id",
+            "lot",
+            "die_set",
+            "billet",
+            "blows",
+            "efficiency",
+            "plastic_J",
+            "h_end_m",
+            "finished",
+        ],
+    }
+}
+
+fn print_table(
+    out: &mut impl std::io::Write,
+    table: Table,
+    found: &[serde_json::Map<String, serde_json::Value>],
+) -> anyhow::Result<()> {
+    let cols = shown(table);
+    writeln!(out, "{}", cols.join("\t"))?;
+    for r in found {
+        let cell = |c: &str| -> String {
+            if c == "wall_time" {
+                return r.get("wall_time_ns").and_then(|v| v.as_i64()).map(rfc3339_ms).unwrap_or_default();
+            }
+            match r.get(c) {
+                None | Some(serde_json::Value::Null) => "-".into(),
+                Some(serde_json::Value::String(s)) => s.clone(),
+                Some(serde_json::Value::Number(n)) if n.is_f64() => format!("{:.4}", n.as_f64().unwrap_or(f64::NAN)),
+                Some(v) => v.to_string(),
+            }
+        };
+        writeln!(out, "{}", cols.iter().map(|c| cell(c)).collect::<Vec<_>>().join("\t"))?;
+    }
+    Ok(())
+}
+
+fn rfc3339_ms(ns: i64) -> String {
+    chrono::DateTime::from_timestamp_nanos(ns).format("%Y-%m-%dT%H:%M:%S%.3fZ").to_string()
+}
+
+/// Messages ingested in one transaction.
+const REBUILD_BATCH: usize = 512;
+
+fn rebuild(a: RebuildArgs) -> anyhow::Result<ExitCode> {
+    let mut files = Vec::new();
+    for input in &a.inputs {
+        files.extend(recordings(input)?);
+    }
+    let mut history = History::open(&a.db, a.keep_days)?;
+    let (mut total, mut corrupt) = (Ingested::default(), false);
+    for file in &files {
+        let mut reader =
+            RecordReader::open(file).with_context(|| format!("{}: cannot rebuild from it", file.display()))?;
+        let mut batch = Vec::with_capacity(REBUILD_BATCH);
+        for m in reader.by_ref() {
+            match m {
+                Ok(m) => batch.push((m.log_time_ns, m.payload)),
+                Err(e) => {
+                    eprintln!("forgemon: {}: the rest of the file skipped: {e}", file.display());
+                    corrupt = true;
+                    break;
+                }
+            }
+            if batch.len() == REBUILD_BATCH {
+                add(&mut total, history.ingest(&batch)?);
+                batch.clear();
+            }
+        }
+        add(&mut total, history.ingest(&batch)?);
+        corrupt |= input_status(reader.report()) != ExitCode::SUCCESS;
+    }
+    let pruned = history.prune()?;
+    eprintln!(
+        "forgemon: {}: {} blows and {} billets added from {} recordings{}",
+        a.db.display(),
+        total.blows,
+        total.billets,
+        files.len(),
+        if pruned > 0 { format!(", {pruned} rows older than --keep-days deleted") } else { String::new() }
+    );
+    Ok(if corrupt { ExitCode::from(EXIT_CORRUPT_INPUT) } else { ExitCode::SUCCESS })
+}
+
+fn add(total: &mut Ingested, n: Ingested) {
+    total.blows += n.blows;
+    total.billets += n.billets;
+}
