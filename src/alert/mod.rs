@@ -5,6 +5,8 @@
 //! disagrees with the accelerometer on k of the last n blows (`sensor_check`, issue 16)
 //! means a sensor or its configuration is wrong. Pure code.
 
+pub mod drift;
+
 use std::collections::{BTreeMap, VecDeque};
 
 use crate::estimate::plausibility::Implausible;

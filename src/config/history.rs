@@ -8,6 +8,7 @@ use serde::Deserialize;
 use super::ConfigError;
 use super::document::Document;
 use super::limits::KEEP_DAYS;
+pub use crate::alert::drift::DriftConfig;
 
 /// The database's file in the recording directory when `[history] path` is not given.
 pub const DEFAULT_FILE: &str = "history.sqlite";
@@ -112,6 +113,48 @@ pub(super) fn parse_die_life(doc: &Document<'_>, raw: Option<&RawDieLife>) -> Re
         return Err(doc.invalid("die_life.warn_energy_J", format!("{w} must be under limit_energy_J ({l})")));
     }
     Ok(cfg)
+}
+
+/// `[drift]`: the drift alarms (`alert::drift`), on by default with its defaults.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawDrift {
+    enabled: Option<bool>,
+    learn_billets: Option<u64>,
+    k: Option<f64>,
+    h: Option<f64>,
+    setting_step_mps: Option<f64>,
+}
+
+/// `[drift]`: `None` when `enabled = false`.
+pub(super) fn parse_drift(doc: &Document<'_>, raw: Option<&RawDrift>) -> Result<Option<DriftConfig>, ConfigError> {
+    let d = DriftConfig::default();
+    let Some(raw) = raw else { return Ok(Some(d)) };
+    if raw.enabled == Some(false) {
+        return Ok(None);
+    }
+    let learn_billets = match raw.learn_billets {
+        Some(n) if !(10..=100_000).contains(&n) => {
+            return Err(doc.invalid("drift.learn_billets", format!("must be 10 to 100000 billets, not {n}")));
+        }
+        Some(n) => n as usize,
+        None => d.learn_billets,
+    };
+    let positive = |key: &str, v: Option<f64>, max: f64, default: f64| -> Result<f64, ConfigError> {
+        match v {
+            Some(x) if !(x > 0.0 && x <= max) => {
+                Err(doc.invalid(key, format!("must be over 0 and at most {max}, not {x}")))
+            }
+            Some(x) => Ok(x),
+            None => Ok(default),
+        }
+    };
+    Ok(Some(DriftConfig {
+        learn_billets,
+        k: positive("drift.k", raw.k, 5.0, d.k)?,
+        h: positive("drift.h", raw.h, 100.0, d.h)?,
+        setting_step_mps: positive("drift.setting_step_mps", raw.setting_step_mps, 5.0, d.setting_step_mps)?,
+    }))
 }
 
 #[derive(Deserialize)]

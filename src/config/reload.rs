@@ -44,6 +44,7 @@ pub fn needs_restart(old: &ServiceConfig, new: &ServiceConfig) -> Vec<&'static s
         history,
         part,
         die_life,
+        drift,
     } = new;
     let changed = [
         ("process", *process_path != old.process_path),
@@ -74,6 +75,7 @@ pub fn needs_restart(old: &ServiceConfig, new: &ServiceConfig) -> Vec<&'static s
         ("history", *history != old.history),
         ("part", *part != old.part),
         ("die_life", *die_life != old.die_life),
+        ("drift", *drift != old.drift),
     ];
     changed.into_iter().filter(|(_, c)| *c).map(|(key, _)| key).collect()
 }

@@ -190,6 +190,8 @@ pub struct ServiceConfig {
     pub part: super::history::Trace,
     /// `[die_life]`: when a die set is due.
     pub die_life: super::history::DieLifeConfig,
+    /// `[drift]`: the drift alarms, `None` when disabled.
+    pub drift: Option<super::history::DriftConfig>,
 }
 
 impl ServiceConfig {
@@ -230,6 +232,7 @@ impl ServiceConfig {
             history: Some(super::history::HistoryConfig::in_dir(&recording_dir)),
             part: super::history::Trace::default(),
             die_life: super::history::DieLifeConfig::default(),
+            drift: Some(super::history::DriftConfig::default()),
         }
     }
 }
@@ -252,6 +255,7 @@ struct RawService {
     history: Option<super::history::RawHistory>,
     part: Option<super::history::RawPart>,
     die_life: Option<super::history::RawDieLife>,
+    drift: Option<super::history::RawDrift>,
     /// Each read by its `kind` (`source.rs`).
     sources: Vec<IgnoredAny>,
     /// Read by `uplink.rs`.
@@ -366,6 +370,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
     let history = super::history::parse_history(&doc, raw.history.as_ref(), &recording_dir, &path)?;
     let part = super::history::parse_part(&doc, raw.part.as_ref())?;
     let die_life = super::history::parse_die_life(&doc, raw.die_life.as_ref())?;
+    let drift = super::history::parse_drift(&doc, raw.drift.as_ref())?;
     Ok(ServiceConfig {
         machine_path: path(&raw.machine),
         process_path: raw.process.as_deref().map(path),
@@ -405,6 +410,7 @@ pub fn parse_service(origin: &str, base: &Path, text: &str) -> Result<ServiceCon
         history,
         part,
         die_life,
+        drift,
     })
 }
 

@@ -212,7 +212,10 @@ pub async fn serve(
     let history = cfg.history.as_ref().map(|h| h.path.clone());
     let dies = die_life::DieLife::start(cfg.die_life, history, cfg.part.die_set.as_deref(), host_now_ns());
     status.lock().map(|mut s| s.die_life = dies.status()).ok();
-    let service = service::Service::new(session, status, live.clone(), hooks, in_force, cfg.min_free_bytes, dies);
+    let drift = cfg.drift.map(crate::alert::drift::Drift::new);
+    status.lock().map(|mut s| s.drift = drift.as_ref().map(crate::alert::drift::Drift::status)).ok();
+    let watches = service::Watches { dies, drift };
+    let service = service::Service::new(session, status, live.clone(), hooks, in_force, cfg.min_free_bytes, watches);
     let rx = queue::SourceQueue::new(rx, parts.backpressure);
     tracing::info!(listen = %cfg.http_listen, dir = %cfg.recording_dir.display(), "forgemon service ready");
     let summary = run_loop(service, rx, control_rx, recipe_rx, stop, &shutdown).await?;

@@ -112,7 +112,7 @@ impl Warnings {
         match kind {
             AlertKind::ModelHealth => self.model_health = true,
             AlertKind::Sensor => self.sensor = true,
-            AlertKind::ElasticBlow | AlertKind::Nok | AlertKind::Storage | AlertKind::DieLife => {}
+            AlertKind::ElasticBlow | AlertKind::Nok | AlertKind::Storage | AlertKind::DieLife | AlertKind::Drift => {}
         }
     }
 }

@@ -43,6 +43,16 @@ pub(super) struct Service {
     last_blow: u32,
     /// The die set in the hammer and what it has taken.
     dies: super::die_life::DieLife,
+    /// The drift alarms (`[drift]`).
+    drift: Option<crate::alert::drift::Drift>,
+}
+
+/// What the service watches over the billets beside each blow's alerts.
+pub(super) struct Watches {
+    /// The die set in the hammer (`[die_life]`).
+    pub dies: super::die_life::DieLife,
+    /// The drift alarms (`[drift]`).
+    pub drift: Option<crate::alert::drift::Drift>,
 }
 
 /// The recording's disk, from good to worst.
@@ -63,7 +73,7 @@ impl Service {
         hooks: Hooks,
         in_force: InForce,
         min_free_bytes: u64,
-        dies: super::die_life::DieLife,
+        watches: Watches,
     ) -> Self {
         Service {
             session,
@@ -76,7 +86,8 @@ impl Service {
             min_free_bytes,
             storage_level: StorageLevel::Ok,
             last_blow: 0,
-            dies,
+            dies: watches.dies,
+            drift: watches.drift,
         }
     }
 
@@ -314,7 +325,7 @@ impl Service {
         for o in std::mem::take(&mut self.outcomes) {
             match o {
                 Outcome::Blow { estimate, log_ns } => self.on_blow(&estimate, log_ns),
-                Outcome::Billet { summary, .. } => self.on_billet(&summary),
+                Outcome::Billet { summary, log_ns } => self.on_billet(&summary, log_ns),
                 Outcome::Rejected { cut, error } => {
                     let msg = format!("blow at t = {:.6} s not estimated: {error}", cut.t_contact_s);
                     tracing::warn!("{msg}");
@@ -357,6 +368,9 @@ impl Service {
             })
             .ok();
         let die_alert = self.dies.on_blow(estimate, log_time_ns);
+        if let Some(d) = self.drift.as_mut() {
+            d.on_blow(estimate);
+        }
         let dies = self.dies.status();
         self.status.lock().map(|mut s| s.die_life = dies).ok();
         if let Some(alert) = &estimate.alert {
@@ -376,7 +390,7 @@ impl Service {
         }
     }
 
-    fn on_billet(&mut self, b: &BilletSummary) {
+    fn on_billet(&mut self, b: &BilletSummary, log_ns: i64) {
         self.summary.billets_finished += u64::from(b.finished);
         tracing::info!(
             billet = b.billet,
@@ -390,6 +404,20 @@ impl Service {
         self.live.publish(LiveEvent::Billet(Arc::new(b.clone())));
         if let Some(f) = self.hooks.on_billet.as_mut() {
             f(b);
+        }
+        let Some(drift) = self.drift.as_mut() else { return };
+        let alarms = drift.on_billet(b, log_ns);
+        let state = drift.status();
+        self.status.lock().map(|mut s| s.drift = Some(state)).ok();
+        for a in alarms {
+            let figures = [
+                ("since_billet", a.since_billet as f64),
+                ("at_billet", a.at_billet as f64),
+                ("shift", a.shift),
+                ("up", f64::from(u8::from(a.direction == crate::alert::drift::Direction::Up))),
+            ];
+            let figures = figures.into_iter().map(|(k, v)| (k.to_string(), v)).collect();
+            self.raise(Alert { kind: AlertKind::Drift, blow: self.last_blow, reason: a.reason, figures });
         }
     }
 

@@ -118,6 +118,8 @@ pub struct StatusSnapshot {
     pub part: crate::estimate::billet_book::Trace,
     /// The die set in the hammer: what it has taken, where it stands against `[die_life]`.
     pub die_life: super::die_life::DieLifeStatus,
+    /// The drift alarms' state (`[drift]`), `None` when disabled.
+    pub drift: Option<crate::alert::drift::DriftStatus>,
     /// The history database's writer (`[history]`, filled every second): rows written,
     /// messages dropped by its full queue or a failed write; `None` when it is off.
     pub history: Option<crate::history::writer::HistoryStatus>,
@@ -158,6 +160,7 @@ impl StatusSnapshot {
             history: None,
             part: Default::default(),
             die_life: Default::default(),
+            drift: None,
             board: Board::default(),
         }
     }

@@ -25,6 +25,8 @@ pub enum AlertKind {
     Storage,
     /// From the service: a die set reached its warning or its limit (`[die_life]`).
     DieLife,
+    /// From the service: a quantity drifts at the same settings (`alert::drift`).
+    Drift,
 }
 
 impl AlertKind {
@@ -36,6 +38,7 @@ impl AlertKind {
             AlertKind::Nok => "nok",
             AlertKind::Storage => "storage",
             AlertKind::DieLife => "die_life",
+            AlertKind::Drift => "drift",
         }
     }
 }

@@ -214,6 +214,7 @@ fn alert_from_pb(a: pb::Alert) -> Result<Alert, DecodeError> {
         "nok" => AlertKind::Nok,
         "storage" => AlertKind::Storage,
         "die_life" => AlertKind::DieLife,
+        "drift" => AlertKind::Drift,
         _ => return Err(DecodeError::UnknownAlertKind { kind: a.kind }),
     };
     Ok(Alert { kind, blow: a.blow, reason: a.reason, figures: a.figures })
