@@ -150,6 +150,40 @@ fn a_demo_session_fills_the_history_and_its_rebuild_from_the_recording_equals_it
     assert_eq!(query(&["--table", "billets", "--nok"]).len(), nok_billets.len());
     assert_eq!(query(&["--die", "17", "--limit", "5"]).len(), 5);
     eprintln!("history of the demo: 32 blows, {nok} NOK on {} billets", nok_billets.len());
+
+    // SPC per blow of the recipe, against Python's statistics on the same rows.
+    let out = ok(forgemon(&["history", "spc", "--db", path_str(&live_db), "--recipe", path_str(&recipe), "--json"]));
+    let spc: Vec<Value> =
+        String::from_utf8(out.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let recipe_file = forgemon::config::recipe::parse_recipe("r", &std::fs::read_to_string(&recipe).unwrap()).unwrap();
+    let script = common::root().join("tests/python/spc_check.py");
+    let py = Command::new("python3").arg(&script).arg(&live_db).arg(&recipe_file.name).output().expect("python3 runs");
+    assert!(py.status.success(), "{}", String::from_utf8_lossy(&py.stderr));
+    let want: Vec<Value> = serde_json::from_slice(&py.stdout).unwrap();
+    // Every blow the recipe has and the demo forged, three quantities each.
+    let blows_in_recipe = recipe_file.blows.iter().filter(|w| w.blow <= 8).count();
+    assert_eq!(spc.len(), 3 * blows_in_recipe, "{spc:?}");
+    for c in &spc {
+        let w = want.iter().find(|w| w["blow"] == c["blow"] && w["quantity"] == c["quantity"]).expect("Python's row");
+        let close = |k: &str| {
+            let (a, b) = (c[k].as_f64().unwrap(), w[k].as_f64().unwrap());
+            assert!((a - b).abs() <= 1e-9 * b.abs().max(1e-12), "{k}: {a} against Python's {b} ({c})");
+        };
+        assert_eq!(c["n"], w["n"], "{c}");
+        for k in ["mean", "sd", "mr_bar"] {
+            close(k);
+        }
+        // The limits are the recipe's window; Cp from them and Python's moving range.
+        let window = recipe_file.blows.iter().find(|b| c["blow"] == b.blow).unwrap();
+        let win = match c["quantity"].as_str().unwrap() {
+            "efficiency" => window.efficiency,
+            "plastic_J" => window.plastic_j,
+            _ => window.peak_load_n,
+        };
+        assert_eq!((c["lsl"].as_f64(), c["usl"].as_f64()), (Some(win.min), Some(win.max)), "{c}");
+        let cp = (win.max - win.min) / (6.0 * w["mr_bar"].as_f64().unwrap() / 1.128);
+        assert!((c["cp"].as_f64().unwrap() - cp).abs() <= 1e-9 * cp, "{c}: Cp {cp}");
+    }
 }
 
 #[test]

@@ -106,6 +106,9 @@ _forgemon() {
             forgemon__subcmd__help__subcmd__history,rebuild)
                 cmd="forgemon__subcmd__help__subcmd__history__subcmd__rebuild"
                 ;;
+            forgemon__subcmd__help__subcmd__history,spc)
+                cmd="forgemon__subcmd__help__subcmd__history__subcmd__spc"
+                ;;
             forgemon__subcmd__history,help)
                 cmd="forgemon__subcmd__history__subcmd__help"
                 ;;
@@ -115,6 +118,9 @@ _forgemon() {
             forgemon__subcmd__history,rebuild)
                 cmd="forgemon__subcmd__history__subcmd__rebuild"
                 ;;
+            forgemon__subcmd__history,spc)
+                cmd="forgemon__subcmd__history__subcmd__spc"
+                ;;
             forgemon__subcmd__history__subcmd__help,help)
                 cmd="forgemon__subcmd__history__subcmd__help__subcmd__help"
                 ;;
@@ -123,6 +129,9 @@ _forgemon() {
                 ;;
             forgemon__subcmd__history__subcmd__help,rebuild)
                 cmd="forgemon__subcmd__history__subcmd__help__subcmd__rebuild"
+                ;;
+            forgemon__subcmd__history__subcmd__help,spc)
+                cmd="forgemon__subcmd__history__subcmd__help__subcmd__spc"
                 ;;
             *)
                 ;;
@@ -397,7 +406,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__help__subcmd__history)
-            opts="query rebuild"
+            opts="query rebuild spc"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -425,6 +434,20 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__help__subcmd__history__subcmd__rebuild)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__help__subcmd__history__subcmd__spc)
             opts=""
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
@@ -551,7 +574,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__history)
-            opts="-h --help query rebuild help"
+            opts="-h --help query rebuild spc help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 2 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -565,7 +588,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__history__subcmd__help)
-            opts="query rebuild help"
+            opts="query rebuild spc help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -607,6 +630,20 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__history__subcmd__help__subcmd__rebuild)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__help__subcmd__spc)
             opts=""
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
@@ -682,6 +719,48 @@ _forgemon() {
                     return 0
                     ;;
                 --keep-days)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__spc)
+            opts="-h --db --recipe --since --until --part --lot --die --json --help"
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                --db)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --recipe)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --since)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --until)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --part)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --lot)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --die)
                     COMPREPLY=($(compgen -f "${cur}"))
                     return 0
                     ;;

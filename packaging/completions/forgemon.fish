@@ -93,10 +93,11 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand import" -s h -l help -
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l csv -d 'Write CSV (a header row, then one row per blow; an empty field where a value is `null`); `-` writes it to standard output' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l parquet -d 'Write Parquet (snappy-compressed; nullable columns where a value can be `null`); `-` writes it to standard output, when that is not a terminal' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -s h -l help -d 'Print help'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild help" -s h -l help -d 'Print help'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild help" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild help" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc help" -s h -l help -d 'Print help'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc help" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc help" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc help" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l db -d 'The history database (`[history] path`; by default `history.sqlite` in the recording directory)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l table -d 'Which table' -r -f -a "blows\t''
 billets\t''"
@@ -105,7 +106,7 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_se
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l part -d 'Only this part id' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l lot -d 'Only this lot' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l die -d 'Only this die set' -r
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l recipe -d 'Only blows judged by this recipe' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l recipe -d 'Only rows of this recipe (its name)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l limit -d 'At most this many rows' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l nok -d 'Only blows judged NOK, or billets with one'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l json -d 'One JSON object per row (every column) instead of a table'
@@ -113,8 +114,18 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_se
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from rebuild" -l db -d 'The database to write (created if missing)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from rebuild" -l keep-days -d 'Delete rows older than this many days before the newest (as `[history] keep_days`)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from rebuild" -s h -l help -d 'Print help'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from spc" -l db -d 'The history database' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from spc" -l recipe -d 'The recipe file (`forgemon teach`): its name selects the blows, its windows are the specification limits' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from spc" -l since -d 'Rows at or after this time: RFC 3339 (2026-11-30T06:00:00Z) or a UTC date (2026-11-30)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from spc" -l until -d 'Rows before this time (as --since)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from spc" -l part -d 'Only this part id' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from spc" -l lot -d 'Only this lot' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from spc" -l die -d 'Only this die set' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from spc" -l json -d 'One JSON object per blow and quantity instead of a table'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from spc" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
 complete -c forgemon -n "__fish_forgemon_using_subcommand inspect" -l json -d 'Print one JSON object instead of text'
 complete -c forgemon -n "__fish_forgemon_using_subcommand inspect" -s h -l help -d 'Print help'
@@ -194,3 +205,4 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand help; and not __fish_s
 complete -c forgemon -n "__fish_forgemon_using_subcommand help; and not __fish_seen_subcommand_from simulate identify diagnose replay import export history inspect run demo simulate-device advise teach help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
 complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
 complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
+complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'

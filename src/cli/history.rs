@@ -27,6 +27,25 @@ pub enum HistoryCommand {
     /// Make the history database from recordings: MCAP is the source of truth. Into an
     /// existing database it adds only the rows it lacks.
     Rebuild(RebuildArgs),
+    /// Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows,
+    /// and the individuals/moving-range chart's limits.
+    Spc(SpcArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct SpcArgs {
+    /// The history database.
+    #[arg(long, value_name = "DB")]
+    pub db: PathBuf,
+    /// The recipe file (`forgemon teach`): its name selects the blows, its windows are the
+    /// specification limits.
+    #[arg(long, value_name = "PART.recipe.toml")]
+    pub recipe: PathBuf,
+    #[command(flatten)]
+    pub filter: FilterArgs,
+    /// One JSON object per blow and quantity instead of a table.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// The filters every reading verb takes.
@@ -47,9 +66,6 @@ pub struct FilterArgs {
     /// Only this die set.
     #[arg(long, value_name = "DIE_SET")]
     pub die: Option<String>,
-    /// Only blows judged by this recipe.
-    #[arg(long, value_name = "NAME")]
-    pub recipe: Option<String>,
 }
 
 #[derive(Debug, Args)]
@@ -63,6 +79,9 @@ pub struct QueryArgs {
     pub table: Table,
     #[command(flatten)]
     pub filter: FilterArgs,
+    /// Only rows of this recipe (its name).
+    #[arg(long, value_name = "NAME")]
+    pub recipe: Option<String>,
     /// Only blows judged NOK, or billets with one.
     #[arg(long)]
     pub nok: bool,
@@ -91,6 +110,7 @@ pub fn run(args: HistoryArgs) -> anyhow::Result<ExitCode> {
     match args.command {
         HistoryCommand::Query(a) => query(a),
         HistoryCommand::Rebuild(a) => rebuild(a),
+        HistoryCommand::Spc(a) => spc(a),
     }
 }
 
@@ -114,7 +134,6 @@ impl FilterArgs {
             part_id: self.part.clone(),
             lot: self.lot.clone(),
             die_set: self.die.clone(),
-            recipe: self.recipe.clone(),
             ..Filter::default()
         })
     }
@@ -133,7 +152,7 @@ pub(crate) fn existing(db: &Path) -> anyhow::Result<()> {
 
 fn query(a: QueryArgs) -> anyhow::Result<ExitCode> {
     existing(&a.db)?;
-    let filter = Filter { nok: a.nok, limit: a.limit, ..a.filter.filter()? };
+    let filter = Filter { nok: a.nok, limit: a.limit, recipe: a.recipe.clone(), ..a.filter.filter()? };
     let conn = open_read(&a.db)?;
     let found = rows(&conn, &a.db, a.table, &filter)?;
     let mut out = super::out::stdout();
@@ -253,4 +272,57 @@ fn rebuild(a: RebuildArgs) -> anyhow::Result<ExitCode> {
 fn add(total: &mut Ingested, n: Ingested) {
     total.blows += n.blows;
     total.billets += n.billets;
+}
+
+/// A recipe blow's window of one quantity.
+type WindowOf = fn(&crate::recipe::BlowWindows) -> crate::recipe::Window;
+
+/// The quantities SPC follows, by the history's column and the recipe window's.
+const SPC_QUANTITIES: [(&str, WindowOf); 3] =
+    [("efficiency", |w| w.efficiency), ("plastic_J", |w| w.plastic_j), ("peak_load_N", |w| w.peak_load_n)];
+
+fn spc(a: SpcArgs) -> anyhow::Result<ExitCode> {
+    existing(&a.db)?;
+    let text = super::read_text(&a.recipe)?;
+    let recipe = crate::config::recipe::parse_recipe(&a.recipe.display().to_string(), &text)?;
+    let filter = Filter { recipe: Some(recipe.name.clone()), ..a.filter.filter()? };
+    let conn = open_read(&a.db)?;
+    let blows = rows(&conn, &a.db, Table::Blows, &filter)?;
+    let mut out = super::out::stdout();
+    if !a.json {
+        writeln!(out, "recipe {}: {} blows judged by it", recipe.name, blows.len())?;
+        writeln!(out, "blow\tquantity\tn\tmean\tsd\tCp\tCpk\tout of control")?;
+    }
+    for w in &recipe.blows {
+        for (column, window) in SPC_QUANTITIES {
+            let values: Vec<f64> = blows
+                .iter()
+                .filter(|b| b.get("billet_blow").and_then(|v| v.as_u64()) == Some(u64::from(w.blow)))
+                .filter_map(|b| b.get(column).and_then(|v| v.as_f64()))
+                .collect();
+            let window = window(w);
+            let Some(c) = crate::history::spc::capability(&values, window.min, window.max) else { continue };
+            if a.json {
+                let mut obj = serde_json::to_value(&c)?;
+                obj["blow"] = w.blow.into();
+                obj["quantity"] = column.into();
+                writeln!(out, "{obj}")?;
+            } else {
+                let f = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.2}"));
+                writeln!(
+                    out,
+                    "{}\t{column}\t{}\t{:.4}\t{:.4}\t{}\t{}\t{}",
+                    w.blow,
+                    c.n,
+                    c.mean,
+                    c.sd,
+                    f(c.cp),
+                    f(c.cpk),
+                    c.out_of_control.len()
+                )?;
+            }
+        }
+    }
+    out.flush()?;
+    Ok(ExitCode::SUCCESS)
 }

@@ -16,6 +16,7 @@
 pub mod die;
 pub mod query;
 pub mod schema;
+pub mod spc;
 pub mod writer;
 
 use std::path::{Path, PathBuf};
