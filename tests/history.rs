@@ -151,6 +151,32 @@ fn a_demo_session_fills_the_history_and_its_rebuild_from_the_recording_equals_it
     assert_eq!(query(&["--die", "17", "--limit", "5"]).len(), 5);
     eprintln!("history of the demo: 32 blows, {nok} NOK on {} billets", nok_billets.len());
 
+    // The shift report from a minute before the first blow: its 32 blows and 4 billets, its
+    // table and each blow's charts.
+    let html = dir.join("shift.html");
+    let day = chrono_day(&blows[0]);
+    ok(forgemon(&[
+        "history",
+        "report",
+        "--db",
+        path_str(&live_db),
+        "--recipe",
+        path_str(&recipe),
+        "--shift",
+        &day,
+        "--hours",
+        "24",
+        "-o",
+        path_str(&html),
+    ]));
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert!(page.contains("Shift report: flange"), "the recipe's name in the title");
+    assert!(
+        page.contains("<td>32</td>") && page.contains("<td>4711</td>") && page.contains("<td>17</td>"),
+        "the shift's table"
+    );
+    assert_eq!(page.matches("<svg").count(), 2 * 8, "an individuals and a moving-range chart per blow");
+
     // SPC per blow of the recipe, against Python's statistics on the same rows.
     let out = ok(forgemon(&["history", "spc", "--db", path_str(&live_db), "--recipe", path_str(&recipe), "--json"]));
     let spc: Vec<Value> =
@@ -184,6 +210,13 @@ fn a_demo_session_fills_the_history_and_its_rebuild_from_the_recording_equals_it
         let cp = (win.max - win.min) / (6.0 * w["mr_bar"].as_f64().unwrap() / 1.128);
         assert!((c["cp"].as_f64().unwrap() - cp).abs() <= 1e-9 * cp, "{c}: Cp {cp}");
     }
+}
+
+/// A minute before a row's time, RFC 3339, for `--shift`.
+fn chrono_day(row: &Value) -> String {
+    let secs = row["wall_time_ns"].as_i64().unwrap() / 1_000_000_000 - 60;
+    let out = Command::new("date").args(["-u", "-d", &format!("@{secs}"), "+%Y-%m-%dT%H:%M:%SZ"]).output().unwrap();
+    String::from_utf8(out.stdout).unwrap().trim().to_string()
 }
 
 #[test]

@@ -106,6 +106,9 @@ _forgemon() {
             forgemon__subcmd__help__subcmd__history,rebuild)
                 cmd="forgemon__subcmd__help__subcmd__history__subcmd__rebuild"
                 ;;
+            forgemon__subcmd__help__subcmd__history,report)
+                cmd="forgemon__subcmd__help__subcmd__history__subcmd__report"
+                ;;
             forgemon__subcmd__help__subcmd__history,spc)
                 cmd="forgemon__subcmd__help__subcmd__history__subcmd__spc"
                 ;;
@@ -118,6 +121,9 @@ _forgemon() {
             forgemon__subcmd__history,rebuild)
                 cmd="forgemon__subcmd__history__subcmd__rebuild"
                 ;;
+            forgemon__subcmd__history,report)
+                cmd="forgemon__subcmd__history__subcmd__report"
+                ;;
             forgemon__subcmd__history,spc)
                 cmd="forgemon__subcmd__history__subcmd__spc"
                 ;;
@@ -129,6 +135,9 @@ _forgemon() {
                 ;;
             forgemon__subcmd__history__subcmd__help,rebuild)
                 cmd="forgemon__subcmd__history__subcmd__help__subcmd__rebuild"
+                ;;
+            forgemon__subcmd__history__subcmd__help,report)
+                cmd="forgemon__subcmd__history__subcmd__help__subcmd__report"
                 ;;
             forgemon__subcmd__history__subcmd__help,spc)
                 cmd="forgemon__subcmd__history__subcmd__help__subcmd__spc"
@@ -406,7 +415,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__help__subcmd__history)
-            opts="query rebuild spc"
+            opts="query rebuild spc report"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -434,6 +443,20 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__help__subcmd__history__subcmd__rebuild)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__help__subcmd__history__subcmd__report)
             opts=""
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
@@ -574,7 +597,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__history)
-            opts="-h --help query rebuild spc help"
+            opts="-h --help query rebuild spc report help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 2 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -588,7 +611,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__history__subcmd__help)
-            opts="query rebuild spc help"
+            opts="query rebuild spc report help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -630,6 +653,20 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__history__subcmd__help__subcmd__rebuild)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__help__subcmd__report)
             opts=""
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
@@ -719,6 +756,64 @@ _forgemon() {
                     return 0
                     ;;
                 --keep-days)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__report)
+            opts="-o -h --db --recipe --shift --hours --since --until --part --lot --die --out --help"
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                --db)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --recipe)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --shift)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --hours)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --since)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --until)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --part)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --lot)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --die)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --out)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                -o)
                     COMPREPLY=($(compgen -f "${cur}"))
                     return 0
                     ;;

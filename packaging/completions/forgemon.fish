@@ -93,11 +93,12 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand import" -s h -l help -
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l csv -d 'Write CSV (a header row, then one row per blow; an empty field where a value is `null`); `-` writes it to standard output' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l parquet -d 'Write Parquet (snappy-compressed; nullable columns where a value can be `null`); `-` writes it to standard output, when that is not a terminal' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -s h -l help -d 'Print help'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc help" -s h -l help -d 'Print help'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc help" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc help" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc help" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report help" -s h -l help -d 'Print help'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report help" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report help" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report help" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report help" -f -a "report" -d 'A shift\'s quality report as one HTML file: SPC per blow, I-MR charts, lots and die sets'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l db -d 'The history database (`[history] path`; by default `history.sqlite` in the recording directory)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l table -d 'Which table' -r -f -a "blows\t''
 billets\t''"
@@ -123,9 +124,21 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_se
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from spc" -l die -d 'Only this die set' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from spc" -l json -d 'One JSON object per blow and quantity instead of a table'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from spc" -s h -l help -d 'Print help'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -l db -d 'The history database' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -l recipe -d 'The recipe file: its name selects the blows, its windows are the limits' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -l shift -d 'The shift\'s start: RFC 3339 or a UTC date' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -l hours -d 'The shift\'s length, h' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -l since -d 'Rows at or after this time: RFC 3339 (2026-11-30T06:00:00Z) or a UTC date (2026-11-30)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -l until -d 'Rows before this time (as --since)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -l part -d 'Only this part id' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -l lot -d 'Only this lot' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -l die -d 'Only this die set' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -s o -l out -d 'Where to write the report' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "report" -d 'A shift\'s quality report as one HTML file: SPC per blow, I-MR charts, lots and die sets'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
 complete -c forgemon -n "__fish_forgemon_using_subcommand inspect" -l json -d 'Print one JSON object instead of text'
 complete -c forgemon -n "__fish_forgemon_using_subcommand inspect" -s h -l help -d 'Print help'
@@ -206,3 +219,4 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand help; and not __fish_s
 complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
 complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
 complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
+complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "report" -d 'A shift\'s quality report as one HTML file: SPC per blow, I-MR charts, lots and die sets'

@@ -1,6 +1,9 @@
-//! `forgemon history {query, rebuild}`: the quality record (issue 44) from the command line.
+//! `forgemon history {query, rebuild, spc, report}`: the quality record (issue 44) from the
+//! command line.
 //! `rebuild` makes the database from recordings by the function the service writes it with
 //! (`history::History::ingest`); `query` prints a table's rows under filters.
+
+mod report;
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -30,6 +33,9 @@ pub enum HistoryCommand {
     /// Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows,
     /// and the individuals/moving-range chart's limits.
     Spc(SpcArgs),
+    /// A shift's quality report as one HTML file: SPC per blow, I-MR charts, lots and die
+    /// sets.
+    Report(report::ReportArgs),
 }
 
 #[derive(Debug, Args)]
@@ -111,6 +117,7 @@ pub fn run(args: HistoryArgs) -> anyhow::Result<ExitCode> {
         HistoryCommand::Query(a) => query(a),
         HistoryCommand::Rebuild(a) => rebuild(a),
         HistoryCommand::Spc(a) => spc(a),
+        HistoryCommand::Report(a) => report::run(a),
     }
 }
 
