@@ -97,46 +97,39 @@ impl DieCount {
     }
 }
 
+/// The columns `row` reads, after the row id.
+const COLUMNS: &str = "id, die_set, installed_ns, blows, hard_blows, energy_J, blows_without_energy";
+
+/// A `die_sets` row selected with `COLUMNS`: its id and count.
+fn row(r: &rusqlite::Row<'_>) -> rusqlite::Result<(i64, DieCount)> {
+    let count = |i: usize| r.get::<_, i64>(i).map(|n| n.max(0) as u64);
+    Ok((
+        r.get(0)?,
+        DieCount {
+            die_set: r.get(1)?,
+            installed_ns: r.get(2)?,
+            blows: count(3)?,
+            hard_blows: count(4)?,
+            energy_j: r.get(5)?,
+            blows_without_energy: count(6)?,
+        },
+    ))
+}
+
 /// The latest installation of every name in the database (`None`: the unnamed set).
 pub fn all_latest(conn: &Connection) -> rusqlite::Result<Vec<DieCount>> {
-    let mut stmt = conn.prepare(
-        "SELECT die_set, installed_ns, blows, hard_blows, energy_J, blows_without_energy FROM die_sets
-         WHERE id IN (SELECT max(id) FROM die_sets GROUP BY COALESCE(die_set, ''))",
-    )?;
-    let rows = stmt.query_map([], |r| {
-        Ok(DieCount {
-            die_set: r.get(0)?,
-            installed_ns: r.get(1)?,
-            blows: r.get::<_, i64>(2)?.max(0) as u64,
-            hard_blows: r.get::<_, i64>(3)?.max(0) as u64,
-            energy_j: r.get(4)?,
-            blows_without_energy: r.get::<_, i64>(5)?.max(0) as u64,
-        })
-    })?;
+    let sql = format!(
+        "SELECT {COLUMNS} FROM die_sets WHERE id IN (SELECT max(id) FROM die_sets GROUP BY COALESCE(die_set, ''))"
+    );
+    let mut stmt = conn.prepare(&sql)?;
+    let rows = stmt.query_map([], |r| row(r).map(|(_, c)| c))?;
     rows.collect()
 }
 
 /// The latest installation of `name` in the database, with its row id.
 pub fn latest(conn: &Connection, name: Option<&str>) -> rusqlite::Result<Option<(i64, DieCount)>> {
-    conn.query_row(
-        "SELECT id, die_set, installed_ns, blows, hard_blows, energy_J, blows_without_energy FROM die_sets
-         WHERE die_set IS ?1 ORDER BY id DESC LIMIT 1",
-        params![name],
-        |r| {
-            Ok((
-                r.get(0)?,
-                DieCount {
-                    die_set: r.get(1)?,
-                    installed_ns: r.get(2)?,
-                    blows: r.get::<_, i64>(3)?.max(0) as u64,
-                    hard_blows: r.get::<_, i64>(4)?.max(0) as u64,
-                    energy_j: r.get(5)?,
-                    blows_without_energy: r.get::<_, i64>(6)?.max(0) as u64,
-                },
-            ))
-        },
-    )
-    .optional()
+    let sql = format!("SELECT {COLUMNS} FROM die_sets WHERE die_set IS ?1 ORDER BY id DESC LIMIT 1");
+    conn.query_row(&sql, params![name], row).optional()
 }
 
 /// The installation of `count`'s die set at its `installed_ns`: a new row, or the one
@@ -147,23 +140,8 @@ pub(super) fn install(conn: &Connection, count: &DieCount) -> rusqlite::Result<(
          VALUES (?1, ?2, 0, 0, 0, 0)",
         params![count.die_set, count.installed_ns],
     )?;
-    conn.query_row(
-        "SELECT id, blows, hard_blows, energy_J, blows_without_energy FROM die_sets
-         WHERE die_set IS ?1 AND installed_ns = ?2",
-        params![count.die_set, count.installed_ns],
-        |r| {
-            Ok((
-                r.get(0)?,
-                DieCount {
-                    blows: r.get::<_, i64>(1)?.max(0) as u64,
-                    hard_blows: r.get::<_, i64>(2)?.max(0) as u64,
-                    energy_j: r.get(3)?,
-                    blows_without_energy: r.get::<_, i64>(4)?.max(0) as u64,
-                    ..count.clone()
-                },
-            ))
-        },
-    )
+    let sql = format!("SELECT {COLUMNS} FROM die_sets WHERE die_set IS ?1 AND installed_ns = ?2");
+    conn.query_row(&sql, params![count.die_set, count.installed_ns], row)
 }
 
 /// Write `count` to its row `id`, last touched at `t`.
