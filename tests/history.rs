@@ -135,6 +135,10 @@ fn a_demo_session_fills_the_history_and_its_rebuild_from_the_recording_equals_it
     assert!(String::from_utf8_lossy(&out.stderr).contains("0 blows and 0 billets added"));
     assert_eq!(dump(&live_db), live);
 
+    // The export: pandas reads the CSV and pyarrow the Parquet file; both hold the database's
+    // rows and columns, with `wall_time` for `wall_time_ns`.
+    history_export_equals_the_rows(&dir, &live_db, blows);
+
     // The queries: by lot, by NOK, by billet table.
     let query = |extra: &[&str]| -> Vec<Value> {
         let args = [&["history", "query", "--db", path_str(&live_db), "--json"], extra].concat();
@@ -209,6 +213,52 @@ fn a_demo_session_fills_the_history_and_its_rebuild_from_the_recording_equals_it
         assert_eq!((c["lsl"].as_f64(), c["usl"].as_f64()), (Some(win.min), Some(win.max)), "{c}");
         let cp = (win.max - win.min) / (6.0 * w["mr_bar"].as_f64().unwrap() / 1.128);
         assert!((c["cp"].as_f64().unwrap() - cp).abs() <= 1e-9 * cp, "{c}: Cp {cp}");
+    }
+}
+
+/// `forgemon history export` of `db`'s blows as CSV and Parquet, read back by pandas and
+/// pyarrow (`tests/python/read_export.py`): the columns and values of `blows`, the database's
+/// rows as Python's sqlite3 read them.
+fn history_export_equals_the_rows(dir: &Path, db: &Path, blows: &[Value]) {
+    let (csv, parquet) = (dir.join("history.csv"), dir.join("history.parquet"));
+    for (flag, out) in [("--csv", &csv), ("--parquet", &parquet)] {
+        ok(forgemon(&["history", "export", "--db", path_str(db), flag, path_str(out)]));
+    }
+    let script = common::root().join("tests/python/read_export.py");
+    let out = Command::new("python3").arg(&script).args([&csv, &parquet]).output().expect("python3 runs");
+    assert!(out.status.success(), "read_export.py: {}", String::from_utf8_lossy(&out.stderr));
+    let read: Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let first = blows[0].as_object().unwrap();
+    let want: Vec<&str> = std::iter::once("wall_time")
+        .chain(first.keys().map(String::as_str).filter(|k| !["id", "wall_time_ns"].contains(k)))
+        .collect();
+    for form in ["csv", "parquet"] {
+        let cols: Vec<&str> = read[form]["columns"].as_array().unwrap().iter().map(|c| c.as_str().unwrap()).collect();
+        // In the table's order (dump_sqlite.py's objects keep it, as does serde_json here).
+        assert_eq!(cols, want, "{form} columns");
+        let got = read[form]["rows"].as_array().unwrap();
+        assert_eq!(got.len(), blows.len(), "{form} rows");
+        for (g, b) in got.iter().zip(blows) {
+            for col in &want[1..] {
+                let (x, y) = (&g[*col], &b[*col]);
+                let same = match (x.as_f64(), y.as_f64(), y.as_str()) {
+                    (Some(x), Some(y), _) => (x - y).abs() <= 2.0 * f64::EPSILON * y.abs(),
+                    // pandas reads a CSV column of digits as numbers ("4711").
+                    (Some(_), None, Some(y)) if form == "csv" => serde_json::to_string(x).ok().as_deref() == Some(y),
+                    _ => x == y,
+                };
+                assert!(same, "{form} blow {}: {col} {x} against the database's {y}", b["blow"]);
+            }
+        }
+    }
+    let types = &read["parquet"]["arrow_types"];
+    assert_eq!(types["wall_time"], "timestamp[ns, tz=UTC]");
+    assert_eq!(
+        (types["billet"].as_str(), types["efficiency"].as_str(), types["lot"].as_str()),
+        (Some("int64"), Some("double"), Some("string"))
+    );
+    for (g, b) in read["parquet"]["rows"].as_array().unwrap().iter().zip(blows) {
+        assert_eq!(g["wall_time"], b["wall_time_ns"], "Parquet wall_time is the row's log time");
     }
 }
 

@@ -100,6 +100,9 @@ _forgemon() {
             forgemon__subcmd__help,teach)
                 cmd="forgemon__subcmd__help__subcmd__teach"
                 ;;
+            forgemon__subcmd__help__subcmd__history,export)
+                cmd="forgemon__subcmd__help__subcmd__history__subcmd__export"
+                ;;
             forgemon__subcmd__help__subcmd__history,query)
                 cmd="forgemon__subcmd__help__subcmd__history__subcmd__query"
                 ;;
@@ -111,6 +114,9 @@ _forgemon() {
                 ;;
             forgemon__subcmd__help__subcmd__history,spc)
                 cmd="forgemon__subcmd__help__subcmd__history__subcmd__spc"
+                ;;
+            forgemon__subcmd__history,export)
+                cmd="forgemon__subcmd__history__subcmd__export"
                 ;;
             forgemon__subcmd__history,help)
                 cmd="forgemon__subcmd__history__subcmd__help"
@@ -126,6 +132,9 @@ _forgemon() {
                 ;;
             forgemon__subcmd__history,spc)
                 cmd="forgemon__subcmd__history__subcmd__spc"
+                ;;
+            forgemon__subcmd__history__subcmd__help,export)
+                cmd="forgemon__subcmd__history__subcmd__help__subcmd__export"
                 ;;
             forgemon__subcmd__history__subcmd__help,help)
                 cmd="forgemon__subcmd__history__subcmd__help__subcmd__help"
@@ -415,8 +424,22 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__help__subcmd__history)
-            opts="query rebuild spc report"
+            opts="query rebuild spc report export"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__help__subcmd__history__subcmd__export)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
             fi
@@ -597,7 +620,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__history)
-            opts="-h --help query rebuild spc report help"
+            opts="-h --help query rebuild spc report export help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 2 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -610,9 +633,77 @@ _forgemon() {
             COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
             return 0
             ;;
-        forgemon__subcmd__history__subcmd__help)
-            opts="query rebuild spc report help"
+        forgemon__subcmd__history__subcmd__export)
+            opts="-h --db --table --since --until --part --lot --die --recipe --nok --csv --parquet --help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                --db)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --table)
+                    COMPREPLY=($(compgen -W "blows billets" -- "${cur}"))
+                    return 0
+                    ;;
+                --since)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --until)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --part)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --lot)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --die)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --recipe)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --csv)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --parquet)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__help)
+            opts="query rebuild spc report export help"
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__help__subcmd__export)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
             fi

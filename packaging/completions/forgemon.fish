@@ -93,12 +93,13 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand import" -s h -l help -
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l csv -d 'Write CSV (a header row, then one row per blow; an empty field where a value is `null`); `-` writes it to standard output' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l parquet -d 'Write Parquet (snappy-compressed; nullable columns where a value can be `null`); `-` writes it to standard output, when that is not a terminal' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -s h -l help -d 'Print help'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report help" -s h -l help -d 'Print help'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report help" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report help" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report help" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report help" -f -a "report" -d 'A shift\'s quality report as one HTML file: SPC per blow, I-MR charts, lots and die sets'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -s h -l help -d 'Print help'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -f -a "report" -d 'A shift\'s quality report as one HTML file: SPC per blow, I-MR charts, lots and die sets'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -f -a "export" -d 'A table of the history database as CSV or Parquet, under the same filters as query'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l db -d 'The history database (`[history] path`; by default `history.sqlite` in the recording directory)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l table -d 'Which table' -r -f -a "blows\t''
 billets\t''"
@@ -135,10 +136,24 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_se
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -l die -d 'Only this die set' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -s o -l out -d 'Where to write the report' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -s h -l help -d 'Print help'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l db -d 'The history database' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l table -d 'Which table' -r -f -a "blows\t''
+billets\t''"
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l since -d 'Rows at or after this time: RFC 3339 (2026-11-30T06:00:00Z) or a UTC date (2026-11-30)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l until -d 'Rows before this time (as --since)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l part -d 'Only this part id' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l lot -d 'Only this lot' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l die -d 'Only this die set' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l recipe -d 'Only rows of this recipe (its name)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l csv -d 'Write CSV (a header row, then the rows oldest first; an empty field for NULL); `-` writes it to standard output' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l parquet -d 'Write Parquet (snappy-compressed; `wall_time` a UTC timestamp in ns); `-` writes it to standard output, when that is not a terminal' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l nok -d 'Only blows judged NOK, or billets with one'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "report" -d 'A shift\'s quality report as one HTML file: SPC per blow, I-MR charts, lots and die sets'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "export" -d 'A table of the history database as CSV or Parquet, under the same filters as query'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
 complete -c forgemon -n "__fish_forgemon_using_subcommand inspect" -l json -d 'Print one JSON object instead of text'
 complete -c forgemon -n "__fish_forgemon_using_subcommand inspect" -s h -l help -d 'Print help'
@@ -220,3 +235,4 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_
 complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
 complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
 complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "report" -d 'A shift\'s quality report as one HTML file: SPC per blow, I-MR charts, lots and die sets'
+complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "export" -d 'A table of the history database as CSV or Parquet, under the same filters as query'

@@ -136,7 +136,7 @@ impl ExportRow {
 }
 
 /// `ns` since the epoch as `2026-11-24T07:15:18.123456789Z`.
-fn rfc3339_ns(ns: i64) -> String {
+pub(crate) fn rfc3339_ns(ns: i64) -> String {
     chrono::DateTime::from_timestamp_nanos(ns).format("%Y-%m-%dT%H:%M:%S%.9fZ").to_string()
 }
 
@@ -187,7 +187,7 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     }
     match (&args.csv, &args.parquet) {
         (Some(out), _) => write_csv(out, &rows)?,
-        (None, Some(out)) => write_parquet(out, &rows)?,
+        (None, Some(out)) => write_parquet(out, &batch(&rows)?)?,
         (None, None) => bail!("say where to write: --csv OUT.csv or --parquet OUT.parquet"),
     }
     eprintln!("forgemon: exported {} blows from {} recordings", rows.len(), files.len());
@@ -198,16 +198,7 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
 const STDOUT_PATH: &str = "-";
 
 fn write_csv(out: &Path, rows: &[ExportRow]) -> anyhow::Result<()> {
-    if out == Path::new(STDOUT_PATH) {
-        // Through `out`: a closed stdout (`| head`) ends the export quietly (`main`).
-        return write_csv_to(csv::Writer::from_writer(super::out::stdout()), rows, "standard output");
-    }
-    let file = std::fs::File::create(out).with_context(|| format!("{}: cannot write", out.display()))?;
-    write_csv_to(csv::Writer::from_writer(file), rows, &out.display().to_string())
-}
-
-/// The table to `w`, which `place` names in the errors.
-fn write_csv_to<W: std::io::Write>(mut w: csv::Writer<W>, rows: &[ExportRow], place: &str) -> anyhow::Result<()> {
+    let (mut w, place) = csv_to(out)?;
     if rows.is_empty() {
         w.write_record(column_names())?;
     }
@@ -216,6 +207,16 @@ fn write_csv_to<W: std::io::Write>(mut w: csv::Writer<W>, rows: &[ExportRow], pl
     }
     w.flush().with_context(|| format!("{place}: cannot write"))?;
     Ok(())
+}
+
+/// A CSV writer to `out` (`-`: standard output), and how errors name it.
+pub(crate) fn csv_to(out: &Path) -> anyhow::Result<(csv::Writer<Box<dyn std::io::Write>>, String)> {
+    if out == Path::new(STDOUT_PATH) {
+        // Through `out`: a closed stdout (`| head`) ends the export quietly (`main`).
+        return Ok((csv::Writer::from_writer(Box::new(super::out::stdout())), "standard output".into()));
+    }
+    let file = File::create(out).with_context(|| format!("{}: cannot write", out.display()))?;
+    Ok((csv::Writer::from_writer(Box::new(file)), out.display().to_string()))
 }
 
 /// The columns in order, as the CSV header names them.
@@ -307,27 +308,28 @@ fn batch(rows: &[ExportRow]) -> anyhow::Result<RecordBatch> {
     Ok(RecordBatch::try_new(Arc::new(schema()), columns)?)
 }
 
-fn write_parquet(out: &Path, rows: &[ExportRow]) -> anyhow::Result<()> {
+/// `batch` as one snappy-compressed Parquet file at `out` (`-`: standard output, when that
+/// is not a terminal).
+pub(crate) fn write_parquet(out: &Path, batch: &RecordBatch) -> anyhow::Result<()> {
     if out == Path::new(STDOUT_PATH) {
         if std::io::IsTerminal::is_terminal(&std::io::stdout()) {
             bail!("--parquet -: standard output is a terminal, and Parquet is binary; give a file, or a pipe");
         }
         // Through `out`: a closed stdout ends the export quietly (`main`).
-        return write_parquet_to(super::out::stdout(), rows, "standard output");
+        return write_parquet_to(super::out::stdout(), batch, "standard output");
     }
     let file = File::create(out).with_context(|| format!("{}: cannot write", out.display()))?;
-    write_parquet_to(file, rows, &out.display().to_string())
+    write_parquet_to(file, batch, &out.display().to_string())
 }
 
-/// The table as Parquet to `w`, which `place` names in the errors.
-fn write_parquet_to<W: std::io::Write + Send>(w: W, rows: &[ExportRow], place: &str) -> anyhow::Result<()> {
+/// `batch` as Parquet to `w`, which `place` names in the errors.
+fn write_parquet_to<W: std::io::Write + Send>(w: W, batch: &RecordBatch, place: &str) -> anyhow::Result<()> {
     use parquet::arrow::ArrowWriter;
     use parquet::basic::Compression;
     use parquet::file::properties::WriterProperties;
-    let batch = batch(rows)?;
     let props = WriterProperties::builder().set_compression(Compression::SNAPPY).build();
     let mut w = ArrowWriter::try_new(BufWriter::new(w), batch.schema(), Some(props))?;
-    w.write(&batch).with_context(|| format!("{place}: cannot write"))?;
+    w.write(batch).with_context(|| format!("{place}: cannot write"))?;
     w.close().with_context(|| format!("{place}: cannot write"))?;
     Ok(())
 }

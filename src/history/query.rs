@@ -115,6 +115,41 @@ pub fn rows(
     Ok(out)
 }
 
+/// How a column stores its values (its declared SQLite type).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ColumnType {
+    Integer,
+    Real,
+    Text,
+}
+
+/// A table's column: its name, type and whether it may be NULL.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Column {
+    pub name: String,
+    pub kind: ColumnType,
+    pub nullable: bool,
+}
+
+/// `table`'s columns in their order (`PRAGMA table_info`).
+pub fn columns(conn: &Connection, path: &std::path::Path, table: Table) -> Result<Vec<Column>, HistoryError> {
+    let sql = |source| HistoryError::Sqlite { path: path.to_path_buf(), source };
+    let mut stmt = conn.prepare(&format!("PRAGMA table_info({})", table.name())).map_err(sql)?;
+    let found = stmt
+        .query_map([], |r| {
+            let declared: String = r.get("type")?;
+            let kind = match declared.to_ascii_uppercase().as_str() {
+                "INTEGER" => ColumnType::Integer,
+                "REAL" => ColumnType::Real,
+                _ => ColumnType::Text,
+            };
+            let notnull: i64 = r.get("notnull")?;
+            Ok(Column { name: r.get("name")?, kind, nullable: notnull == 0 })
+        })
+        .map_err(sql)?;
+    found.collect::<Result<Vec<_>, _>>().map_err(sql)
+}
+
 fn json(v: SqlValue) -> Value {
     match v {
         SqlValue::Null => Value::Null,

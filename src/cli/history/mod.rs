@@ -1,8 +1,9 @@
-//! `forgemon history {query, rebuild, spc, report}`: the quality record (issue 44) from the
+//! `forgemon history {query, rebuild, spc, report, export}`: the quality record (issue 44) from the
 //! command line.
 //! `rebuild` makes the database from recordings by the function the service writes it with
 //! (`history::History::ingest`); `query` prints a table's rows under filters.
 
+mod export;
 mod report;
 
 use std::io::Write as _;
@@ -36,6 +37,8 @@ pub enum HistoryCommand {
     /// A shift's quality report as one HTML file: SPC per blow, I-MR charts, lots and die
     /// sets.
     Report(report::ReportArgs),
+    /// A table of the history database as CSV or Parquet, under the same filters as query.
+    Export(export::ExportArgs),
 }
 
 #[derive(Debug, Args)]
@@ -118,6 +121,7 @@ pub fn run(args: HistoryArgs) -> anyhow::Result<ExitCode> {
         HistoryCommand::Rebuild(a) => rebuild(a),
         HistoryCommand::Spc(a) => spc(a),
         HistoryCommand::Report(a) => report::run(a),
+        HistoryCommand::Export(a) => export::run(a),
     }
 }
 
