@@ -41,8 +41,9 @@ fn image(c: &mut Criterion) {
         bench.iter(|| encode(black_box(17), black_box(&status), Some(black_box(&b)), Warnings::default()))
     });
     let words = encode(17, &status, Some(&b), Warnings::default());
+    let mut block = [0u16; forgemon::daemon::plc_server::part_block::WORDS];
     c.bench_function("plc_image/answer_read_20", |bench| {
-        bench.iter(|| answer(black_box(&words), Request::ReadHoldingRegisters(0, 20), |_| true))
+        bench.iter(|| answer(black_box(&words), &mut block, Request::ReadHoldingRegisters(0, 20), |_| true))
     });
 }
 

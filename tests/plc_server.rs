@@ -143,7 +143,8 @@ fn a_pymodbus_client_reads_the_demo_results_and_its_coils_act() {
         ("read_input", 1),
         ("read_coils", 1),
         ("read_past_end", 2),
-        ("write_coil_2", 2),
+        ("read_past_block", 2),
+        ("write_coil_4", 2),
         ("other_unit", 11),
     ] {
         assert_eq!(refused[what], code, "{what}: {refused}");
@@ -152,11 +153,13 @@ fn a_pymodbus_client_reads_the_demo_results_and_its_coils_act() {
     // Every image read shows the result of the blow its counter names.
     let images: Vec<Vec<u32>> = seen["images"].as_array().expect("images").iter().map(words).collect();
     let ack = &seen["ack"];
+    let part = &seen["part"];
+    let part_at = part["images_before"].as_u64().expect("the part block step ran") as usize;
     let ack_at = ack["images_before"].as_u64().expect("the alert was latched and acknowledged") as usize;
     let acked_blows = u32_at(&words(&ack["before"]), 2);
     let mut blows_seen = Vec::new();
     for (i, w) in images.iter().enumerate() {
-        assert_eq!(w.len(), 22);
+        assert_eq!(w.len(), 30);
         assert_eq!(w[1] & 1, 1, "running");
         let n = u32_at(w, 2);
         if n == 0 {
@@ -182,6 +185,17 @@ fn a_pymodbus_client_reads_the_demo_results_and_its_coils_act() {
         assert_eq!(w[1] & 4 != 0, alerted(None), "blow {n}: alert latched bit");
         assert_eq!(w[1] & 32 != 0, alerted(Some("model_health")), "blow {n}: model health bit");
         assert_eq!(w[1] & 64 != 0, alerted(Some("sensor")), "blow {n}: sensor bit");
+        // Registers 22–29: the demo's one die set since the start (a fresh history), until
+        // coil 3 changed it; no [die_life] limits: level 0, no share used.
+        if i < part_at {
+            let upto = || results.iter().filter(|x| x.blow <= u32_at(w, 2));
+            assert_eq!(u32_at(w, 22), u32_at(w, 2), "blow {n}: die set blows");
+            let hard = upto().filter(|x| x.class == BlowClass::Hard).count();
+            assert_eq!(u32_at(w, 24) as usize, hard, "blow {n}: die set hard blows");
+            let energy: f64 = upto().filter_map(|x| x.elastic_j.zip(x.damped_j)).map(|(e, d)| e + d).sum();
+            shows(u32_at(w, 26), energy, 1e3, "die energy kJ", n);
+            assert_eq!((w[28], w[29]), (0, 0), "blow {n}: no [die_life] limits");
+        }
         blows_seen.push(n);
     }
     blows_seen.dedup();
@@ -197,6 +211,33 @@ fn a_pymodbus_client_reads_the_demo_results_and_its_coils_act() {
     assert_eq!(billet["written"], true);
     let (before, after) = (words(&billet["before"]), words(&billet["after"]));
     assert!(u32_at(&after, 4) > u32_at(&before, 4), "coil 1: billets {before:?} -> {after:?}");
+
+    // The part block: written, read back as written, a control character refused (0x03);
+    // coil 2 started a billet forged as it says, coil 3 a new life of die set 18.
+    assert_eq!(
+        (&part["wrote"], &part["coil_2"], &part["coil_3"]),
+        (&Value::Bool(true), &Value::Bool(true), &Value::Bool(true)),
+        "{part}"
+    );
+    assert_eq!(part["read_back"], part["written"]);
+    assert_eq!(part["bad_write"], 3);
+    let (before, as_block, die) = (words(&part["before"]), words(&part["after_billet"]), words(&part["after_die"]));
+    assert_eq!(u32_at(&as_block, 4), u32_at(&before, 4) + 1, "coil 2 counted a billet");
+    let since_change = u32_at(&die, 2) - u32_at(&as_block, 2);
+    assert!(u32_at(&die, 22) <= since_change, "coil 3 started the count again: {die:?} after {as_block:?}");
+    // What the recording says the billets after coil 2 were forged as, and the die change.
+    let messages = read_recording(&file).expect("the recording reads").messages;
+    let forged: Vec<_> = messages
+        .iter()
+        .filter_map(|m| if let Payload::Billet(b) = &m.payload { Some(b.trace.clone()) } else { None })
+        .collect();
+    let want = forgemon::estimate::billet_book::Trace {
+        part_id: Some("P-000418".into()),
+        lot: Some("4711".into()),
+        die_set: Some("18".into()),
+    };
+    assert!(forged.contains(&want), "a billet forged as the part block said: {forged:?}");
+    assert!(forged.first().is_some_and(|t| *t != want), "not the first one: {forged:?}");
 
     // The heartbeat counts seconds: over the run it advanced by the seconds elapsed, within
     // one count at each end (the client reads at any phase of the 1 s tick) and 0.5 s of

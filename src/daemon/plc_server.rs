@@ -1,7 +1,10 @@
 //! The PLC result image (docs/interfaces.md §8): the latest results as Modbus TCP holding
 //! registers, served by tokio-modbus's server on `[plc_server] listen`, unit id 1, so that
 //! the press's or hammer's PLC reads them every cycle; coil 0 acknowledges the latched
-//! alert, coil 1 says a new billet is in the dies.
+//! alert, coil 1 says a new billet is in the dies. Registers 22–29 count the die set's life;
+//! the part block (registers 100–147, `part_block.rs`) is the PLC's to write the part id,
+//! lot and die set in, which coil 2 (a new billet as the block says) and coil 3 (a die
+//! change) apply.
 //!
 //! The image is rebuilt from the service's live feed (`live.rs`: each blow's result as the
 //! pipeline produced it) and the status snapshot (counters, sources, the latched alert) on
@@ -19,6 +22,7 @@
 
 pub mod conn;
 pub mod gate;
+pub mod part_block;
 
 use std::future::{Ready, ready};
 use std::net::SocketAddr;
@@ -45,10 +49,11 @@ use crate::signal::sample::Role;
 
 /// The unit id the image answers (docs/interfaces.md §8).
 pub const PLC_UNIT_ID: u8 = 1;
-/// Holding registers 0–21.
-pub const IMAGE_WORDS: usize = 22;
-/// Coils 0 (acknowledge) and 1 (new billet).
-pub const COILS: u16 = 2;
+/// Holding registers 0–29.
+pub const IMAGE_WORDS: usize = 30;
+/// Coils 0 (acknowledge), 1 (new billet), 2 (new billet as the part block says) and 3 (die
+/// change).
+pub const COILS: u16 = 4;
 /// How often the heartbeat (register 0) counts up.
 pub const HEARTBEAT_PERIOD: Duration = Duration::from_secs(1);
 
@@ -72,6 +77,12 @@ pub mod reg {
     /// The last blow's sensing mode: the channels its estimate used (issue 43).
     pub const CHANNELS: usize = 20;
     pub const EFFICIENCY_SD: usize = 21;
+    // 22–29: the die set in the hammer (issue 44).
+    pub const DIE_BLOWS: usize = 22;
+    pub const DIE_HARD_BLOWS: usize = 24;
+    pub const DIE_ENERGY_KJ: usize = 26;
+    pub const DIE_LEVEL: usize = 28;
+    pub const DIE_USED_PERMILLE: usize = 29;
 }
 
 /// Bits of register 20: the channels the last blow's estimate used (0 before the first).
@@ -206,7 +217,26 @@ pub fn encode(
         .and_then(|a| a.blows_to_target())
         .map_or(BLOWS_TO_TARGET_UNKNOWN, |n| u16::try_from(n).unwrap_or(BLOWS_TO_TARGET_UNKNOWN - 1));
     put_u32(&mut w, reg::ADVISED_KINETIC_J, sat_u32(advice.and_then(|a| a.next_kinetic_j()).unwrap_or(0.0)));
+    encode_die_life(&mut w, &status.die_life);
     w
+}
+
+/// Registers 22–29: the die set's blows, hard blows and energy (kJ), its level against
+/// `[die_life]` (0 ok, 1 warning, 2 limit) and the share of its life used, in ‰ of the
+/// nearer limit (0 without one).
+fn encode_die_life(w: &mut [u16; IMAGE_WORDS], d: &super::die_life::DieLifeStatus) {
+    put_u32(w, reg::DIE_BLOWS, count_u32(d.count.blows));
+    put_u32(w, reg::DIE_HARD_BLOWS, count_u32(d.count.hard_blows));
+    put_u32(w, reg::DIE_ENERGY_KJ, sat_u32(d.count.energy_j / 1e3));
+    w[reg::DIE_LEVEL] = match d.level {
+        crate::history::die::DieLevel::Ok => 0,
+        crate::history::die::DieLevel::Warning => 1,
+        crate::history::die::DieLevel::Limit => 2,
+    };
+    let by_blows = d.limit_blows.map(|l| d.count.blows as f64 / l as f64);
+    let by_energy = d.limit_energy_j.map(|l| d.count.energy_j / l);
+    let used = by_blows.into_iter().chain(by_energy).fold(0.0, f64::max);
+    w[reg::DIE_USED_PERMILLE] = sat_u16(used * 1e3);
 }
 
 /// What the server has done since it started (logged as it happens).
@@ -233,14 +263,15 @@ pub struct PlcStats {
     pub commands: AtomicU64,
 }
 
-/// One request against `image` (Modbus Application Protocol v1.1b3 §6): holding registers
-/// 0–21 are read; coils 0 and 1 are written, and each coil written `true` sends its command
-/// through `command`. A quantity outside the function's range is an illegal data value
-/// (§6.3: 1..=125 registers), checked before the address; every other function or address
-/// is refused with an exception; a command the service cannot take now is "server device
-/// busy".
+/// One request against `image` and the part block (Modbus Application Protocol v1.1b3 §6):
+/// holding registers 0–29 are read; registers 100–147 (`block`) are read and written; coils
+/// 0–3 are written, and each coil written `true` sends its command through `command`. A
+/// quantity outside the function's range is an illegal data value (§6.3: 1..=125
+/// registers), checked before the address; every other function or address is refused
+/// with an exception; a command the service cannot take now is "server device busy".
 pub fn answer(
     image: &[u16; IMAGE_WORDS],
+    block: &mut part_block::Block,
     request: Request<'_>,
     mut command: impl FnMut(Control) -> bool,
 ) -> Result<Response, ExceptionCode> {
@@ -250,36 +281,64 @@ pub fn answer(
             if !(1..=125).contains(&n) {
                 return Err(ExceptionCode::IllegalDataValue);
             }
+            if let Some(at) = part_block::span(addr, usize::from(n)) {
+                return Ok(Response::ReadHoldingRegisters(block[at?].to_vec()));
+            }
             if end > IMAGE_WORDS {
                 return Err(ExceptionCode::IllegalDataAddress);
             }
             Ok(Response::ReadHoldingRegisters(image[start..end].to_vec()))
         }
+        // Only the part block is written; the image is read-only (a write to it is not a
+        // function it offers).
+        Request::WriteSingleRegister(addr, v) => {
+            let at = part_block::span(addr, 1).ok_or(ExceptionCode::IllegalFunction)??;
+            part_block::write(block, at, &[v])?;
+            Ok(Response::WriteSingleRegister(addr, v))
+        }
+        Request::WriteMultipleRegisters(addr, words) => {
+            let at = part_block::span(addr, words.len()).ok_or(ExceptionCode::IllegalFunction)??;
+            part_block::write(block, at, &words)?;
+            Ok(Response::WriteMultipleRegisters(addr, words.len() as u16))
+        }
         Request::WriteSingleCoil(addr, on) => {
-            coils(addr, &[on], &mut command)?;
+            coils(addr, &[on], block, &mut command)?;
             Ok(Response::WriteSingleCoil(addr, on))
         }
         Request::WriteMultipleCoils(addr, values) => {
-            coils(addr, &values, &mut command)?;
+            coils(addr, &values, block, &mut command)?;
             Ok(Response::WriteMultipleCoils(addr, values.len() as u16))
         }
-        // The registers are read-only: a write is not a function this image offers; nor
-        // are reading coils (write-only), input registers or anything else.
+        // Reading coils (write-only), input registers or anything else is not offered.
         _ => Err(ExceptionCode::IllegalFunction),
     }
 }
 
-/// Coils `addr..` set to `values`: the command of each one set `true`.
-fn coils(addr: u16, values: &[bool], command: &mut impl FnMut(Control) -> bool) -> Result<(), ExceptionCode> {
+/// Coils `addr..` set to `values`: the command of each one set `true` (coils 2 and 3 with
+/// the part block's fields, checked before anything is sent).
+fn coils(
+    addr: u16,
+    values: &[bool],
+    block: &part_block::Block,
+    command: &mut impl FnMut(Control) -> bool,
+) -> Result<(), ExceptionCode> {
     if values.is_empty() || usize::from(addr) + values.len() > usize::from(COILS) {
         return Err(ExceptionCode::IllegalDataAddress);
     }
+    let mut sends = Vec::new();
     for (k, &on) in values.iter().enumerate() {
-        let c = match usize::from(addr) + k {
+        if !on {
+            continue;
+        }
+        sends.push(match usize::from(addr) + k {
             0 => Control::Acknowledge,
-            _ => Control::NewBillet { at_device_ns: None },
-        };
-        if on && !command(c) {
+            1 => Control::NewBillet { at_device_ns: None },
+            2 => Control::NewBilletAs { at_device_ns: None, change: Box::new(part_block::billet_change(block)?) },
+            _ => Control::DieChange(Box::new(part_block::die_change(block)?)),
+        });
+    }
+    for c in sends {
+        if !command(c) {
             return Err(ExceptionCode::ServerDeviceBusy);
         }
     }
@@ -290,6 +349,8 @@ fn coils(addr: u16, values: &[bool], command: &mut impl FnMut(Control) -> bool) 
 #[derive(Clone)]
 struct ImageService {
     image: watch::Receiver<[u16; IMAGE_WORDS]>,
+    /// The part block, one for every connection.
+    block: Arc<std::sync::Mutex<part_block::Block>>,
     control: mpsc::Sender<Control>,
     stats: Arc<PlcStats>,
 }
@@ -307,7 +368,8 @@ impl Service for ImageService {
             Err(ExceptionCode::GatewayTargetDevice)
         } else {
             let image = *self.image.borrow();
-            answer(&image, req.request, |c| {
+            let mut block = self.block.lock().unwrap_or_else(|p| p.into_inner());
+            answer(&image, &mut block, req.request, |c| {
                 let said = format!("{c:?}");
                 let sent = self.control.try_send(c).is_ok();
                 if sent {
@@ -368,7 +430,8 @@ pub async fn start(
     let (image_tx, image_rx) = watch::channel(encode(0, &status, None, Warnings::default()));
     let stats = Arc::new(PlcStats::default());
     let updater = tokio::spawn(update(live.subscribe(), status, image_tx));
-    let service = ImageService { image: image_rx, control, stats: stats.clone() };
+    let block = Arc::new(std::sync::Mutex::new([0u16; part_block::WORDS]));
+    let service = ImageService { image: image_rx, block, control, stats: stats.clone() };
     let server = tokio::spawn(serve(Server::new(listener), service, limits));
     tracing::info!(%addr, "PLC result image (Modbus TCP, unit {PLC_UNIT_ID}) listening");
     Ok(Some(PlcServer { addr, stats, tasks: [updater, server] }))
@@ -614,38 +677,129 @@ pub(crate) mod tests {
     }
 
     #[test]
-    fn registers_are_read_only_and_the_coils_send_their_commands() {
+    fn the_image_is_read_only_the_part_block_is_written_and_the_coils_send_their_commands() {
         let image: [u16; IMAGE_WORDS] = std::array::from_fn(|i| i as u16 * 3);
+        let mut block = [0u16; part_block::WORDS];
         let mut sent = Vec::new();
         let mut take = |c| {
             sent.push(c);
             true
         };
         assert_eq!(
-            answer(&image, Request::ReadHoldingRegisters(18, 2), &mut take),
+            answer(&image, &mut block, Request::ReadHoldingRegisters(18, 2), &mut take),
             Ok(Response::ReadHoldingRegisters(vec![54, 57]))
         );
-        let refused = |r| answer(&image, r, |_| true);
-        assert_eq!(refused(Request::ReadHoldingRegisters(21, 2)), Err(ExceptionCode::IllegalDataAddress));
+        let mut spare = [0u16; part_block::WORDS];
+        let mut refused = |r| answer(&image, &mut spare, r, |_| true);
+        assert_eq!(refused(Request::ReadHoldingRegisters(29, 2)), Err(ExceptionCode::IllegalDataAddress));
+        assert_eq!(refused(Request::ReadHoldingRegisters(99, 2)), Err(ExceptionCode::IllegalDataAddress));
+        assert_eq!(refused(Request::ReadHoldingRegisters(147, 2)), Err(ExceptionCode::IllegalDataAddress));
         // A quantity outside 1..=125 is a value error, before any address is looked at.
         assert_eq!(refused(Request::ReadHoldingRegisters(0, 0)), Err(ExceptionCode::IllegalDataValue));
         assert_eq!(refused(Request::ReadHoldingRegisters(0, 126)), Err(ExceptionCode::IllegalDataValue));
-        assert_eq!(refused(Request::ReadHoldingRegisters(0, 23)), Err(ExceptionCode::IllegalDataAddress));
+        assert_eq!(refused(Request::ReadHoldingRegisters(0, 31)), Err(ExceptionCode::IllegalDataAddress));
+        // The image is read-only: a write to it is not a function it offers.
         assert_eq!(refused(Request::WriteSingleRegister(0, 1)), Err(ExceptionCode::IllegalFunction));
         assert_eq!(refused(Request::WriteMultipleRegisters(0, vec![1].into())), Err(ExceptionCode::IllegalFunction));
+        assert_eq!(
+            refused(Request::WriteMultipleRegisters(146, vec![1; 3].into())),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
         assert_eq!(refused(Request::ReadCoils(0, 2)), Err(ExceptionCode::IllegalFunction));
         assert_eq!(refused(Request::ReadInputRegisters(0, 2)), Err(ExceptionCode::IllegalFunction));
-        assert_eq!(refused(Request::WriteSingleCoil(2, true)), Err(ExceptionCode::IllegalDataAddress));
+        assert_eq!(refused(Request::WriteSingleCoil(4, true)), Err(ExceptionCode::IllegalDataAddress));
+        assert_eq!(spare, [0u16; part_block::WORDS], "nothing written by a refused request");
         assert_eq!(
-            answer(&image, Request::WriteSingleCoil(0, true), &mut take),
+            answer(&image, &mut block, Request::WriteSingleCoil(0, true), &mut take),
             Ok(Response::WriteSingleCoil(0, true))
         );
         // Writing false does nothing; both at once send both.
-        assert!(answer(&image, Request::WriteSingleCoil(1, false), &mut take).is_ok());
-        assert!(answer(&image, Request::WriteMultipleCoils(0, vec![true, true].into()), &mut take).is_ok());
+        assert!(answer(&image, &mut block, Request::WriteSingleCoil(1, false), &mut take).is_ok());
+        assert!(answer(&image, &mut block, Request::WriteMultipleCoils(0, vec![true, true].into()), &mut take).is_ok());
         assert_eq!(sent, [Control::Acknowledge, Control::Acknowledge, Control::NewBillet { at_device_ns: None }]);
         // A service that cannot take the command now says so.
-        assert_eq!(answer(&image, Request::WriteSingleCoil(1, true), |_| false), Err(ExceptionCode::ServerDeviceBusy));
+        assert_eq!(
+            answer(&image, &mut block, Request::WriteSingleCoil(1, true), |_| false),
+            Err(ExceptionCode::ServerDeviceBusy)
+        );
+    }
+
+    #[test]
+    fn the_part_block_is_written_read_back_and_sent_by_coils_2_and_3() {
+        let image = [0u16; IMAGE_WORDS];
+        let mut block = [0u16; part_block::WORDS];
+        let mut sent = Vec::new();
+        let mut take = |c| {
+            sent.push(c);
+            true
+        };
+        // The part block: the PLC writes the part id and the die set, reads them back, and
+        // coils 2 and 3 send them.
+        let part = part_block::encode("P-000418");
+        assert_eq!(
+            answer(&image, &mut block, Request::WriteMultipleRegisters(100, part.to_vec().into()), &mut take),
+            Ok(Response::WriteMultipleRegisters(100, 16))
+        );
+        assert!(
+            answer(&image, &mut block, Request::WriteSingleRegister(132, u16::from_be_bytes(*b"18")), &mut take)
+                .is_ok()
+        );
+        assert_eq!(
+            answer(&image, &mut block, Request::ReadHoldingRegisters(100, 2), &mut take),
+            Ok(Response::ReadHoldingRegisters(part[..2].to_vec()))
+        );
+        assert!(answer(&image, &mut block, Request::WriteMultipleCoils(2, vec![true, true].into()), &mut take).is_ok());
+        let eighteen = Some(Some("18".to_string()));
+        assert_eq!(
+            sent,
+            [
+                Control::NewBilletAs {
+                    at_device_ns: None,
+                    change: Box::new(crate::config::history::TraceUpdate {
+                        part_id: Some(Some("P-000418".into())),
+                        lot: None,
+                        die_set: eighteen.clone(),
+                    })
+                },
+                Control::DieChange(Box::new(crate::config::history::TraceUpdate {
+                    die_set: eighteen,
+                    ..Default::default()
+                })),
+            ]
+        );
+        // A control character is refused whole; a field with a leading space refuses its coil.
+        assert_eq!(
+            answer(&image, &mut block, Request::WriteSingleRegister(116, 0x0941), |_| true),
+            Err(ExceptionCode::IllegalDataValue)
+        );
+        assert!(answer(&image, &mut block, Request::WriteSingleRegister(116, 0x2041), |_| true).is_ok());
+        assert_eq!(
+            answer(&image, &mut block, Request::WriteSingleCoil(2, true), |_| panic!("nothing sent")),
+            Err(ExceptionCode::IllegalDataValue)
+        );
+    }
+
+    #[test]
+    fn the_die_set_s_counts_level_and_share_of_life_used_are_in_registers_22_to_29() {
+        let mut s = StatusSnapshot::new("hammer");
+        s.die_life.count.blows = 70_000;
+        s.die_life.count.hard_blows = 12;
+        s.die_life.count.energy_j = 3.6e9;
+        s.die_life.level = crate::history::die::DieLevel::Warning;
+        s.die_life.limit_blows = Some(80_000);
+        let w = encode(0, &s, None, Warnings::default());
+        assert_eq!(u32_at(&w, reg::DIE_BLOWS), 70_000);
+        assert_eq!(u32_at(&w, reg::DIE_HARD_BLOWS), 12);
+        assert_eq!(u32_at(&w, reg::DIE_ENERGY_KJ), 3_600_000);
+        assert_eq!(w[reg::DIE_LEVEL], 1);
+        assert_eq!(w[reg::DIE_USED_PERMILLE], 875, "70 000 of 80 000 blows");
+        // The nearer limit: the energy's, 3.6 GJ of 3 GJ.
+        s.die_life.limit_energy_j = Some(3e9);
+        assert_eq!(encode(0, &s, None, Warnings::default())[reg::DIE_USED_PERMILLE], 1200);
+        // Without limits: 0.
+        s.die_life.limit_blows = None;
+        s.die_life.limit_energy_j = None;
+        assert_eq!(encode(0, &s, None, Warnings::default())[reg::DIE_USED_PERMILLE], 0);
     }
 
     #[tokio::test]
@@ -653,7 +807,8 @@ pub(crate) mod tests {
         let (tx, _rx) = watch::channel([7u16; IMAGE_WORDS]);
         let (control, mut commands) = mpsc::channel(4);
         let stats = Arc::new(PlcStats::default());
-        let s = ImageService { image: tx.subscribe(), control, stats: stats.clone() };
+        let block = Arc::new(std::sync::Mutex::new([0u16; part_block::WORDS]));
+        let s = ImageService { image: tx.subscribe(), block, control, stats: stats.clone() };
         let req = |slave, request| SlaveRequest { slave, request };
         assert_eq!(s.call(req(2, Request::ReadHoldingRegisters(0, 1))).await, Err(ExceptionCode::GatewayTargetDevice));
         assert_eq!(

@@ -5,7 +5,10 @@ The independent client of issue 19 §2: it polls holding registers 0-21 of unit 
 `forgemon demo --plc ADDR` runs, keeps every image it saw twice in a row (so a half-updated
 one is never kept), checks that writes and other addresses are refused with Modbus
 exceptions, and once the alert-latched bit is set writes coil 0 (acknowledge), then coil 1
-(new billet), keeping the registers before and after each. It sends one connection of
+(new billet), keeping the registers before and after each. Then it writes the part block
+(registers 100-147: part id, lot and die set as ASCII), reads it back, and writes coil 2 (a
+new billet forged as the block says) and coil 3 (a die change), keeping the registers
+around each. It sends one connection of
 garbage bytes first, which the server must survive. It prints one JSON object for
 tests/plc_server.rs to compare with the demo's recording; it decodes nothing with forgemon.
 
@@ -26,7 +29,9 @@ except ImportError as err:  # pragma: no cover - depends on the machine
     sys.exit(3)
 
 UNIT = 1
-WORDS = 22
+WORDS = 30
+PART_BLOCK = 100
+PART = {"part_id": "P-000418", "lot": "4711", "die_set": "18"}
 ALERT_LATCHED = 1 << 2
 
 
@@ -39,6 +44,36 @@ def unit_kw(method):
 def error_code(result):
     """The Modbus exception code of a refused request, or None when it was answered."""
     return result.exception_code if result.isError() else None
+
+
+def ascii_words(text):
+    """`text` as 16 registers, two characters each, the first in the high byte, NUL-padded."""
+    raw = text.encode("ascii").ljust(32, b"\0")
+    return [(raw[i] << 8) | raw[i + 1] for i in range(0, 32, 2)]
+
+
+def part_step(client, kw, read):
+    """Write the part block, read it back, then coil 2 and coil 3, with the registers around each."""
+    words = sum((ascii_words(PART[k]) for k in ("part_id", "lot", "die_set")), [])
+    wrote = error_code(client.write_registers(PART_BLOCK, words, **kw)) is None
+    back = client.read_holding_registers(PART_BLOCK, count=48, **kw)
+    bad = error_code(client.write_register(PART_BLOCK + 16, 0x0941, **kw))  # a tab: refused
+    before = read()
+    as_block = error_code(client.write_coil(2, True, **kw)) is None
+    after_billet = settle(read, lambda w: w[4:6] != before[4:6])
+    die = error_code(client.write_coil(3, True, **kw)) is None
+    after_die = settle(read, lambda w: (w[22] << 16 | w[23]) < (after_billet[22] << 16 | after_billet[23]))
+    return {
+        "wrote": wrote,
+        "read_back": None if back.isError() else list(back.registers),
+        "written": words,
+        "bad_write": bad,
+        "coil_2": as_block,
+        "coil_3": die,
+        "before": before,
+        "after_billet": after_billet,
+        "after_die": after_die,
+    }
 
 
 def settle(read, done):
@@ -85,15 +120,16 @@ def main():
     refused = {
         "write_register": error_code(client.write_register(7, 1, **kw)),
         "write_registers": error_code(client.write_registers(0, [1, 2], **kw)),
-        "read_past_end": error_code(client.read_holding_registers(21, count=2, **kw)),
+        "read_past_end": error_code(client.read_holding_registers(29, count=2, **kw)),
+        "read_past_block": error_code(client.read_holding_registers(147, count=2, **kw)),
         "read_input": error_code(client.read_input_registers(0, count=2, **kw)),
-        "write_coil_2": error_code(client.write_coil(2, True, **kw)),
+        "write_coil_4": error_code(client.write_coil(4, True, **kw)),
         "read_coils": error_code(client.read_coils(0, count=2, **kw)),
         "other_unit": error_code(client.read_holding_registers(0, count=2, **{unit_kw(client.read_holding_registers): 2})),
     }
 
     images, heartbeats = [], []
-    ack, billet = None, None
+    ack, billet, part = None, None, None
     previous = None
     start = time.monotonic()
     while time.monotonic() < deadline:
@@ -116,10 +152,12 @@ def main():
             ok = error_code(client.write_coil(1, True, **kw)) is None
             after = settle(read, lambda w: w[4:6] != before[4:6])
             billet = {"written": ok, "before": before, "after": after}
+        elif billet is not None and part is None:
+            part = dict(part_step(client, kw, read), images_before=len(images))
         time.sleep(0.01)
     client.close()
     json.dump(
-        {"refused": refused, "images": images, "heartbeats": heartbeats, "ack": ack, "billet": billet},
+        {"refused": refused, "images": images, "heartbeats": heartbeats, "ack": ack, "billet": billet, "part": part},
         sys.stdout,
     )
 
