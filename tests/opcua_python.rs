@@ -77,7 +77,7 @@ fn an_asyncua_client_browses_reads_and_receives_every_blow_of_the_demo() {
     let py = client(&["demo", &url, "40"]).spawn().unwrap_or_else(|e| panic!("cannot run python3 ({e}): {INSTALL}"));
     // Real time, 2 billets of 8 blows 0.4 s apart: about 7 s.
     let demo = Command::new(env!("CARGO_BIN_EXE_forgemon"))
-        .args(["demo", "--billets", "2", "--interval", "0.4", "--opcua", &url, "--dir"])
+        .args(["demo", "--billets", "2", "--interval", "0.4", "--lot", "4711", "--die", "17", "--opcua", &url, "--dir"])
         .arg(dir.path().join("rec"))
         .output()
         .expect("run the demo");
@@ -124,6 +124,47 @@ fn an_asyncua_client_browses_reads_and_receives_every_blow_of_the_demo() {
         same(&e["PeakLoad"], Some(r.peak_load_n), &format!("blow {n} peak load"));
         same(&e["BilletHeight"], r.h_end_m, &format!("blow {n} billet height"));
         assert_eq!(e["Alert"], r.alert.as_ref().map_or("", |a| a.kind.as_str()), "blow {n}");
+    }
+
+    // What each blow was forged as (OPC 40503's PartId): the demo's lot and die set, then
+    // what SetPart gave (lot kept), then the die set ChangeDies put in. A blow struck while a
+    // call was on its way may show either; the next two show the change.
+    let calls = &seen["calls"];
+    assert_eq!(calls["bad_part"], "BadInvalidArgument", "{calls}");
+    let set_at = calls["set_part"].as_u64().expect("SetPart was called");
+    let dies_at = calls["change_dies"].as_u64().expect("ChangeDies was called");
+    for e in events {
+        let n = e["BlowNumber"].as_u64().unwrap_or(0);
+        let forged = (e["PartId"].as_str(), e["Lot"].as_str(), e["DieSet"].as_str());
+        if n <= set_at {
+            assert_eq!(forged, (Some(""), Some("4711"), Some("17")), "blow {n}");
+        } else if n > set_at + 1 && n <= dies_at {
+            assert_eq!(forged, (Some("P-000418"), Some("4711"), Some("18")), "blow {n}");
+        } else if n > dies_at + 1 {
+            assert_eq!(forged, (Some("P-000418"), Some("4711"), Some("19")), "blow {n}");
+        }
+    }
+    assert!(dies_at + 2 <= 16, "ChangeDies came in time to show: at blow {dies_at}");
+
+    // The standard's units (OPC 10000-8 §5.6.3): UNECE codes as Int32, computed here from the
+    // code's letters, not from forgemon's table; a Double is an AnalogUnitType (i=17497).
+    let unit_id = |code: &str| code.bytes().fold(0i64, |id, c| (id << 8) | i64::from(c));
+    for (name, code, symbol) in [
+        ("CycleCounter", "C62", "1"),
+        ("BilletCounter", "C62", "1"),
+        ("PeakLoad", "NEW", "N"),
+        ("BilletHeight", "MTR", "m"),
+        ("ImpactVelocity", "MTS", "m/s"),
+        ("ImpactEnergy", "JOU", "J"),
+        ("PlasticEnergy", "JOU", "J"),
+        ("Efficiency", "C62", "1"),
+    ] {
+        let u = &seen["units"][name];
+        assert_eq!(u["namespace"], "http://www.opcfoundation.org/UA/units/un/cefact", "{name}: {u}");
+        assert_eq!(u["unit_id"].as_i64(), Some(unit_id(code)), "{name}: {code} {u}");
+        assert_eq!(u["display"], symbol, "{name}: {u}");
+        let analog = !name.ends_with("Counter");
+        assert_eq!(u["type"] == 17497, analog, "{name}: type definition {u}");
     }
 
     // Each Read (one request for all values) showed one blow's values together.

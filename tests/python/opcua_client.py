@@ -9,7 +9,10 @@ The client of issue 21 §2, for tests/opcua_python.rs. It decodes nothing with f
       BlowCompletedEventType events and the AlarmConditionType events of the machine,
       reads the counters and values in one Read request every 50 ms, and acknowledges the
       first raised condition with its condition's Acknowledge method (after trying an
-      EventId that is not the condition's). Stops after SECONDS or when the server goes.
+      EventId that is not the condition's). Reads each value's EngineeringUnits and type
+      definition. After blow 3 calls the working unit's SetPart("P-000418", "", "18")
+      (after trying a part id with a leading space), and four blows later ChangeDies("19").
+      Stops after SECONDS or when the server goes.
   auth URL SERVER_CERT_DER USER PASSWORD WORKDIR
       Tries an anonymous session, a wrong password and the right password (over
       Basic256Sha256 SignAndEncrypt with a self-signed client certificate made in WORKDIR);
@@ -136,6 +139,8 @@ async def demo(url, seconds):
         await sub.subscribe_events(machine, evfilter=await event_filter(alarm_type), queuesize=100)
         await sub.subscribe_data_change(value_nodes[0], queuesize=100)
         result["subscribed_at"] = plain(await value_nodes[0].read_value())
+        result["units"] = await engineering_units(unit, mf, fm)
+        result["calls"] = {}
         cond_node, pending_ack = None, None
         while time.monotonic() < deadline:
             try:
@@ -155,6 +160,7 @@ async def demo(url, seconds):
                         pending_ack = (fields["ConditionName"], item["EventId"])
                 else:
                     result["events"].append(fields)
+            await part_calls(unit, fm, result)
             if pending_ack is not None and result["ack"] is None:
                 name, event_id = pending_ack
                 cond_node = await unit.get_child(f"{fm}:{name}")
@@ -184,6 +190,40 @@ async def demo(url, seconds):
         except Exception:
             pass
     return result
+
+
+async def engineering_units(unit, mf, fm):
+    """Each value's EngineeringUnits (EUInformation) and type definition."""
+    out = {}
+    for name in VALUES + ["ImpactVelocity"]:
+        node = await unit.get_child(f"{mf if name in ('CycleCounter', 'PeakLoad', 'BilletHeight') else fm}:{name}")
+        eu = await (await node.get_child("0:EngineeringUnits")).read_value()
+        out[name] = {
+            "namespace": eu.NamespaceUri,
+            "unit_id": eu.UnitId,
+            "display": eu.DisplayName.Text,
+            "description": eu.Description.Text,
+            "type": (await node.read_type_definition()).Identifier,
+        }
+    return out
+
+
+async def part_calls(unit, fm, result):
+    """SetPart after blow 3 (a bad id first), ChangeDies four blows later; each with the
+    cycle counter just before the call."""
+    calls = result["calls"]
+    counter = result["reads"][-1][0] if result["reads"] else 0
+    if "set_part" not in calls and counter >= 3:
+        try:
+            await unit.call_method(f"{fm}:SetPart", " P-1", "", "")
+            calls["bad_part"] = "Good"
+        except ua.UaStatusCodeError as e:
+            calls["bad_part"] = ua.StatusCode(e.code).name
+        await unit.call_method(f"{fm}:SetPart", "P-000418", "", "18")
+        calls["set_part"] = counter
+    elif "set_part" in calls and "change_dies" not in calls and counter >= calls["set_part"] + 4:
+        await unit.call_method(f"{fm}:ChangeDies", "19")
+        calls["change_dies"] = counter
 
 
 async def try_session(client):

@@ -10,6 +10,7 @@ use opcua::nodes::{BaseEventType, Event};
 use opcua::types::{ByteString, DateTime, LocalizedText, NamespaceMap, NodeId, ObjectTypeId, UAString};
 
 use crate::estimate::BlowEstimate;
+use crate::estimate::billet_book::Trace;
 
 /// `BlowCompletedEventType` (forgemon namespace, `s=BlowCompletedEventType`): one per
 /// blow. Each field is a property of the type of the same browse name, in Pascal case
@@ -41,10 +42,15 @@ pub struct BlowCompletedEvent {
     pub billet_height: Option<f64>,
     /// The alert the blow raised (`elastic_blow`, ...), empty when none.
     pub alert: UAString,
+    /// What the blow was forged as (OPC 40503's PartId; `[part]`, `POST /billet`, the PLC's
+    /// part block, `SetPart`), empty when not given.
+    pub part_id: UAString,
+    pub lot: UAString,
+    pub die_set: UAString,
 }
 
 /// The fields of [`BlowCompletedEvent`] as browse names, in order (the type's properties).
-pub const BLOW_EVENT_FIELDS: [&str; 11] = [
+pub const BLOW_EVENT_FIELDS: [&str; 14] = [
     "BlowNumber",
     "BilletNumber",
     "BilletBlow",
@@ -56,12 +62,15 @@ pub const BLOW_EVENT_FIELDS: [&str; 11] = [
     "PeakLoad",
     "BilletHeight",
     "Alert",
+    "PartId",
+    "Lot",
+    "DieSet",
 ];
 
 impl BlowCompletedEvent {
-    /// The event of blow `b`, from `source` (the working unit) named `source_name`, in the
-    /// forgemon namespace `ns`.
-    pub fn of(b: &BlowEstimate, ns: u16, source: &NodeId, source_name: &str) -> Self {
+    /// The event of blow `b` forged as `part`, from `source` (the working unit) named
+    /// `source_name`, in the forgemon namespace `ns`.
+    pub fn of(b: &BlowEstimate, part: &Trace, ns: u16, source: &NodeId, source_name: &str) -> Self {
         let message = format!("blow {} on billet {}: {}", b.blow, b.billet.billet, b.class.as_str());
         let base = BaseEventType::new(Self::event_type_id_from_index(ns), event_id(), message, DateTime::now())
             .set_source_node(source.clone())
@@ -81,6 +90,9 @@ impl BlowCompletedEvent {
             peak_load: b.peak_load_n,
             billet_height: b.h_end_m,
             alert: b.alert.as_ref().map(|a| a.kind.as_str()).unwrap_or_default().into(),
+            part_id: part.part_id.as_deref().unwrap_or_default().into(),
+            lot: part.lot.as_deref().unwrap_or_default().into(),
+            die_set: part.die_set.as_deref().unwrap_or_default().into(),
         }
     }
 }
@@ -165,16 +177,18 @@ mod tests {
     #[test]
     fn the_blow_event_answers_every_declared_field() {
         let b = complete_blow();
-        let e = BlowCompletedEvent::of(&b, 3, &NodeId::new(2, "unit"), "Hammer");
+        let part = Trace { part_id: Some("P-1".into()), lot: Some("4711".into()), die_set: Some("17".into()) };
+        let e = BlowCompletedEvent::of(&b, &part, 3, &NodeId::new(2, "unit"), "Hammer");
         for name in BLOW_EVENT_FIELDS {
             assert_ne!(field(&e, &[(3, name)]), Variant::Empty, "{name}");
         }
         assert_eq!(field(&e, &[(3, "PlasticEnergy")]), Variant::from(7_195.6));
         assert_eq!(field(&e, &[(3, "BlowNumber")]), Variant::from(7u32));
+        assert_eq!(field(&e, &[(3, "PartId")]), Variant::from("P-1"));
         assert_eq!(field(&e, &[(0, "EventType")]), Variant::from(NodeId::new(3, "BlowCompletedEventType")));
         assert_eq!(field(&e, &[(3, "NoSuchField")]), Variant::Empty);
         // An incomplete blow has no energies: empty, not zero.
-        let e = BlowCompletedEvent::of(&BlowEstimate { plastic_j: None, ..b }, 3, &NodeId::null(), "Hammer");
+        let e = BlowCompletedEvent::of(&BlowEstimate { plastic_j: None, ..b }, &part, 3, &NodeId::null(), "Hammer");
         assert_eq!(field(&e, &[(3, "PlasticEnergy")]), Variant::Empty);
     }
 

@@ -15,9 +15,11 @@ use tokio::sync::{broadcast, mpsc};
 
 use super::events::{BlowCompletedEvent, ConditionPlace, ConditionState, as_dyn, condition_event, event_id};
 use super::model::Nodes;
+use crate::config::history::{TraceUpdate, check_id};
 use crate::daemon::Control;
 use crate::daemon::live::LiveEvent;
 use crate::estimate::BlowEstimate;
+use crate::estimate::billet_book::Trace;
 use crate::estimate::result::AlertKind;
 
 /// The conditions' states, in the order of `Nodes::conditions`.
@@ -41,11 +43,14 @@ pub struct Feed {
     pub subscriptions: Arc<SubscriptionCache>,
     pub nodes: Nodes,
     pub conditions: Conditions,
+    /// What the blows are forged as: the last status snapshot's (published just before each
+    /// blow, after the billet's change).
+    pub part: Trace,
 }
 
 impl Feed {
     /// Follow the live feed until the service stops.
-    pub async fn run(self, mut live: broadcast::Receiver<LiveEvent>) {
+    pub async fn run(mut self, mut live: broadcast::Receiver<LiveEvent>) {
         // Fell behind the bus: the next status snapshot has the last blow.
         let mut behind = false;
         loop {
@@ -54,6 +59,7 @@ impl Feed {
                 Ok(LiveEvent::Acknowledged) => self.on_acknowledged(),
                 Ok(LiveEvent::Billet(_) | LiveEvent::NewBillet | LiveEvent::Advice(_) | LiveEvent::Alert { .. }) => {}
                 Ok(LiveEvent::Status(s)) => {
+                    self.part = s.part.clone();
                     if let Some(b) = s.last_blow.as_ref().filter(|_| std::mem::take(&mut behind)) {
                         self.write_values(b);
                     }
@@ -73,7 +79,13 @@ impl Feed {
     /// A blow: its values, its event, and its alert's condition.
     pub fn on_blow(&self, b: &BlowEstimate) {
         self.write_values(b);
-        let e = BlowCompletedEvent::of(b, self.nodes.forgemon_ns, &self.nodes.working_unit, &self.nodes.machine_name);
+        let e = BlowCompletedEvent::of(
+            b,
+            &self.part,
+            self.nodes.forgemon_ns,
+            &self.nodes.working_unit,
+            &self.nodes.machine_name,
+        );
         self.notify(as_dyn(&e));
         if let Some(a) = &b.alert {
             self.raise(a.kind, &format!("blow {}: {}", a.blow, a.reason));
@@ -83,7 +95,8 @@ impl Feed {
     /// The working unit's process values from blow `b`, with one timestamp.
     fn write_values(&self, b: &BlowEstimate) {
         let opt = |x: Option<f64>| x.map_or(Variant::Empty, Variant::from);
-        let values: [(&str, Variant); 10] = [
+        let text = |x: &Option<String>| Variant::from(x.as_deref().unwrap_or_default());
+        let values: [(&str, Variant); 13] = [
             ("CycleCounter", b.blow.into()),
             ("PeakLoad", b.peak_load_n.into()),
             ("BilletHeight", opt(b.h_end_m)),
@@ -94,6 +107,9 @@ impl Feed {
             ("PlasticEnergy", opt(b.plastic_j)),
             ("Efficiency", opt(b.efficiency)),
             ("LastAlert", b.alert.as_ref().map(|a| a.kind.as_str()).unwrap_or_default().into()),
+            ("PartId", text(&self.part.part_id)),
+            ("Lot", text(&self.part.lot)),
+            ("DieSet", text(&self.part.die_set)),
         ];
         let mut writes: Vec<(&NodeId, Variant)> =
             values.into_iter().filter_map(|(name, v)| self.nodes.value(name).map(|id| (id, v))).collect();
@@ -223,5 +239,43 @@ pub fn acknowledge(
     }
     control.try_send(Control::Acknowledge).map_err(|_| StatusCode::BadResourceUnavailable)?;
     tracing::info!(condition = i, "OPC UA: Acknowledge");
+    Ok(Vec::new())
+}
+
+/// A text argument of `SetPart`/`ChangeDies`: empty keeps the value in force; otherwise it
+/// must be an id as `[part]`'s (1–32 characters, no leading or trailing space).
+fn id_arg(args: &[Variant], i: usize) -> Result<Option<Option<String>>, StatusCode> {
+    match args.get(i) {
+        None => Err(StatusCode::BadArgumentsMissing),
+        Some(Variant::String(s)) if s.is_empty() => Ok(None),
+        Some(Variant::String(s)) => {
+            let s = s.as_ref();
+            check_id(s).map_err(|_| StatusCode::BadInvalidArgument)?;
+            Ok(Some(Some(s.to_string())))
+        }
+        Some(Variant::Empty) => Ok(None),
+        Some(_) => Err(StatusCode::BadTypeMismatch),
+    }
+}
+
+/// A method of the working unit that sends the service a control.
+pub type PartMethod = fn(&mpsc::Sender<Control>, &[Variant]) -> Result<Vec<Variant>, StatusCode>;
+
+/// `FM:SetPart(PartId, Lot, DieSet)`: a new billet, forged as given (as `POST /billet` with
+/// a body, the PLC's coil 2).
+pub fn set_part(control: &mpsc::Sender<Control>, args: &[Variant]) -> Result<Vec<Variant>, StatusCode> {
+    let change = TraceUpdate { part_id: id_arg(args, 0)?, lot: id_arg(args, 1)?, die_set: id_arg(args, 2)? };
+    control
+        .try_send(Control::NewBilletAs { at_device_ns: None, change: Box::new(change) })
+        .map_err(|_| StatusCode::BadResourceUnavailable)?;
+    tracing::info!("OPC UA: SetPart");
+    Ok(Vec::new())
+}
+
+/// `FM:ChangeDies(DieSet)`: the dies were changed (as `POST /die`, the PLC's coil 3).
+pub fn change_dies(control: &mpsc::Sender<Control>, args: &[Variant]) -> Result<Vec<Variant>, StatusCode> {
+    let change = TraceUpdate { die_set: id_arg(args, 0)?, ..TraceUpdate::default() };
+    control.try_send(Control::DieChange(Box::new(change))).map_err(|_| StatusCode::BadResourceUnavailable)?;
+    tracing::info!("OPC UA: ChangeDies");
     Ok(Vec::new())
 }

@@ -191,11 +191,23 @@ pub async fn start(
             .inner()
             .add_method_callback(c.acknowledge.clone(), move |args| feed::acknowledge(&conditions, i, &control, args));
     }
+    let methods: [(_, feed::PartMethod); 2] =
+        [(nodes.set_part.clone(), feed::set_part), (nodes.change_dies.clone(), feed::change_dies)];
+    for (node, call) in methods {
+        let control = control.clone();
+        manager.inner().add_method_callback(node, move |args| call(&control, args));
+    }
     let listener = tokio::net::TcpListener::bind(cfg.listen)
         .await
         .with_context(|| format!("opcua.listen {}: cannot listen", cfg.url))?;
     let addr = listener.local_addr().with_context(|| format!("opcua.listen {}", cfg.url))?;
-    let feed = feed::Feed { manager, subscriptions: handle.subscriptions().clone(), nodes, conditions };
+    let feed = feed::Feed {
+        manager,
+        subscriptions: handle.subscriptions().clone(),
+        nodes,
+        conditions,
+        part: crate::estimate::billet_book::Trace::default(),
+    };
     let updater = tokio::spawn(feed.run(live.subscribe()));
     let run = tokio::spawn(async move {
         if let Err(e) = server.run_with(listener).await {

@@ -11,8 +11,8 @@
 use opcua::nodes::{AccessLevel, EventNotifier, MethodBuilder, ObjectBuilder, ObjectTypeBuilder, VariableBuilder};
 use opcua::server::address_space::AddressSpace;
 use opcua::types::{
-    Argument, DataTypeId, LocalizedText, NodeId, ObjectId, ObjectTypeId, QualifiedName, ReferenceTypeId,
-    VariableTypeId, Variant,
+    Argument, DataTypeId, EUInformation, ExtensionObject, LocalizedText, NodeId, ObjectId, ObjectTypeId, QualifiedName,
+    ReferenceTypeId, VariableTypeId, Variant,
 };
 
 use super::events::BLOW_EVENT_FIELDS;
@@ -34,27 +34,80 @@ pub const CONDITIONS: [(AlertKind, &str, u16); 4] = [
     (AlertKind::Sensor, "SensorAlarm", 500),
 ];
 
-/// A process value: browse name, namespace (true: forgemon's), data type, unit.
+/// A unit of UN/CEFACT Recommendation 20 as OPC 10000-8 §5.6.3 names it: the common code,
+/// the symbol shown, the description.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Unece {
+    pub code: &'static str,
+    pub symbol: &'static str,
+    pub description: &'static str,
+}
+
+/// OPC 10000-8 §5.6.3: the namespace of the UNECE units.
+pub const UNECE_NAMESPACE: &str = "http://www.opcfoundation.org/UA/units/un/cefact";
+
+impl Unece {
+    /// The unit's `UnitId`: its common code's characters as bytes of an Int32, the first the
+    /// most significant (OPC 10000-8 §5.6.3).
+    pub fn unit_id(&self) -> i32 {
+        self.code.bytes().fold(0i32, |id, c| (id << 8) | i32::from(c))
+    }
+
+    /// The `EngineeringUnits` value.
+    pub fn eu_information(&self) -> EUInformation {
+        EUInformation {
+            namespace_uri: UNECE_NAMESPACE.into(),
+            unit_id: self.unit_id(),
+            display_name: LocalizedText::new("en", self.symbol),
+            description: LocalizedText::new("en", self.description),
+        }
+    }
+}
+
+const NEWTON: Unece = Unece { code: "NEW", symbol: "N", description: "newton" };
+const METRE: Unece = Unece { code: "MTR", symbol: "m", description: "metre" };
+const METRE_PER_SECOND: Unece = Unece { code: "MTS", symbol: "m/s", description: "metre per second" };
+const JOULE: Unece = Unece { code: "JOU", symbol: "J", description: "joule" };
+/// A count or a ratio: "one".
+const ONE: Unece = Unece { code: "C62", symbol: "1", description: "one" };
+
+/// A process value: browse name, namespace (true: forgemon's), data type, unit (the
+/// `FM:Unit` text and the standard's `EngineeringUnits`).
 struct ValueSpec {
     name: &'static str,
     forgemon: bool,
     data_type: DataTypeId,
     unit: &'static str,
+    unece: Option<Unece>,
 }
 
-/// The working unit's per-blow values, written on every blow (`feed.rs`).
-const VALUES: [ValueSpec; 11] = [
-    ValueSpec { name: "CycleCounter", forgemon: false, data_type: DataTypeId::UInt32, unit: "blows" },
-    ValueSpec { name: "PeakLoad", forgemon: false, data_type: DataTypeId::Double, unit: "N" },
-    ValueSpec { name: "BilletHeight", forgemon: false, data_type: DataTypeId::Double, unit: "m" },
-    ValueSpec { name: "BilletCounter", forgemon: true, data_type: DataTypeId::UInt32, unit: "billets" },
-    ValueSpec { name: "BlowClass", forgemon: true, data_type: DataTypeId::String, unit: "" },
-    ValueSpec { name: "ImpactVelocity", forgemon: true, data_type: DataTypeId::Double, unit: "m/s" },
-    ValueSpec { name: "ImpactEnergy", forgemon: true, data_type: DataTypeId::Double, unit: "J" },
-    ValueSpec { name: "PlasticEnergy", forgemon: true, data_type: DataTypeId::Double, unit: "J" },
-    ValueSpec { name: "Efficiency", forgemon: true, data_type: DataTypeId::Double, unit: "1" },
-    ValueSpec { name: "LastAlert", forgemon: true, data_type: DataTypeId::String, unit: "" },
-    ValueSpec { name: "AlertLatched", forgemon: true, data_type: DataTypeId::Boolean, unit: "" },
+const fn value(
+    name: &'static str,
+    forgemon: bool,
+    data_type: DataTypeId,
+    unit: &'static str,
+    unece: Option<Unece>,
+) -> ValueSpec {
+    ValueSpec { name, forgemon, data_type, unit, unece }
+}
+
+/// The working unit's per-blow values, written on every blow (`feed.rs`); the part, lot and
+/// die set the blow was forged as (issue 44).
+const VALUES: [ValueSpec; 14] = [
+    value("CycleCounter", false, DataTypeId::UInt32, "blows", Some(ONE)),
+    value("PeakLoad", false, DataTypeId::Double, "N", Some(NEWTON)),
+    value("BilletHeight", false, DataTypeId::Double, "m", Some(METRE)),
+    value("BilletCounter", true, DataTypeId::UInt32, "billets", Some(ONE)),
+    value("BlowClass", true, DataTypeId::String, "", None),
+    value("ImpactVelocity", true, DataTypeId::Double, "m/s", Some(METRE_PER_SECOND)),
+    value("ImpactEnergy", true, DataTypeId::Double, "J", Some(JOULE)),
+    value("PlasticEnergy", true, DataTypeId::Double, "J", Some(JOULE)),
+    value("Efficiency", true, DataTypeId::Double, "1", Some(ONE)),
+    value("LastAlert", true, DataTypeId::String, "", None),
+    value("AlertLatched", true, DataTypeId::Boolean, "", None),
+    value("PartId", true, DataTypeId::String, "", None),
+    value("Lot", true, DataTypeId::String, "", None),
+    value("DieSet", true, DataTypeId::String, "", None),
 ];
 
 /// The ids of the nodes the feed writes and the events name.
@@ -70,6 +123,9 @@ pub struct Nodes {
     /// Each condition: kind, node, browse name, severity, its `Acknowledge` method and its
     /// state variables' `Id` (`ActiveState/Id`, `AckedState/Id`) and `Retain`.
     pub conditions: Vec<ConditionNodes>,
+    /// The working unit's `SetPart` and `ChangeDies` methods.
+    pub set_part: NodeId,
+    pub change_dies: NodeId,
 }
 
 /// A condition's nodes.
@@ -170,14 +226,90 @@ pub fn build(space: &mut AddressSpace, model_ns: u16, forgemon_ns: u16, kind: Ma
             let eu = NodeId::new(ns, format!("{}.Unit", v.name));
             variable(space, &eu, QualifiedName::new(forgemon_ns, "Unit"), v.unit, DataTypeId::String, &id, true);
         }
+        if let Some(u) = v.unece {
+            engineering_units(space, &id, ns, v.name, u, v.data_type == DataTypeId::Double);
+        }
         values.push((v.name, id));
     }
+    let methods = part_methods(space, forgemon_ns, &unit);
     let input = f("Efficiency");
     let conditions = CONDITIONS
         .iter()
         .map(|&(kind, cname, severity)| condition(space, forgemon_ns, &unit, &input, kind, cname, severity))
         .collect();
-    Nodes { model_ns, forgemon_ns, machine, machine_name: name.to_string(), working_unit: unit, values, conditions }
+    Nodes {
+        model_ns,
+        forgemon_ns,
+        machine,
+        machine_name: name.to_string(),
+        working_unit: unit,
+        values,
+        conditions,
+        set_part: methods.0,
+        change_dies: methods.1,
+    }
+}
+
+/// `EngineeringUnits` (OPC 10000-8 §5.3.2: an `EUInformation`) of the value `id`; a Double
+/// becomes an `AnalogUnitType`, whose property it is.
+fn engineering_units(space: &mut AddressSpace, id: &NodeId, ns: u16, name: &str, u: Unece, analog: bool) {
+    let eu = NodeId::new(ns, format!("{name}.EngineeringUnits"));
+    let value = Variant::from(ExtensionObject::from_message(u.eu_information()));
+    variable(space, &eu, QualifiedName::new(0, "EngineeringUnits"), value, DataTypeId::EUInformation, id, true);
+    if analog {
+        // The value was made a BaseDataVariableType; AnalogUnitType is its subtype with
+        // mandatory units.
+        space.delete_reference(
+            id,
+            &NodeId::from(VariableTypeId::BaseDataVariableType),
+            ReferenceTypeId::HasTypeDefinition,
+        );
+        space.insert_reference(id, &NodeId::from(VariableTypeId::AnalogUnitType), ReferenceTypeId::HasTypeDefinition);
+    }
+}
+
+/// The text arguments of a method: name and description.
+fn string_args(names: &[(&str, &str)]) -> Vec<Argument> {
+    names
+        .iter()
+        .map(|(name, description)| Argument {
+            name: (*name).into(),
+            data_type: DataTypeId::String.into(),
+            value_rank: -1,
+            array_dimensions: None,
+            description: (*description).into(),
+        })
+        .collect()
+}
+
+/// The working unit's methods `FM:SetPart(PartId, Lot, DieSet)` (a new billet, forged as
+/// given) and `FM:ChangeDies(DieSet)` (a die change): their node ids.
+fn part_methods(space: &mut AddressSpace, ns: u16, unit: &NodeId) -> (NodeId, NodeId) {
+    let id = |s: &str| NodeId::new(ns, s.to_string());
+    let keeps = "empty: the value in force is kept";
+    let set_part = id("SetPart");
+    MethodBuilder::new(&set_part, QualifiedName::new(ns, "SetPart"), "SetPart")
+        .component_of(unit.clone())
+        .executable(true)
+        .user_executable(true)
+        .input_args(
+            space,
+            &id("SetPart.InputArguments"),
+            &string_args(&[("PartId", keeps), ("Lot", keeps), ("DieSet", keeps)]),
+        )
+        .insert(space);
+    let change_dies = id("ChangeDies");
+    MethodBuilder::new(&change_dies, QualifiedName::new(ns, "ChangeDies"), "ChangeDies")
+        .component_of(unit.clone())
+        .executable(true)
+        .user_executable(true)
+        .input_args(
+            space,
+            &id("ChangeDies.InputArguments"),
+            &string_args(&[("DieSet", "the die set put in; empty: the one in force, counted from zero")]),
+        )
+        .insert(space);
+    (set_part, change_dies)
 }
 
 /// `Identification` (OPC 40001-1 §8, MachineryItemIdentificationType's properties that
