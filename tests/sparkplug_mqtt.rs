@@ -93,9 +93,11 @@ struct Demo {
 }
 
 impl Demo {
-    fn start(dir: &Path, billets: u32, url: &str) -> Demo {
+    /// `billets` forged as lot `lot` on die set 17.
+    fn start(dir: &Path, billets: u32, url: &str, lot: &str) -> Demo {
         let mut child = Command::new(env!("CARGO_BIN_EXE_forgemon"))
-            .args(["demo", "--billets", &billets.to_string(), "--interval", "0.3", "--mqtt", url, "--dir"])
+            .args(["demo", "--billets", &billets.to_string(), "--interval", "0.3", "--mqtt", url])
+            .args(["--lot", lot, "--die", "17", "--dir"])
             .arg(dir)
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
@@ -221,7 +223,7 @@ fn every_blow_reaches_a_historian_through_broker_and_service_restarts() {
     let sub = Subscriber::start(port);
 
     // Demo 1, 24 blows at 0.3 s: the broker goes away for blows 5..=10 and from 17 on.
-    let demo = Demo::start(&rec, 3, &url);
+    let demo = Demo::start(&rec, 3, &url, "L1");
     demo.wait_blow(4);
     broker.stop();
     demo.wait_blow(10);
@@ -230,7 +232,7 @@ fn every_blow_reaches_a_historian_through_broker_and_service_restarts() {
     broker.stop();
     demo.wait();
     // Demo 2 on the same directory while the broker is still down: it resumes the queue.
-    let demo = Demo::start(&rec, 1, &url);
+    let demo = Demo::start(&rec, 1, &url, "L2");
     demo.wait_blow(3);
     broker.start();
     demo.wait();
@@ -283,7 +285,7 @@ fn every_blow_reaches_a_historian_through_broker_and_service_restarts() {
         assert_eq!(metric(birth, "Node Control/Rebirth")["datatype"], 11, "the rebirth control is a Boolean");
         let dbirth = seq.get(1).expect("a DBIRTH after the NBIRTH");
         assert_eq!(dbirth["type"], "DBIRTH");
-        for f in ["blow/plastic_J", "blow/efficiency", "blow/class", "alert/elastic_blow"] {
+        for f in ["blow/plastic_J", "blow/efficiency", "blow/class", "blow/lot", "alert/elastic_blow"] {
             assert!(dbirth["metrics"].get(f).is_some(), "DBIRTH lacks {f}");
         }
         for (i, m) in seq.iter().enumerate() {
@@ -328,8 +330,15 @@ fn every_blow_reaches_a_historian_through_broker_and_service_restarts() {
     let published: Vec<&Value> = first.values().copied().collect();
     let numbers: Vec<u64> = published.iter().map(|m| u(&metric(m, "blow/blow")["value"])).collect();
     assert_eq!(published.len(), results.len(), "blows published vs recorded; published: {numbers:?}");
-    for (m, r) in published.iter().zip(&results) {
+    // Demo 2 numbers its blows from 1 again.
+    let mut demo_index = 0;
+    for (i, (m, r)) in published.iter().zip(&results).enumerate() {
         assert_eq!(u(&metric(m, "blow/blow")["value"]), u64::from(r.blow), "published {numbers:?}");
+        demo_index += usize::from(i > 0 && r.blow < results[i - 1].blow);
+        // What it was forged as (issue 44): the demo's lot and die set; no part id given.
+        assert_eq!(metric(m, "blow/lot")["value"], ["L1", "L2"][demo_index], "blow {} lot", r.blow);
+        assert_eq!(metric(m, "blow/die_set")["value"], "17", "blow {}", r.blow);
+        assert_eq!(metric(m, "blow/part_id")["null"], true, "blow {}: no part id given", r.blow);
         assert_eq!(bits(m, "blow/t_contact_s"), Some(r.t_contact_s.to_bits()));
         assert_eq!(bits(m, "blow/plastic_J"), r.plastic_j.map(f64::to_bits));
         assert_eq!(bits(m, "blow/efficiency"), r.efficiency.map(f64::to_bits));

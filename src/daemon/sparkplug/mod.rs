@@ -38,6 +38,8 @@ use tokio::task::JoinHandle;
 use super::live::{Live, LiveEvent};
 use crate::config::uplink::MqttUplink;
 use payload::{NodeCounters, NodeIds};
+
+use crate::estimate::billet_book::Trace;
 use store::{Store, StoreLimits};
 
 /// The queue's directory under the recording directory.
@@ -163,13 +165,15 @@ fn now_ms() -> u64 {
 /// The feeder: each blow's DDATA onto the queue, then sent if a session is up. On `stop`,
 /// it takes what the feed still holds and ends.
 async fn feed(mut rx: broadcast::Receiver<LiveEvent>, shared: SharedState, stop: Arc<Notify>) {
+    // What the blows are forged as: the status snapshot's, published just before each blow.
+    let mut part = Trace::default();
     loop {
         let event = tokio::select! {
             ev = rx.recv() => ev,
             _ = stop.notified() => {
                 loop {
                     match rx.try_recv() {
-                        Ok(ev) => queue_event(&shared, ev),
+                        Ok(ev) => queue_event(&shared, ev, &mut part),
                         Err(TryRecvError::Lagged(n)) => count_lagged(&shared, n),
                         Err(_) => return,
                     }
@@ -177,7 +181,7 @@ async fn feed(mut rx: broadcast::Receiver<LiveEvent>, shared: SharedState, stop:
             }
         };
         match event {
-            Ok(ev) => queue_event(&shared, ev),
+            Ok(ev) => queue_event(&shared, ev, &mut part),
             Err(RecvError::Lagged(n)) => count_lagged(&shared, n),
             Err(RecvError::Closed) => return,
         }
@@ -192,11 +196,19 @@ fn count_lagged(shared: &SharedState, n: u64) {
     }
 }
 
-/// A blow's DDATA onto the queue (other events are not published).
-fn queue_event(shared: &SharedState, ev: LiveEvent) {
-    let LiveEvent::Blow(e) = ev else { return };
+/// A blow's DDATA onto the queue, forged as `part`, which a status snapshot updates (other
+/// events are not published).
+fn queue_event(shared: &SharedState, ev: LiveEvent, part: &mut Trace) {
+    let e = match ev {
+        LiveEvent::Blow(e) => e,
+        LiveEvent::Status(s) => {
+            *part = s.part.clone();
+            return;
+        }
+        _ => return,
+    };
     let t_ms = now_ms();
-    let bytes = payload::blow_data(&e, t_ms).encode_to_vec();
+    let bytes = payload::blow_data(&e, part, t_ms).encode_to_vec();
     let Ok(mut s) = shared.lock() else { return };
     if let Err(err) = s.store.push(&bytes, t_ms) {
         s.store_errors += 1;

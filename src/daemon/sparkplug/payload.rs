@@ -9,6 +9,7 @@ use prost::Message;
 use super::proto::Payload;
 use super::proto::payload::{Metric, metric};
 use crate::estimate::BlowEstimate;
+use crate::estimate::billet_book::Trace;
 
 /// The Sparkplug B topic namespace (specification §4.1.1).
 pub const NAMESPACE: &str = "spBv1.0";
@@ -55,6 +56,10 @@ pub const BLOW_FIELDS: &[(&str, DataType)] = &[
     ("billet", DataType::UInt32),
     ("billet_blow", DataType::UInt32),
 ];
+
+/// What a blow was forged as (issue 44: `[part]`, `POST /billet`, the PLC's part block, OPC
+/// UA's `SetPart`), published as `blow/<field>` strings, null when not given.
+pub const TRACE_FIELDS: [&str; 3] = ["part_id", "lot", "die_set"];
 
 /// The alert kinds of docs/interfaces.md §5, published as `alert/<kind>` holding the alert's reason.
 pub const ALERT_KINDS: &[&str] = &["elastic_blow", "low_efficiency", "model_health", "sensor", "nok"];
@@ -151,16 +156,23 @@ pub fn ndeath(bd_seq: u64) -> Payload {
 /// first blow.
 pub fn dbirth(seq: u64, t_ms: u64) -> Payload {
     let blows = BLOW_FIELDS.iter().map(|(f, t)| metric(&format!("blow/{f}"), t_ms, *t, None));
+    let trace = TRACE_FIELDS.iter().map(|f| metric(&format!("blow/{f}"), t_ms, DataType::String, None));
     let alerts = ALERT_KINDS.iter().map(|k| metric(&format!("alert/{k}"), t_ms, DataType::String, None));
-    Payload { timestamp: Some(t_ms), metrics: blows.chain(alerts).collect(), seq: Some(seq), ..Default::default() }
+    let metrics = blows.chain(trace).chain(alerts).collect();
+    Payload { timestamp: Some(t_ms), metrics, seq: Some(seq), ..Default::default() }
 }
 
 /// A blow's DDATA as it is queued: every `blow/<field>` at `t_ms` (when the service made
-/// the result), plus `alert/<kind>` if the blow raised an alert; no `seq` yet.
-pub fn blow_data(e: &BlowEstimate, t_ms: u64) -> Payload {
+/// the result), what it was forged as (`trace`), plus `alert/<kind>` if the blow raised an
+/// alert; no `seq` yet.
+pub fn blow_data(e: &BlowEstimate, trace: &Trace, t_ms: u64) -> Payload {
     let json = serde_json::to_value(e).unwrap_or(serde_json::Value::Null);
     let mut metrics: Vec<Metric> =
         BLOW_FIELDS.iter().map(|(f, t)| metric(&format!("blow/{f}"), t_ms, *t, value_of(json.get(*f), *t))).collect();
+    for (f, v) in TRACE_FIELDS.iter().zip([&trace.part_id, &trace.lot, &trace.die_set]) {
+        let value = v.clone().map(metric::Value::StringValue);
+        metrics.push(metric(&format!("blow/{f}"), t_ms, DataType::String, value));
+    }
     if let Some(a) = &e.alert {
         let reason = metric::Value::StringValue(a.reason.clone());
         metrics.push(metric(&format!("alert/{}", a.kind.as_str()), t_ms, DataType::String, Some(reason)));
@@ -237,7 +249,7 @@ mod tests {
     #[test]
     fn dbirth_declares_every_field_and_alert_with_a_type() {
         let p = dbirth(1, 5);
-        assert_eq!(p.metrics.len(), BLOW_FIELDS.len() + ALERT_KINDS.len());
+        assert_eq!(p.metrics.len(), BLOW_FIELDS.len() + TRACE_FIELDS.len() + ALERT_KINDS.len());
         assert!(p.metrics.iter().all(|m| m.datatype.is_some() && m.is_null == Some(true)));
     }
 
@@ -266,6 +278,16 @@ mod tests {
             Some(metric::Value::StringValue("{\"ok\":true}".into()))
         );
         assert_eq!(value_of(j.get("missing"), DataType::Double), None);
+    }
+
+    #[test]
+    fn a_blow_carries_what_it_was_forged_as_and_null_for_what_was_not_given() {
+        let trace = Trace { part_id: None, lot: Some("4711".into()), die_set: Some("17".into()) };
+        let p = blow_data(&crate::estimate::result::examples::soft(3), &trace, 9);
+        let m = |name: &str| p.metrics.iter().find(|m| m.name.as_deref() == Some(name)).expect(name);
+        assert_eq!(m("blow/lot").value, Some(metric::Value::StringValue("4711".into())));
+        assert_eq!(m("blow/die_set").value, Some(metric::Value::StringValue("17".into())));
+        assert_eq!((m("blow/part_id").value.as_ref(), m("blow/part_id").is_null), (None, Some(true)));
     }
 
     #[test]
