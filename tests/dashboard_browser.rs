@@ -96,6 +96,15 @@ fn the_page_shows_the_first_blow_live_and_the_acknowledged_alert() {
     assert!((page_eff - demo_eff).abs() <= 0.005 + 1e-9, "efficiency {page_eff} on the page, {demo_eff} printed");
     assert_eq!(row[12], printed[2], "class");
 
+    // The die set in the hammer (issue 44): the demo gives none, so "–", with its blows as
+    // /status counts them (the page may have moved on by a blow since).
+    let dies = &seen["dies"];
+    let shown = dies["shown"].as_str().unwrap();
+    let counted: u64 = shown.strip_prefix("– · ").and_then(|n| n.parse().ok()).unwrap_or_else(|| panic!("{dies}"));
+    let at_status = dies["status_blows"].as_u64().unwrap();
+    assert!(counted == at_status || counted == at_status + 1, "{dies}");
+    assert_eq!(at_status, dies["blows"].as_u64().unwrap(), "one die set since the start: {dies}");
+
     // The page opened before the blows it then showed arrived (the live feed did it).
     assert!(seen["blows_at_load"].as_u64().unwrap() < 8, "{seen}");
     // The curve of the alerting blow: measured and fitted model (the demo's hammer at
@@ -206,4 +215,93 @@ fn the_page_reconnects_by_itself_after_the_service_restarts() {
     let header: u64 = seen["after"]["header_blows"].as_str().unwrap().parse().unwrap();
     let status = seen["status_blows"].as_u64().unwrap();
     assert!(header == status || header + 1 == status, "header {header} blows, /status {status}");
+}
+
+/// The history page (issue 44) with 100 000 blows: a demo makes the database, Python's
+/// sqlite3 adds 100 000 synthetic blows on four die sets and twenty lots
+/// (`tests/python/fill_history.py`, another code path than the service's writer), and a demo
+/// serving it is opened in Chromium. Every die set's and lot's row must show Python's counts
+/// and mean efficiency; the die-set filter must narrow it; the I-MR chart of blow 3 must
+/// count its blows. The time from navigation to drawn is printed (a figure for the note,
+/// not a pass mark: times are for benchmarks). It saves `target/history.png`.
+#[test]
+fn the_history_page_draws_100000_blows_by_die_set_and_lot() {
+    let browser = chromium();
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let dir = std::env::temp_dir().join(format!("forgemon-history-page-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let forgemon = env!("CARGO_BIN_EXE_forgemon");
+    let made =
+        Command::new(forgemon).args(["demo", "--fast", "--billets", "1", "--dir", dir.to_str().unwrap()]).output();
+    assert!(made.unwrap().status.success(), "the first demo makes the database");
+    let db = dir.join("history.sqlite");
+    let fill = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/fill_history.py");
+    let out = Command::new("python3").args([fill, db.to_str().unwrap(), "100000", "7"]).output().unwrap();
+    assert!(out.status.success(), "fill_history.py: {}", String::from_utf8_lossy(&out.stderr));
+    let want: Value = serde_json::from_slice(&out.stdout).unwrap();
+
+    let mut demo = Command::new(forgemon)
+        .args(["demo", "--billets", "6", "--interval", "0.5", "--http", &format!("127.0.0.1:{port}")])
+        .args(["--dir", dir.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Its stdout read to the end: a closed pipe would stop the demo.
+    let (tx, rx) = mpsc::channel();
+    let stdout = demo.stdout.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if let Some(u) = line.trim().strip_prefix("dashboard on ") {
+                let _ = tx.send(u.to_string());
+            }
+        }
+    });
+    let url = rx.recv_timeout(Duration::from_secs(20)).expect("the demo prints its dashboard's URL");
+    let shot = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("target/history.png");
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/dashboard_cdp.py");
+    let page = format!("{url}history");
+    let out = Command::new("python3").args([script, "--history", &browser, &page, shot.to_str().unwrap()]).output();
+    let _ = demo.kill();
+    let _ = demo.wait();
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = out.unwrap();
+    assert!(
+        out.status.success(),
+        "the browser session failed ({INSTALL}):\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let seen: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((&seen["ready"], &seen["error"]), (&Value::from("1"), &Value::from("")), "{seen}");
+    let blows: u64 = seen["blows"].as_str().unwrap().parse().unwrap();
+    assert!(blows >= 100_008, "the synthetic blows and the first demo's 8: {blows}");
+
+    // Each die set's and lot's row: name, blows, billets, hard, NOK, mean efficiency (3
+    // decimals: within half of the last digit of Python's mean).
+    for (table, key) in [("by_die", "die"), ("by_lot", "lot")] {
+        let rows = seen[table].as_array().unwrap();
+        let groups = want[key].as_object().unwrap();
+        for (name, w) in groups {
+            let row = rows.iter().find(|r| r[0] == name.as_str()).unwrap_or_else(|| panic!("{table}: no {name}"));
+            for (col, field) in [(1, "blows"), (2, "billets"), (3, "hard"), (4, "nok")] {
+                assert_eq!(row[col].as_str().unwrap().parse::<u64>().ok(), w[field].as_u64(), "{table} {name} {field}");
+            }
+            let shown: f64 = row[5].as_str().unwrap().parse().unwrap();
+            let mean = w["mean_efficiency"].as_f64().unwrap();
+            assert!((shown - mean).abs() <= 0.0005 + 1e-9, "{table} {name}: mean {shown} against {mean}");
+        }
+        assert_eq!(rows.len(), groups.len() + 1, "{table}: the demo's blows without a die set or lot are one more row");
+    }
+    assert_eq!(seen["filtered"]["blows"], "20000", "die set D2 only: {}", seen["filtered"]);
+    assert_eq!(seen["filtered"]["by_die"].as_array().map(Vec::len), Some(1));
+    // Blow 3 of the 12 500 synthetic billets and of the demos' billets.
+    let imr = seen["imr_blow_3"].as_str().unwrap();
+    let n: u64 = imr.strip_prefix("n ").and_then(|s| s.split(' ').next()).and_then(|s| s.parse().ok()).unwrap();
+    assert!((12_501..12_510).contains(&n), "{imr}");
+    eprintln!(
+        "history page: {blows} blows drawn {:.0} ms after navigation (this load {:.0} ms)",
+        seen["load_ms"].as_f64().unwrap_or(f64::NAN),
+        seen["drawn"]["ms"].as_f64().unwrap_or(f64::NAN)
+    );
 }

@@ -17,6 +17,7 @@ pub mod die;
 pub mod query;
 pub mod schema;
 pub mod spc;
+pub mod trend;
 pub mod writer;
 
 use std::path::{Path, PathBuf};

@@ -78,6 +78,18 @@ impl Filter {
     }
 }
 
+/// `--since`/`--until`'s text as ns since the epoch.
+pub fn parse_time(flag: &str, text: &str) -> anyhow::Result<i64> {
+    let t = chrono::DateTime::parse_from_rfc3339(text).map(|t| t.to_utc()).or_else(|_| {
+        chrono::NaiveDate::parse_from_str(text, "%Y-%m-%d")
+            .map(|d| d.and_hms_opt(0, 0, 0).unwrap_or_default().and_utc())
+    });
+    let t = t.map_err(|_| {
+        anyhow::anyhow!("{flag} {text}: not a time; give RFC 3339 (2026-11-30T06:00:00Z) or a date (2026-11-30)")
+    })?;
+    t.timestamp_nanos_opt().ok_or_else(|| anyhow::anyhow!("{flag} {text}: out of range"))
+}
+
 /// Open `path` to read, refusing a file that is not there (SQLite would create it).
 pub fn open_read(path: &std::path::Path) -> Result<Connection, HistoryError> {
     let sql = |source| HistoryError::Sqlite { path: path.to_path_buf(), source };

@@ -146,9 +146,57 @@ def restart(chromium, forgemon, port, workdir):
                     child.wait()
 
 
+HISTORY_TABLE = """(id) => Array.from(document.querySelectorAll('#' + id + ' tr'))
+  .map(r => Array.from(r.cells).map(c => c.textContent))"""
+
+
+def history(chromium, url, shot):
+    """Open the history page at URL, wait until it has drawn, read its tables and figures,
+    choose blow 3 in the I-MR chart, and save a screenshot. Prints what it saw, with the time
+    from navigation to drawn (performance.now(), ms since the page's time origin)."""
+    with tempfile.TemporaryDirectory(ignore_cleanup_errors=True) as profile:
+        proc, ws_url = launch(chromium, profile)
+        try:
+            p = Page(ws_url)
+            p.call("Page.enable")
+            p.call("Emulation.setDeviceMetricsOverride", width=1280, height=1300, deviceScaleFactor=1, mobile=False)
+            p.call("Page.navigate", url=url)
+            p.wait("document.body && document.body.dataset.ready", "the history page to draw", timeout_s=60)
+            drawn = p.eval("({ready: document.body.dataset.ready, error: document.getElementById('error').textContent,"
+                           " drawn: window.historyDrawn, at_ms: performance.now(),"
+                           " blows: document.getElementById('h-blows').textContent,"
+                           " imr: document.getElementById('imr-figures').textContent})")
+            drawn["load_ms"] = p.eval("window.historyDrawn && window.historyDrawn.at")
+            drawn["by_die"] = p.eval(f"({HISTORY_TABLE})('by-die')")
+            drawn["by_lot"] = p.eval(f"({HISTORY_TABLE})('by-lot')")
+            p.eval("(() => { const s = document.getElementById('imr-blow'); s.value = '3';"
+                   " s.dispatchEvent(new Event('change')); })()")
+            drawn["imr_blow_3"] = p.eval("document.getElementById('imr-figures').textContent")
+            # The filter form: one die set only.
+            p.eval("document.getElementById('f-die').value = 'D2';"
+                   " document.getElementById('filters').requestSubmit()")
+            p.wait("document.body.dataset.ready === '1' && document.getElementById('by-die').rows.length === 1",
+                   "the page filtered to D2")
+            drawn["filtered"] = {"blows": p.eval("document.getElementById('h-blows').textContent"),
+                                 "by_die": p.eval(f"({HISTORY_TABLE})('by-die')")}
+            p.eval("document.getElementById('f-die').value = '';"
+                   " document.getElementById('filters').requestSubmit()")
+            p.wait("document.body.dataset.ready === '1' && document.getElementById('by-die').rows.length > 1",
+                   "the page unfiltered")
+            png = p.call("Page.captureScreenshot", format="png")["data"]
+            with open(shot, "wb") as f:
+                f.write(base64.b64decode(png))
+            print(json.dumps(drawn))
+        finally:
+            proc.kill()
+            proc.wait()
+
+
 def main():
     if sys.argv[1] == "--restart":
         return restart(*sys.argv[2:6])
+    if sys.argv[1] == "--history":
+        return history(*sys.argv[2:5])
     chromium, url, shot = sys.argv[1:4]
     with tempfile.TemporaryDirectory(ignore_cleanup_errors=True) as profile:
         proc, ws_url = launch(chromium, profile)
@@ -199,6 +247,11 @@ def main():
             p.wait("!!document.querySelector('#alert.acked')", "the acknowledged state")
             after = p.eval(ALERT)
             status = json.load(urllib.request.urlopen(base + "/status"))
+            # The die set's count as the header shows it, once it has caught up with /status.
+            p.wait(f"document.getElementById('die-life').textContent.endsWith(' {status['die_life']['blows']}')"
+                   f" || +document.getElementById('blows-total').textContent > {status['blows']}", "the die count")
+            dies = {"shown": p.eval("document.getElementById('die-life').textContent"),
+                    "status_blows": status["die_life"]["blows"], "blows": status["blows"]}
             print(json.dumps({"first_row": first, "blows_at_load": blows_at_load, "curve": curve_points,
                               "sensors": sensors,
                               "alert_before": before, "alert_after": after, "advice": advice,
@@ -208,7 +261,7 @@ def main():
                               if live_row["time"].count(":") == 2 else None,
                               "arrived_time_s": (arrived_s + ZONE_OFFSET_S) % 86400,
                               "reason_before": reason_before, "reason_open": reason_open,
-                              "latched_reason": latched_reason}))
+                              "latched_reason": latched_reason, "dies": dies}))
         finally:
             proc.kill()
             proc.wait()

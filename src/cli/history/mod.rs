@@ -125,17 +125,7 @@ pub fn run(args: HistoryArgs) -> anyhow::Result<ExitCode> {
     }
 }
 
-/// `--since`/`--until`'s text as ns since the epoch.
-pub(crate) fn parse_time(flag: &str, text: &str) -> anyhow::Result<i64> {
-    let t = chrono::DateTime::parse_from_rfc3339(text).map(|t| t.to_utc()).or_else(|_| {
-        chrono::NaiveDate::parse_from_str(text, "%Y-%m-%d")
-            .map(|d| d.and_hms_opt(0, 0, 0).unwrap_or_default().and_utc())
-    });
-    let t = t.map_err(|_| {
-        anyhow::anyhow!("{flag} {text}: not a time; give RFC 3339 (2026-11-30T06:00:00Z) or a date (2026-11-30)")
-    })?;
-    t.timestamp_nanos_opt().with_context(|| format!("{flag} {text}: out of range"))
-}
+pub(crate) use crate::history::query::parse_time;
 
 impl FilterArgs {
     pub(crate) fn filter(&self) -> anyhow::Result<Filter> {

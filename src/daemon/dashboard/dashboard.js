@@ -225,6 +225,18 @@ function renderHeader(status) {
   $("blows-total").textContent = status.blows;
   const h = status.last_blow ? status.last_blow.h_end_m : null;
   $("height").textContent = h === null || h === undefined ? "–" : fmt(1000 * h, 2) + " mm";
+  renderDies(status.die_life);
+}
+
+// The die set in the hammer: its name and blows, coloured at its warning and limit
+// (`[die_life]`); its hard blows and energy as the title.
+function renderDies(d) {
+  if (!d) return;
+  const el = $("die-life");
+  el.textContent = `${d.die_set === null ? "–" : d.die_set} · ${d.blows}` + (d.limit_blows ? ` / ${d.limit_blows}` : "");
+  el.className = d.level === "ok" ? "" : d.level === "warning" ? "die-warning" : "die-limit";
+  el.title = `${d.hard_blows} hard blows, ${fmt(d.energy_J / 1e6, 2)} MJ into the dies` +
+    (d.level === "ok" ? "" : ` (${d.level} reached)`);
 }
 
 // The live advisor's plan (`[advisor]`): blows left to the target and the next blow's

@@ -9,6 +9,7 @@
 
 pub mod auth;
 pub mod board;
+pub mod history_page;
 
 use std::convert::Infallible;
 
@@ -46,6 +47,7 @@ struct Shared {
 /// listener is the service's `[http]`); it stops with the listener.
 pub fn face<'a>(ctx: &'a FaceContext<'a>) -> BoxFuture<'a, anyhow::Result<Option<Box<dyn Face>>>> {
     ctx.serve_routes(routes(ctx.status.clone(), ctx.control.clone(), ctx.bus.clone()));
+    ctx.serve_routes(history_page::routes(ctx.config.history.as_ref().map(|h| h.path.clone())));
     Box::pin(async { Ok(boxed(Some(Dashboard))) })
 }
 
