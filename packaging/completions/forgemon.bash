@@ -112,6 +112,9 @@ _forgemon() {
             forgemon__subcmd__help__subcmd__history,report)
                 cmd="forgemon__subcmd__help__subcmd__history__subcmd__report"
                 ;;
+            forgemon__subcmd__help__subcmd__history,serve)
+                cmd="forgemon__subcmd__help__subcmd__history__subcmd__serve"
+                ;;
             forgemon__subcmd__help__subcmd__history,spc)
                 cmd="forgemon__subcmd__help__subcmd__history__subcmd__spc"
                 ;;
@@ -130,6 +133,9 @@ _forgemon() {
             forgemon__subcmd__history,report)
                 cmd="forgemon__subcmd__history__subcmd__report"
                 ;;
+            forgemon__subcmd__history,serve)
+                cmd="forgemon__subcmd__history__subcmd__serve"
+                ;;
             forgemon__subcmd__history,spc)
                 cmd="forgemon__subcmd__history__subcmd__spc"
                 ;;
@@ -147,6 +153,9 @@ _forgemon() {
                 ;;
             forgemon__subcmd__history__subcmd__help,report)
                 cmd="forgemon__subcmd__history__subcmd__help__subcmd__report"
+                ;;
+            forgemon__subcmd__history__subcmd__help,serve)
+                cmd="forgemon__subcmd__history__subcmd__help__subcmd__serve"
                 ;;
             forgemon__subcmd__history__subcmd__help,spc)
                 cmd="forgemon__subcmd__history__subcmd__help__subcmd__spc"
@@ -214,7 +223,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__demo)
-            opts="-h --billets --interval --dir --fast --http --plc --foxglove --mqtt --opcua --recipe --target --settings --without --dead --lot --die --help"
+            opts="-h --billets --interval --dir --fast --http --plc --foxglove --mqtt --opcua --recipe --target --settings --without --dead --lot --die --scatter --help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 2 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -424,7 +433,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__help__subcmd__history)
-            opts="query rebuild spc report export"
+            opts="query rebuild spc report export serve"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -480,6 +489,20 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__help__subcmd__history__subcmd__report)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__help__subcmd__history__subcmd__serve)
             opts=""
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
@@ -620,7 +643,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__history)
-            opts="-h --help query rebuild spc report export help"
+            opts="-h --help query rebuild spc report export serve help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 2 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -688,7 +711,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__history__subcmd__help)
-            opts="query rebuild spc report export help"
+            opts="query rebuild spc report export serve help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -758,6 +781,20 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__history__subcmd__help__subcmd__report)
+            opts=""
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__help__subcmd__serve)
             opts=""
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 4 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
@@ -905,6 +942,28 @@ _forgemon() {
                     return 0
                     ;;
                 -o)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                *)
+                    COMPREPLY=()
+                    ;;
+            esac
+            COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+            return 0
+            ;;
+        forgemon__subcmd__history__subcmd__serve)
+            opts="-h --db --http --help"
+            if [[ ${cur} == -* || ${COMP_CWORD} -eq 3 ]] ; then
+                COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
+                return 0
+            fi
+            case "${prev}" in
+                --db)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --http)
                     COMPREPLY=($(compgen -f "${cur}"))
                     return 0
                     ;;

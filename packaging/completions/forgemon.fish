@@ -93,13 +93,14 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand import" -s h -l help -
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l csv -d 'Write CSV (a header row, then one row per blow; an empty field where a value is `null`); `-` writes it to standard output' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -l parquet -d 'Write Parquet (snappy-compressed; nullable columns where a value can be `null`); `-` writes it to standard output, when that is not a terminal' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand export" -s h -l help -d 'Print help'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -s h -l help -d 'Print help'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -f -a "report" -d 'A shift\'s quality report as one HTML file: SPC per blow, I-MR charts, lots and die sets'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -f -a "export" -d 'A table of the history database as CSV or Parquet, under the same filters as query'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export serve help" -s h -l help -d 'Print help'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export serve help" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export serve help" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export serve help" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export serve help" -f -a "report" -d 'A shift\'s quality report as one HTML file: SPC per blow, I-MR charts, lots and die sets'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export serve help" -f -a "export" -d 'A table of the history database as CSV or Parquet, under the same filters as query'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export serve help" -f -a "serve" -d 'Serve the dashboard\'s history page over a database alone (no machine, no service)'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and not __fish_seen_subcommand_from query rebuild spc report export serve help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l db -d 'The history database (`[history] path`; by default `history.sqlite` in the recording directory)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from query" -l table -d 'Which table' -r -f -a "blows\t''
 billets\t''"
@@ -149,11 +150,15 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_se
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l parquet -d 'Write Parquet (snappy-compressed; `wall_time` a UTC timestamp in ns); `-` writes it to standard output, when that is not a terminal' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l nok -d 'Only blows judged NOK, or billets with one'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -s h -l help -d 'Print help'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from serve" -l db -d 'The history database' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from serve" -l http -d 'Where to serve the page (loopback only)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from serve" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "query" -d 'Print the blows (or billets) of the history database, oldest first'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "rebuild" -d 'Make the history database from recordings: MCAP is the source of truth. Into an existing database it adds only the rows it lacks'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "report" -d 'A shift\'s quality report as one HTML file: SPC per blow, I-MR charts, lots and die sets'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "export" -d 'A table of the history database as CSV or Parquet, under the same filters as query'
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "serve" -d 'Serve the dashboard\'s history page over a database alone (no machine, no service)'
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from help" -f -a "help" -d 'Print this message or the help of the given subcommand(s)'
 complete -c forgemon -n "__fish_forgemon_using_subcommand inspect" -l json -d 'Print one JSON object instead of text'
 complete -c forgemon -n "__fish_forgemon_using_subcommand inspect" -s h -l help -d 'Print help'
@@ -175,6 +180,7 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l dead -d 'Kill
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l lot -d 'The lot the billets come from (`[part] lot`): on every blow and billet in the history database (`--dir`/history.sqlite) and the recording' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l die -d 'The die set in the hammer (`[part] die_set`), as --lot' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l fast -d 'Run as fast as possible instead of in real time, and end after the last billet (on a terminal the demo otherwise keeps its dashboard up until Ctrl-C)'
+complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l scatter -d 'Forge each billet a little unlike the last, as a plant\'s billets come: its flow stress ±3 % and its friction ±3 % (one sd, drawn per billet, the same every run of a lot and die set), so the history\'s charts and SPC have a spread to show'
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -s h -l help -d 'Print help'
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l machine -d 'The machine model (machine.toml)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand simulate-device" -l process -d 'The billet forged, again and again (process.toml)' -r -F
@@ -236,3 +242,4 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_
 complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "spc" -d 'Process capability per blow of a recipe: mean, spread, Cp/Cpk against its windows, and the individuals/moving-range chart\'s limits'
 complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "report" -d 'A shift\'s quality report as one HTML file: SPC per blow, I-MR charts, lots and die sets'
 complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "export" -d 'A table of the history database as CSV or Parquet, under the same filters as query'
+complete -c forgemon -n "__fish_forgemon_using_subcommand help; and __fish_seen_subcommand_from history" -f -a "serve" -d 'Serve the dashboard\'s history page over a database alone (no machine, no service)'

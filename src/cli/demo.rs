@@ -100,6 +100,12 @@ pub struct DemoArgs {
     /// The die set in the hammer (`[part] die_set`), as --lot.
     #[arg(long, value_name = "DIE_SET", value_parser = parse_id)]
     pub die: Option<String>,
+    /// Forge each billet a little unlike the last, as a plant's billets come: its flow stress
+    /// ±3 % and its friction ±3 % (one sd, drawn per billet, the same every run of a lot and
+    /// die set), so the
+    /// history's charts and SPC have a spread to show.
+    #[arg(long)]
+    pub scatter: bool,
 }
 
 fn parse_dead(s: &str) -> Result<(Role, f64), String> {
@@ -145,9 +151,14 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         .map_err(|e| anyhow::anyhow!("--opcua {e}"))?;
     let machine = parse_machine("hammer-lg1000.machine.toml", MACHINE)?.machine;
     let steel = parse_process("steel-16NiCrMo13.process.toml", STEEL)?;
-    let plan = BilletPlan { process: steel, v0s_mps: vec![3.9, 5.3, 5.3, 5.3, 5.3, 5.3, 5.3, 5.3] };
     let billets = if args.billets == 0 { UNTIL_STOPPED_BILLETS } else { args.billets };
-    let sim = SimMachine::new(machine, EffectSet::NONE, vec![plan; billets], CaptureSpec::hammer(7), args.interval);
+    // Each lot and die set its own billets (a fixed seed per pair, the same every run).
+    let seed = [&args.lot, &args.die]
+        .iter()
+        .flat_map(|s| s.as_deref().unwrap_or("").bytes())
+        .fold(44u64, |h, b| h.wrapping_mul(31).wrapping_add(u64::from(b)));
+    let plans = plans(steel, billets, args.scatter.then_some(seed));
+    let sim = SimMachine::new(machine, EffectSet::NONE, plans, CaptureSpec::hammer(7), args.interval);
     let parts = parts(&args, opcua.clone())?;
     let (stop_tx, stop_rx) = watch::channel(false);
     let faces = Faces {
@@ -166,6 +177,26 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     };
     rt.block_on(serve_demo(sim, device, parts, hooks, faces, stop_rx))?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// The demo's billets: the steel sheet's, struck at 3.9 m/s and then 5.3 m/s seven times;
+/// with `scatter`, each its own flow stress (±3 %) and friction (±3 %), drawn from its seed.
+fn plans(steel: crate::physics::process::Process, billets: usize, scatter: Option<u64>) -> Vec<BilletPlan> {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+    let v0s_mps = vec![3.9, 5.3, 5.3, 5.3, 5.3, 5.3, 5.3, 5.3];
+    let mut rng = rand::rngs::StdRng::seed_from_u64(scatter.unwrap_or(0));
+    (0..billets)
+        .map(|_| {
+            let mut process = steel.clone();
+            if scatter.is_some() {
+                let (a, b): (f64, f64) = (StandardNormal.sample(&mut rng), StandardNormal.sample(&mut rng));
+                process.material = process.material.scaled(1.0 + 0.03 * a);
+                process.friction *= 1.0 + 0.03 * b;
+            }
+            BilletPlan { process, v0s_mps: v0s_mps.clone() }
+        })
+        .collect()
 }
 
 /// How the demo's faces end, and what stops the demo besides the signals.

@@ -71,6 +71,8 @@ pub struct History {
     die: Option<(i64, die::DieCount)>,
     /// The last blow's billet and recipe: its billet's summary carries the same recipe.
     last_blow: Option<(u32, Option<String>)>,
+    /// The billet the last blows were struck on and its first blow's log time.
+    first_blow: Option<(u32, i64)>,
     /// Rows older than this before the newest are deleted (`[history] keep_days`).
     keep_ns: Option<i64>,
     newest_ns: i64,
@@ -91,6 +93,7 @@ impl History {
             path: path.to_path_buf(),
             trace: Trace::default(),
             last_blow: None,
+            first_blow: None,
             die: None,
             keep_ns: keep_days.map(|d| (d * DAY_NS) as i64),
             newest_ns: i64::MIN,
@@ -126,6 +129,11 @@ impl History {
                 Payload::Result(r) => {
                     let recipe = r.judgement.as_ref().map(|j| j.recipe.clone());
                     self.last_blow = Some((r.billet.billet, recipe));
+                    // A billet's first blow: another billet's number, or its blow 1 (a new
+                    // run numbers billets from 1 again).
+                    if r.billet.billet_blow == 1 || self.first_blow.is_none_or(|(b, _)| b != r.billet.billet) {
+                        self.first_blow = Some((r.billet.billet, *t));
+                    }
                     insert_blow(&tx, *t, r, &self.trace).and_then(|k| {
                         n.blows += k as u64;
                         // A blow already there is not counted again.
@@ -141,7 +149,8 @@ impl History {
                         Some((billet, recipe)) if *billet == b.billet => recipe.as_deref(),
                         _ => None,
                     };
-                    insert_billet(&tx, *t, b, recipe).map(|k| n.billets += k as u64)
+                    let first = self.first_blow.filter(|(n, _)| *n == b.billet).map_or(0, |(_, t)| t);
+                    insert_billet(&tx, *t, b, recipe, first).map(|k| n.billets += k as u64)
                 }
                 Payload::Config(c) if c.name == PART_CONFIG_NAME => {
                     match parse_trace_text(&c.text) {
@@ -258,7 +267,7 @@ fn insert_blow(tx: &rusqlite::Transaction<'_>, t: i64, r: &BlowEstimate, trace: 
 }
 
 /// The billet row's columns, in the order `insert_billet` binds them.
-const BILLET_COLUMNS: [&str; 24] = [
+const BILLET_COLUMNS: [&str; 25] = [
     "wall_time_ns",
     "billet",
     "t_start_s",
@@ -283,6 +292,7 @@ const BILLET_COLUMNS: [&str; 24] = [
     "part_id",
     "lot",
     "die_set",
+    "first_blow_ns",
 ];
 
 fn insert_billet(
@@ -290,12 +300,13 @@ fn insert_billet(
     t: i64,
     b: &BilletSummary,
     recipe: Option<&str>,
+    first_blow_ns: i64,
 ) -> rusqlite::Result<usize> {
     // A later summary of the billet (finished, after an unfinished one) updates its row in
     // place; the same summary again changes nothing.
     let update: Vec<String> = BILLET_COLUMNS.iter().map(|c| format!("{c} = excluded.{c}")).collect();
     let sql = format!(
-        "INSERT INTO billets ({}) VALUES ({}) ON CONFLICT (billet, t_start_s) DO UPDATE SET {}
+        "INSERT INTO billets ({}) VALUES ({}) ON CONFLICT (billet, t_start_s, first_blow_ns) DO UPDATE SET {}
          WHERE excluded.wall_time_ns > billets.wall_time_ns",
         BILLET_COLUMNS.join(", "),
         (1..=BILLET_COLUMNS.len()).map(|i| format!("?{i}")).collect::<Vec<_>>().join(", "),
@@ -327,6 +338,7 @@ fn insert_billet(
         b.trace.part_id,
         b.trace.lot,
         b.trace.die_set,
+        first_blow_ns,
     ])
 }
 
@@ -386,6 +398,49 @@ mod tests {
         assert_eq!((count(&h, "blows"), count(&h, "billets")), (1, 1));
         let finished: bool = h.connection().query_row("SELECT finished FROM billets", [], |r| r.get(0)).expect("a row");
         assert!(finished, "the later summary is kept");
+    }
+
+    #[test]
+    fn two_runs_whose_clocks_both_start_at_zero_keep_their_billets_apart() {
+        // The same billet number and device times (a power-cycled DAQ, the simulator) in two
+        // runs: two rows, known apart by their first blow's log time.
+        let mut h = History::open(&temp_db("runs"), None).expect("opens");
+        let mut first = estimate(true);
+        (first.billet.billet, first.billet.billet_blow) = (4, 1);
+        let blow = Payload::Result(Box::new(first));
+        let summary = Payload::Billet(Box::new(billet(true)));
+        h.ingest(&[(10, blow.clone()), (11, summary.clone())]).expect("run 1");
+        h.ingest(&[(500, blow), (501, summary)]).expect("run 2");
+        assert_eq!((count(&h, "blows"), count(&h, "billets")), (2, 2));
+        let firsts: Vec<i64> = h
+            .connection()
+            .prepare("SELECT first_blow_ns FROM billets ORDER BY id")
+            .and_then(|mut s| s.query_map([], |r| r.get(0))?.collect())
+            .expect("rows");
+        assert_eq!(firsts, [10, 500]);
+    }
+
+    #[test]
+    fn a_version_2_database_keeps_its_billets_and_takes_their_first_blows_times() {
+        let path = temp_db("v2");
+        let conn = Connection::open(&path).expect("opens");
+        conn.execute_batch(schema::MIGRATIONS[0]).and_then(|_| conn.execute_batch(schema::MIGRATIONS[1])).expect("v2");
+        conn.pragma_update(None, "user_version", 2).expect("set");
+        conn.execute_batch(
+            "INSERT INTO blows (wall_time_ns, billet, billet_blow, blow, t_contact_s, class) VALUES (70, 1, 1, 1, 5.0, 'soft');
+             INSERT INTO blows (wall_time_ns, billet, billet_blow, blow, t_contact_s, class) VALUES (80, 1, 2, 2, 6.0, 'soft');
+             INSERT INTO billets (wall_time_ns, billet, t_start_s, t_end_s, blows, incomplete_blows, implausible_blows,
+                 energies_partial, hard_blows, alerts, checked_blows, finished, lot)
+                 VALUES (90, 1, 5.0, 6.0, 2, 0, 0, 0, 0, 0, 0, 1, '4711');",
+        )
+        .expect("rows");
+        drop(conn);
+        let h = History::open(&path, None).expect("migrates");
+        let (lot, first): (String, i64) = h
+            .connection()
+            .query_row("SELECT lot, first_blow_ns FROM billets", [], |r| Ok((r.get(0)?, r.get(1)?)))
+            .expect("the row kept");
+        assert_eq!((lot.as_str(), first), ("4711", 70));
     }
 
     #[test]

@@ -92,4 +92,46 @@ pub const MIGRATIONS: &[&str] = &[
     -- One row per installation, however often its marker is ingested (an unnamed set as '',
     -- which no name can be).
     CREATE UNIQUE INDEX die_sets_once ON die_sets (COALESCE(die_set, ''), installed_ns);",
+    // 3: a billet is known by its number, its start's device time and its first blow's log
+    // time (`first_blow_ns`, 0 when it had no blow): two runs whose DAQ clocks both start at
+    // zero (a power-cycled DAQ, the simulator) give their first billets the same number and
+    // device time, and were one row. SQLite cannot drop a table's UNIQUE constraint, so the
+    // table is made again; the rows there take their first blow's time from `blows`.
+    "CREATE TABLE billets_v3 (
+        id INTEGER PRIMARY KEY,
+        wall_time_ns INTEGER NOT NULL,
+        billet INTEGER NOT NULL,
+        t_start_s REAL NOT NULL,
+        t_end_s REAL NOT NULL,
+        blows INTEGER NOT NULL,
+        incomplete_blows INTEGER NOT NULL,
+        implausible_blows INTEGER NOT NULL,
+        energies_partial INTEGER NOT NULL,
+        h_start_m REAL,
+        h_start_off_sheet_m REAL,
+        h_end_m REAL,
+        kinetic_in_J REAL,
+        plastic_J REAL,
+        friction_J REAL,
+        efficiency REAL,
+        first_hard_blow INTEGER,
+        hard_blows INTEGER NOT NULL,
+        alerts INTEGER NOT NULL,
+        checked_blows INTEGER NOT NULL,
+        finished INTEGER NOT NULL,
+        recipe TEXT,
+        part_id TEXT,
+        lot TEXT,
+        die_set TEXT,
+        first_blow_ns INTEGER NOT NULL DEFAULT 0
+    );
+    INSERT INTO billets_v3 SELECT *, COALESCE((SELECT min(b.wall_time_ns) FROM blows b WHERE b.billet = billets.billet
+        AND b.t_contact_s >= billets.t_start_s AND b.t_contact_s <= billets.t_end_s
+        AND b.wall_time_ns <= billets.wall_time_ns), 0) FROM billets;
+    DROP TABLE billets;
+    ALTER TABLE billets_v3 RENAME TO billets;
+    CREATE UNIQUE INDEX billets_once ON billets (billet, t_start_s, first_blow_ns);
+    CREATE INDEX billets_by_time ON billets (wall_time_ns);
+    CREATE INDEX billets_by_lot ON billets (lot);
+    CREATE INDEX billets_by_die ON billets (die_set, wall_time_ns);",
 ];

@@ -56,6 +56,17 @@ pub enum FlowStress {
 }
 
 impl FlowStress {
+    /// The same material with every flow stress times `factor` (a billet harder or softer
+    /// than the sheet: colder, another heat).
+    pub fn scaled(&self, factor: f64) -> FlowStress {
+        match *self {
+            FlowStress::Constant { sigma0_pa } => FlowStress::Constant { sigma0_pa: sigma0_pa * factor },
+            FlowStress::HanselSpittel { a_pa, m1, m2, m3, m4, temperature_c } => {
+                FlowStress::HanselSpittel { a_pa: a_pa * factor, m1, m2, m3, m4, temperature_c }
+            }
+        }
+    }
+
     /// Flow stress at strain `eps` and strain rate `epsdot_per_s` (both floored).
     pub fn sigma_pa(&self, eps: f64, epsdot_per_s: f64) -> f64 {
         match *self {

@@ -205,13 +205,7 @@ pub fn demo_hammer_parts(
 
 /// `p` with its flow stress scaled by `factor` (a colder or warmer billet of the same sheet).
 pub fn with_flow_stress(mut p: Process, factor: f64) -> Process {
-    use forgemon::physics::billet::FlowStress;
-    p.material = match p.material {
-        FlowStress::Constant { sigma0_pa } => FlowStress::Constant { sigma0_pa: sigma0_pa * factor },
-        FlowStress::HanselSpittel { a_pa, m1, m2, m3, m4, temperature_c } => {
-            FlowStress::HanselSpittel { a_pa: a_pa * factor, m1, m2, m3, m4, temperature_c }
-        }
-    };
+    p.material = p.material.scaled(factor);
     p
 }
 

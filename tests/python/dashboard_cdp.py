@@ -2,6 +2,8 @@
 
 Usage: dashboard_cdp.py CHROMIUM URL SCREENSHOT.png
        dashboard_cdp.py --restart CHROMIUM FORGEMON PORT DIR
+       dashboard_cdp.py --history CHROMIUM URL SCREENSHOT.png [DIE_SET]   (the history page; see history())
+       dashboard_cdp.py --page CHROMIUM URL SCREENSHOT.png [HEIGHT]   (any page, 1280 wide)
 
 Opens URL at 1280 x 800 while the demo runs, in the time zone Asia/Kathmandu (UTC+5:45, no
 daylight saving: a zone no CI machine runs in), and prints one JSON object: the first blow row
@@ -150,7 +152,7 @@ HISTORY_TABLE = """(id) => Array.from(document.querySelectorAll('#' + id + ' tr'
   .map(r => Array.from(r.cells).map(c => c.textContent))"""
 
 
-def history(chromium, url, shot):
+def history(chromium, url, shot, die="D2"):
     """Open the history page at URL, wait until it has drawn, read its tables and figures,
     choose blow 3 in the I-MR chart, and save a screenshot. Prints what it saw, with the time
     from navigation to drawn (performance.now(), ms since the page's time origin)."""
@@ -173,10 +175,10 @@ def history(chromium, url, shot):
                    " s.dispatchEvent(new Event('change')); })()")
             drawn["imr_blow_3"] = p.eval("document.getElementById('imr-figures').textContent")
             # The filter form: one die set only.
-            p.eval("document.getElementById('f-die').value = 'D2';"
+            p.eval(f"document.getElementById('f-die').value = '{die}';"
                    " document.getElementById('filters').requestSubmit()")
             p.wait("document.body.dataset.ready === '1' && document.getElementById('by-die').rows.length === 1",
-                   "the page filtered to D2")
+                   f"the page filtered to die set {die}")
             drawn["filtered"] = {"blows": p.eval("document.getElementById('h-blows').textContent"),
                                  "by_die": p.eval(f"({HISTORY_TABLE})('by-die')")}
             p.eval("document.getElementById('f-die').value = '';"
@@ -192,11 +194,33 @@ def history(chromium, url, shot):
             proc.wait()
 
 
+def page_shot(chromium, url, shot, height=None):
+    """A screenshot of the page at URL, 1280 wide and as tall as the page (or `height`)."""
+    with tempfile.TemporaryDirectory(ignore_cleanup_errors=True) as profile:
+        proc, ws_url = launch(chromium, profile)
+        try:
+            p = Page(ws_url)
+            p.call("Page.enable")
+            p.call("Page.navigate", url=url)
+            p.wait("document.readyState === 'complete'", "the page")
+            h = int(height) if height else min(p.eval("document.documentElement.scrollHeight"), 4000)
+            p.call("Emulation.setDeviceMetricsOverride", width=1280, height=h, deviceScaleFactor=1, mobile=False)
+            time.sleep(0.3)
+            png = p.call("Page.captureScreenshot", format="png")["data"]
+            with open(shot, "wb") as f:
+                f.write(base64.b64decode(png))
+        finally:
+            proc.kill()
+            proc.wait()
+
+
 def main():
+    if sys.argv[1] == "--page":
+        return page_shot(*sys.argv[2:6])
     if sys.argv[1] == "--restart":
         return restart(*sys.argv[2:6])
     if sys.argv[1] == "--history":
-        return history(*sys.argv[2:5])
+        return history(*sys.argv[2:6])
     chromium, url, shot = sys.argv[1:4]
     with tempfile.TemporaryDirectory(ignore_cleanup_errors=True) as profile:
         proc, ws_url = launch(chromium, profile)

@@ -1,10 +1,11 @@
-//! `forgemon history {query, rebuild, spc, report, export}`: the quality record (issue 44) from the
+//! `forgemon history {query, rebuild, spc, report, export, serve}`: the quality record (issue 44) from the
 //! command line.
 //! `rebuild` makes the database from recordings by the function the service writes it with
 //! (`history::History::ingest`); `query` prints a table's rows under filters.
 
 mod export;
 mod report;
+mod serve;
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -39,6 +40,8 @@ pub enum HistoryCommand {
     Report(report::ReportArgs),
     /// A table of the history database as CSV or Parquet, under the same filters as query.
     Export(export::ExportArgs),
+    /// Serve the dashboard's history page over a database alone (no machine, no service).
+    Serve(serve::ServeArgs),
 }
 
 #[derive(Debug, Args)]
@@ -122,6 +125,7 @@ pub fn run(args: HistoryArgs) -> anyhow::Result<ExitCode> {
         HistoryCommand::Spc(a) => spc(a),
         HistoryCommand::Report(a) => report::run(a),
         HistoryCommand::Export(a) => export::run(a),
+        HistoryCommand::Serve(a) => serve::run(a),
     }
 }
 

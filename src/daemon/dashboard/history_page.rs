@@ -62,6 +62,12 @@ pub fn routes(db: Option<PathBuf>) -> Router {
         .with_state(db)
 }
 
+/// The page over `db` on a server of its own (`forgemon history serve`), with the
+/// dashboard's style sheet.
+pub fn standalone(db: PathBuf) -> Router {
+    routes(Some(db)).route("/dashboard.css", get(|| page(super::DASHBOARD_CSS, "text/css; charset=utf-8")))
+}
+
 async fn page(body: &'static str, content_type: &'static str) -> Response {
     ([(header::CONTENT_TYPE, content_type), (header::CACHE_CONTROL, "no-cache")], body).into_response()
 }
