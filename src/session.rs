@@ -216,6 +216,12 @@ impl Session {
         self.record("the part's trace", |w| w.write_config(log_ns, PART_CONFIG_NAME, &text));
     }
 
+    /// Record `text` as the configuration file `name` (`/config`): what a replay or a history
+    /// rebuild takes up from here, such as the drift alarms' learnt reference.
+    pub fn record_config(&mut self, what: &'static str, name: &str, text: &str, log_ns: i64) {
+        self.record(what, |w| w.write_config(log_ns, name, text));
+    }
+
     /// The dies were changed: forged as `trace` from here on (its `die_set` the new set's
     /// name), then the die-change marker, both recorded now.
     pub fn change_dies(&mut self, trace: Trace, log_ns: i64) {

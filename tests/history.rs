@@ -288,16 +288,23 @@ fn a_query_names_a_missing_database_and_a_bad_time() {
 /// forged as `part` at the start; at each later billet's start `change` says what it is
 /// forged as (as `POST /billet` would, at the billet's first sample).
 fn forge(rec: &Path, part: Trace, die_life: DieLifeConfig, billets: usize, change: fn(usize) -> TraceUpdate) {
+    forge_with(rec, |c| ServiceConfig { part, die_life, ..c }, billets, change)
+}
+
+/// As `forge`, the service's configuration `config` of the minimal one.
+fn forge_with(
+    rec: &Path,
+    config: impl FnOnce(ServiceConfig) -> ServiceConfig,
+    billets: usize,
+    change: fn(usize) -> TraceUpdate,
+) {
     let machine_text = common::read("config/hammer-lg1000.machine.toml");
     let steel = common::read("config/steel-16NiCrMo13.process.toml");
     let machine = parse_machine("m", &machine_text).unwrap().machine;
     let plan = BilletPlan { process: parse_process("p", &steel).unwrap(), v0s_mps: vec![3.9, 5.3, 5.3] };
     let sim = SimMachine::new(machine, EffectSet::NONE, vec![plan; billets], CaptureSpec::hammer(5), 0.3);
-    let config = ServiceConfig {
-        part,
-        die_life,
-        ..ServiceConfig::minimal(common::root().join("config/hammer-lg1000.machine.toml"), rec.to_path_buf())
-    };
+    let config =
+        config(ServiceConfig::minimal(common::root().join("config/hammer-lg1000.machine.toml"), rec.to_path_buf()));
     let parts = common::demo_hammer_parts(rec, config);
     let channels = forgemon::cli::demo::demo_channels();
     let rt = tokio::runtime::Runtime::new().unwrap();
@@ -497,4 +504,44 @@ fn post_billet_takes_a_json_body_and_refuses_a_bad_one_naming_its_key() {
     let st = status();
     assert_eq!(st["history"]["path"].as_str(), Some(path_str(&dir.join("rec/history.sqlite"))), "{st}");
     assert_eq!(st["history"]["dropped"], 0, "{st}");
+}
+
+/// The drift alarms' reference survives a restart (issue 44): a first run learns it from 10
+/// good billets and records it; the history keeps it; a second run resumes it at its start
+/// (recorded again, the same text) instead of learning anew, and learns nothing itself.
+#[test]
+fn the_drift_reference_learnt_in_one_run_is_resumed_by_the_next() {
+    let dir = temp("drift");
+    let rec = dir.join("rec");
+    let drift = forgemon::config::history::DriftConfig { learn_billets: 10, ..Default::default() };
+    let with_drift = move |c: ServiceConfig| ServiceConfig { drift: Some(drift), ..c };
+    forge_with(&rec, with_drift, 12, |_| TraceUpdate::default());
+    let references = |files: &[PathBuf]| -> Vec<(i64, String)> {
+        files
+            .iter()
+            .flat_map(|f| read_recording(f).unwrap().messages)
+            .filter_map(|m| match m.payload {
+                Payload::Config(c) if c.name == forgemon::alert::drift::REFERENCE_CONFIG_NAME => {
+                    Some((m.log_time_ns, c.text))
+                }
+                _ => None,
+            })
+            .collect()
+    };
+    let first_run = common::recordings_in(&rec);
+    let learnt = references(&first_run);
+    assert_eq!(learnt.len(), 1, "learnt once, after the tenth good billet");
+    let reference: forgemon::alert::drift::Reference = serde_json::from_str(&learnt[0].1).expect("a reference");
+    assert_eq!(reference.learn_billets, 10);
+    assert!(!reference.blows.is_empty());
+    let kept = dump(&rec.join("history.sqlite"));
+    assert_eq!(rows(&kept, "drift_references").len(), 1, "the history keeps it");
+
+    forge_with(&rec, with_drift, 2, |_| TraceUpdate::default());
+    let second_run: Vec<PathBuf> = common::recordings_in(&rec).into_iter().filter(|f| !first_run.contains(f)).collect();
+    assert!(!second_run.is_empty());
+    let resumed = references(&second_run);
+    assert_eq!(resumed.len(), 1, "recorded once, at the start: {resumed:?}");
+    assert_eq!(resumed[0].1, learnt[0].1, "the same reference");
+    assert_eq!(rows(&dump(&rec.join("history.sqlite")), "drift_references").len(), 1, "still one reference");
 }

@@ -131,6 +131,35 @@ pub struct DriftStatus {
     pub learn_billets: usize,
 }
 
+/// The name a learnt reference is recorded under (`/config`, docs/interfaces.md §13): when it
+/// is learnt, and at the start of each run that resumes it.
+pub const REFERENCE_CONFIG_NAME: &str = "drift-reference.json";
+
+/// A learnt reference, as recorded and as the service resumes it after a restart: for each
+/// setting, blow index and quantity, the count, mean and sum of squared deviations of the
+/// reference billets' values; the billet score's spread bound per quantity; and the settings
+/// it was learnt under.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Reference {
+    pub learn_billets: usize,
+    pub setting_step_mps: f64,
+    pub blows: Vec<ReferenceBlow>,
+    /// `null` where it could not be estimated.
+    pub score_sd: [Option<f64>; 3],
+}
+
+/// One setting's, blow index's and quantity's reference (`quantity`: 0 efficiency, 1 plastic
+/// energy, 2 travel; `setting`: the impact speed in `setting_step_mps`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ReferenceBlow {
+    pub setting: i64,
+    pub blow: u32,
+    pub quantity: usize,
+    pub n: f64,
+    pub mean: f64,
+    pub m2: f64,
+}
+
 /// One blow's setting, index and values.
 #[derive(Debug, Clone)]
 struct Blow {
@@ -224,6 +253,52 @@ impl Drift {
     /// Whether the reference is learnt and the billets are watched.
     pub fn watching(&self) -> bool {
         self.learned
+    }
+
+    /// The learnt reference, to record; `None` while learning.
+    pub fn reference(&self) -> Option<Reference> {
+        self.learned.then(|| Reference {
+            learn_billets: self.cfg.learn_billets,
+            setting_step_mps: self.cfg.setting_step_mps,
+            blows: self
+                .reference
+                .iter()
+                .map(|(((setting, blow), quantity), st)| ReferenceBlow {
+                    setting: *setting,
+                    blow: *blow,
+                    quantity: *quantity,
+                    n: st.n,
+                    mean: st.mean,
+                    m2: st.m2,
+                })
+                .collect(),
+            score_sd: self.score_sd.map(|x| x.is_finite().then_some(x)),
+        })
+    }
+
+    /// Watch from a recorded reference (a restart): the CUSUMs start from zero. Refused,
+    /// saying why, when it was learnt under other settings (`learn_billets`,
+    /// `setting_step_mps`) or does not hold together; the service then learns anew.
+    pub fn resume(cfg: DriftConfig, r: &Reference) -> Result<Self, String> {
+        if r.learn_billets != cfg.learn_billets || r.setting_step_mps != cfg.setting_step_mps {
+            return Err(format!(
+                "learnt from {} billets with settings {} m/s apart, and [drift] now says {} and {}",
+                r.learn_billets, r.setting_step_mps, cfg.learn_billets, cfg.setting_step_mps
+            ));
+        }
+        let sound = |x: f64| x.is_finite();
+        if r.blows.iter().any(|b| b.quantity > 2 || !(sound(b.n) && sound(b.mean) && sound(b.m2)) || b.m2 < 0.0) {
+            return Err("a blow's reference is not a count, mean and spread".into());
+        }
+        let mut d = Drift::new(cfg);
+        d.reference = r
+            .blows
+            .iter()
+            .map(|b| (((b.setting, b.blow), b.quantity), Stat { n: b.n, mean: b.mean, m2: b.m2 }))
+            .collect();
+        d.score_sd = r.score_sd.map(|x| x.unwrap_or(f64::NAN));
+        d.learned = true;
+        Ok(d)
     }
 
     /// The state `/status` shows: learning (the good billets so far) or watching.
@@ -447,6 +522,35 @@ mod tests {
             trace: Default::default(),
         };
         d.on_billet(&summary, t)
+    }
+
+    #[test]
+    fn a_resumed_reference_watches_as_the_learnt_one_did() {
+        let cfg = DriftConfig { learn_billets: 30, ..DriftConfig::default() };
+        let mut rng = StdRng::seed_from_u64(7);
+        let mut learnt = Drift::new(cfg);
+        for i in 0..30 {
+            billet(&mut learnt, &mut rng, 5, 0.0, i);
+        }
+        // Recorded as JSON and read back, as a restart does.
+        let text = serde_json::to_string(&learnt.reference().expect("learnt")).expect("JSON");
+        let reference: Reference = serde_json::from_str(&text).expect("reads back");
+        let mut resumed = Drift::resume(cfg, &reference).expect("the same settings");
+        assert!(resumed.watching());
+        // The same billets, drifting down: the same alarms on the same billets.
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for i in 0..200 {
+            let (mut r1, mut r2) = (StdRng::seed_from_u64(1000 + i), StdRng::seed_from_u64(1000 + i));
+            a.extend(billet(&mut learnt, &mut r1, 5, -0.01 * i as f64, i as i64).into_iter().map(|x| x.at_billet));
+            b.extend(billet(&mut resumed, &mut r2, 5, -0.01 * i as f64, i as i64).into_iter().map(|x| x.at_billet));
+        }
+        assert!(!a.is_empty(), "the drift was found");
+        assert_eq!(a.iter().map(|n| n - 30).collect::<Vec<_>>(), b, "billets counted from each run's start");
+        // Learnt under other settings: refused, saying which.
+        let other = DriftConfig { learn_billets: 50, ..cfg };
+        let why = Drift::resume(other, &reference).expect_err("refused");
+        assert!(why.contains("30 billets") && why.contains("50"), "{why}");
+        assert!(Drift::resume(DriftConfig { setting_step_mps: 0.1, ..cfg }, &reference).is_err());
     }
 
     /// In-control alarms over `sessions` sessions of 10 000 billets, and the mean delay to

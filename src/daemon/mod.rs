@@ -11,6 +11,7 @@
 pub mod advisor;
 pub mod dashboard;
 pub mod die_life;
+mod drift;
 pub mod faces;
 pub mod foxglove;
 mod history;
@@ -210,9 +211,9 @@ pub async fn serve(
     status.lock().map(|mut s| s.part = cfg.part.clone()).ok();
     let in_force = reload::InForce::new(&parts, recipe_text);
     let history = cfg.history.as_ref().map(|h| h.path.clone());
-    let dies = die_life::DieLife::start(cfg.die_life, history, cfg.part.die_set.as_deref(), host_now_ns());
+    let dies = die_life::DieLife::start(cfg.die_life, history.clone(), cfg.part.die_set.as_deref(), host_now_ns());
     status.lock().map(|mut s| s.die_life = dies.status()).ok();
-    let drift = cfg.drift.map(crate::alert::drift::Drift::new);
+    let drift = cfg.drift.map(|d| drift::start(d, history.as_deref(), &mut session));
     status.lock().map(|mut s| s.drift = drift.as_ref().map(crate::alert::drift::Drift::status)).ok();
     let watches = service::Watches { dies, drift };
     let service = service::Service::new(session, status, live.clone(), hooks, in_force, cfg.min_free_bytes, watches);

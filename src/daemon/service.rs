@@ -406,8 +406,17 @@ impl Service {
             f(b);
         }
         let Some(drift) = self.drift.as_mut() else { return };
+        let learning = !drift.watching();
         let alarms = drift.on_billet(b, log_ns);
         let state = drift.status();
+        // Just learnt: recorded, so that a restart resumes it (the history keeps it).
+        if let Some(r) = drift.reference().filter(|_| learning)
+            && let Ok(text) = serde_json::to_string_pretty(&r)
+        {
+            tracing::info!(billets = r.learn_billets, "drift: the reference is learnt; watching");
+            let name = crate::alert::drift::REFERENCE_CONFIG_NAME;
+            self.session.record_config("the drift reference", name, &text, log_ns);
+        }
         self.status.lock().map(|mut s| s.drift = Some(state)).ok();
         for a in alarms {
             let figures = [

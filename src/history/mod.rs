@@ -22,7 +22,7 @@ pub mod writer;
 
 use std::path::{Path, PathBuf};
 
-use rusqlite::{Connection, params};
+use rusqlite::{Connection, OptionalExtension, params};
 
 use crate::config::history::parse_trace_text;
 use crate::estimate::BlowEstimate;
@@ -152,6 +152,12 @@ impl History {
                     let first = self.first_blow.filter(|(n, _)| *n == b.billet).map_or(0, |(_, t)| t);
                     insert_billet(&tx, *t, b, recipe, first).map(|k| n.billets += k as u64)
                 }
+                Payload::Config(c) if c.name == crate::alert::drift::REFERENCE_CONFIG_NAME => tx
+                    .execute(
+                        "INSERT OR IGNORE INTO drift_references (wall_time_ns, reference) VALUES (?1, ?2)",
+                        params![t, c.text],
+                    )
+                    .map(|_| ()),
                 Payload::Config(c) if c.name == PART_CONFIG_NAME => {
                     match parse_trace_text(&c.text) {
                         Ok(trace) => self.trace = trace,
@@ -340,6 +346,16 @@ fn insert_billet(
         b.trace.die_set,
         first_blow_ns,
     ])
+}
+
+/// The drift alarms' latest learnt reference in the database at `path` (its JSON), if any.
+pub fn latest_drift_reference(path: &Path) -> Result<Option<String>, HistoryError> {
+    let conn = query::open_read(path)?;
+    conn.query_row("SELECT reference FROM drift_references ORDER BY wall_time_ns DESC, id DESC LIMIT 1", [], |r| {
+        r.get(0)
+    })
+    .optional()
+    .map_err(|source| HistoryError::Sqlite { path: path.to_path_buf(), source })
 }
 
 #[cfg(test)]

@@ -134,4 +134,11 @@ pub const MIGRATIONS: &[&str] = &[
     CREATE INDEX billets_by_time ON billets (wall_time_ns);
     CREATE INDEX billets_by_lot ON billets (lot);
     CREATE INDEX billets_by_die ON billets (die_set, wall_time_ns);",
+    // 4: the drift alarms' learnt references (`alert::drift::Reference` as JSON), each once:
+    // the service resumes the latest after a restart.
+    "CREATE TABLE drift_references (
+        id INTEGER PRIMARY KEY,
+        wall_time_ns INTEGER NOT NULL,
+        reference TEXT NOT NULL UNIQUE
+    );",
 ];
