@@ -5,6 +5,11 @@
 //! directory, finished and renamed. Reported in samples (per channel) per second. Also:
 //! zstd without the syncs (the disk's share), lz4, uncompressed, the sample encoder
 //! alone, and reading each file back (the decode share of replay).
+//!
+//! The history's tap (issue 44): the zstd case with a blow result every 0.5 s, with and
+//! without the history database's live writer (`history::writer::LiveHistory`) tapping
+//! the recorder, alternated in the same process; printed as the ratio of their times, the
+//! anchor the run without it.
 
 use std::hint::black_box;
 
@@ -106,7 +111,52 @@ fn record(c: &mut Criterion) {
         });
     }
     g.finish();
+    history_tap(&input, &dir);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The recorder's time with the history's tap over its time without, alternated for
+/// `ROUNDS` rounds: the median ratio and the rounds' range.
+fn history_tap(input: &[SampleBatch], dir: &std::path::Path) {
+    const ROUNDS: usize = 15;
+    let result = forgemon::estimate::BlowEstimate {
+        gap_s: 0.4,
+        ..forgemon::estimate::BlowEstimate::incomplete(1, 0.5, 5.3, 0.6)
+    };
+    let run = |tapped: bool, round: usize| {
+        let path = dir.join(format!("tap-{tapped}-{round}.mcap"));
+        let live = tapped.then(|| {
+            forgemon::history::writer::LiveHistory::start(dir.join(format!("tap-{round}.sqlite")), None)
+                .expect("a database")
+        });
+        let options = RecordOptions::default();
+        let start = std::time::Instant::now();
+        let mut w = RecordWriter::create_with(&path, options).expect("create");
+        if let Some(l) = &live {
+            w.set_tap(l.tap());
+        }
+        for (k, batch) in input.iter().enumerate() {
+            w.write_samples(black_box(batch)).expect("write");
+            // A blow every 0.5 s of samples (10 batches).
+            if k % 10 == 9 {
+                w.write_result(batch.host_time_ns, &result).expect("write");
+            }
+        }
+        w.finish().expect("finish");
+        let took = start.elapsed().as_secs_f64();
+        if let Some(l) = live {
+            l.finish();
+        }
+        took
+    };
+    let mut ratios: Vec<f64> = (0..ROUNDS).map(|r| run(true, r) / run(false, r)).collect();
+    ratios.sort_by(f64::total_cmp);
+    eprintln!(
+        "record/history_tap: {:.3}x the recorder's time without the tap (median of {ROUNDS} alternated rounds; range {:.3}-{:.3})",
+        ratios[ROUNDS / 2],
+        ratios[0],
+        ratios[ROUNDS - 1]
+    );
 }
 
 criterion_group!(benches, record);
