@@ -83,10 +83,10 @@ fn a_pymodbus_client_reads_the_demo_results_and_its_coils_act() {
     let dir = tempfile::tempdir().expect("temp dir");
     let (plc, http) = (free_port(), free_port());
     let plc_addr = format!("127.0.0.1:{plc}");
-    // Real time (the client reads each blow as a PLC would): 2 billets of 8 blows, 0.25 s
-    // apart, about 5 s.
+    // Real time (the client reads each blow as a PLC would): 3 billets of 8 blows, 0.25 s
+    // apart, about 7 s.
     let mut demo = Command::new(env!("CARGO_BIN_EXE_forgemon"))
-        .args(["demo", "--billets", "2", "--interval", "0.25", "--plc", &plc_addr])
+        .args(["demo", "--billets", "3", "--interval", "0.25", "--plc", &plc_addr])
         .args(["--http", &format!("127.0.0.1:{http}"), "--dir"])
         .arg(dir.path().join("rec"))
         .stdout(Stdio::piped())
@@ -132,7 +132,7 @@ fn a_pymodbus_client_reads_the_demo_results_and_its_coils_act() {
         .into_iter()
         .filter_map(|m| if let Payload::Result(r) = m.payload { Some(*r) } else { None })
         .collect();
-    assert_eq!(results.len(), 16, "two billets of eight blows");
+    assert_eq!(results.len(), 24, "three billets of eight blows");
 
     // Refusals (Modbus exception codes): 1 illegal function, 2 illegal data address, 11
     // gateway target device failed to respond (unit 2 does not exist).
@@ -200,7 +200,7 @@ fn a_pymodbus_client_reads_the_demo_results_and_its_coils_act() {
     }
     blows_seen.dedup();
     assert!(blows_seen.len() >= 8, "the client saw at least half the blows: {blows_seen:?}");
-    assert_eq!(blows_seen.last(), Some(&16), "the last image shows the last blow");
+    assert_eq!(blows_seen.last(), Some(&24), "the last image shows the last blow");
 
     // Coil 0 cleared the latched alert; coil 1 counted a new billet.
     assert_eq!(ack["written"], true);
@@ -222,7 +222,8 @@ fn a_pymodbus_client_reads_the_demo_results_and_its_coils_act() {
     assert_eq!(part["read_back"], part["written"]);
     assert_eq!(part["bad_write"], 3);
     let (before, as_block, die) = (words(&part["before"]), words(&part["after_billet"]), words(&part["after_die"]));
-    assert_eq!(u32_at(&as_block, 4), u32_at(&before, 4) + 1, "coil 2 counted a billet");
+    // At least one more: the demo may start its own next billet meanwhile.
+    assert!(u32_at(&as_block, 4) > u32_at(&before, 4), "coil 2 counted a billet: {before:?} -> {as_block:?}");
     let since_change = u32_at(&die, 2) - u32_at(&as_block, 2);
     assert!(u32_at(&die, 22) <= since_change, "coil 3 started the count again: {die:?} after {as_block:?}");
     // What the recording says the billets after coil 2 were forged as, and the die change.

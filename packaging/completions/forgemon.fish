@@ -137,7 +137,7 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_se
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -l die -d 'Only this die set' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -s o -l out -d 'Where to write the report' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from report" -s h -l help -d 'Print help'
-complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l db -d 'The history database' -r -F
+complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l db -d 'The history database (`[history] path`; by default `history.sqlite` in the recording directory)' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l table -d 'Which table' -r -f -a "blows\t''
 billets\t''"
 complete -c forgemon -n "__fish_forgemon_using_subcommand history; and __fish_seen_subcommand_from export" -l since -d 'Rows at or after this time: RFC 3339 (2026-11-30T06:00:00Z) or a UTC date (2026-11-30)' -r

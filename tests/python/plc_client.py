@@ -77,9 +77,10 @@ def part_step(client, kw, read):
 
 
 def settle(read, done):
-    """The registers once `done` holds of them, or after 1 s: the service takes a coil's
-    command on its next turn, and the image follows the event that command publishes."""
-    until = time.monotonic() + 1.0
+    """The registers once `done` holds of them, or after 3 s: the service takes a coil's
+    command on its next turn, and the image follows the status snapshot after it (one a
+    second at the latest; later on a loaded machine)."""
+    until = time.monotonic() + 3.0
     regs = read()
     while not done(regs) and time.monotonic() < until:
         time.sleep(0.01)

@@ -13,26 +13,14 @@ use arrow_schema::{DataType, Field, Schema, TimeUnit};
 use clap::Args;
 use serde_json::{Map, Value};
 
-use super::{FilterArgs, existing};
+use super::RowArgs;
 use crate::cli::export::{csv_to, rfc3339_ns, write_parquet};
-use crate::history::query::{Column, ColumnType, Filter, Table, columns, open_read, rows};
+use crate::history::query::{Column, ColumnType, columns, open_read, rows};
 
 #[derive(Debug, Args)]
 pub struct ExportArgs {
-    /// The history database.
-    #[arg(long, value_name = "DB")]
-    pub db: PathBuf,
-    /// Which table.
-    #[arg(long, value_enum, default_value = "blows")]
-    pub table: Table,
     #[command(flatten)]
-    pub filter: FilterArgs,
-    /// Only rows of this recipe (its name).
-    #[arg(long, value_name = "NAME")]
-    pub recipe: Option<String>,
-    /// Only blows judged NOK, or billets with one.
-    #[arg(long)]
-    pub nok: bool,
+    pub rows: RowArgs,
     /// Write CSV (a header row, then the rows oldest first; an empty field for NULL); `-`
     /// writes it to standard output.
     #[arg(long, value_name = "OUT.csv", required_unless_present = "parquet", conflicts_with = "parquet")]
@@ -47,18 +35,18 @@ pub struct ExportArgs {
 const LEFT_OUT: [&str; 2] = ["id", "wall_time_ns"];
 
 pub fn run(a: ExportArgs) -> anyhow::Result<ExitCode> {
-    existing(&a.db)?;
-    let filter = Filter { nok: a.nok, recipe: a.recipe.clone(), ..a.filter.filter()? };
-    let conn = open_read(&a.db)?;
+    let filter = a.rows.filter()?;
+    let (db, table) = (&a.rows.db, a.rows.table);
+    let conn = open_read(db)?;
     let cols: Vec<Column> =
-        columns(&conn, &a.db, a.table)?.into_iter().filter(|c| !LEFT_OUT.contains(&c.name.as_str())).collect();
-    let found = rows(&conn, &a.db, a.table, &filter)?;
+        columns(&conn, db, table)?.into_iter().filter(|c| !LEFT_OUT.contains(&c.name.as_str())).collect();
+    let found = rows(&conn, db, table, &filter)?;
     match (&a.csv, &a.parquet) {
         (Some(out), _) => write_csv(out, &cols, &found)?,
         (None, Some(out)) => write_parquet(out, &batch(&cols, &found)?)?,
         (None, None) => anyhow::bail!("say where to write: --csv OUT.csv or --parquet OUT.parquet"),
     }
-    eprintln!("forgemon: exported {} {}", found.len(), a.table.name());
+    eprintln!("forgemon: exported {} {}", found.len(), table.name());
     Ok(ExitCode::SUCCESS)
 }
 

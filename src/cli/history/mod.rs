@@ -80,8 +80,9 @@ pub struct FilterArgs {
     pub die: Option<String>,
 }
 
+/// Which rows of which table `query` and `export` read.
 #[derive(Debug, Args)]
-pub struct QueryArgs {
+pub struct RowArgs {
     /// The history database (`[history] path`; by default `history.sqlite` in the recording
     /// directory).
     #[arg(long, value_name = "DB")]
@@ -97,6 +98,20 @@ pub struct QueryArgs {
     /// Only blows judged NOK, or billets with one.
     #[arg(long)]
     pub nok: bool,
+}
+
+impl RowArgs {
+    /// The database, checked to be there, and the filter.
+    pub(crate) fn filter(&self) -> anyhow::Result<Filter> {
+        existing(&self.db)?;
+        Ok(Filter { nok: self.nok, recipe: self.recipe.clone(), ..self.filter.filter()? })
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct QueryArgs {
+    #[command(flatten)]
+    pub rows: RowArgs,
     /// At most this many rows.
     #[arg(long, value_name = "N")]
     pub limit: Option<u64>,
@@ -156,20 +171,20 @@ pub(crate) fn existing(db: &Path) -> anyhow::Result<()> {
 }
 
 fn query(a: QueryArgs) -> anyhow::Result<ExitCode> {
-    existing(&a.db)?;
-    let filter = Filter { nok: a.nok, limit: a.limit, recipe: a.recipe.clone(), ..a.filter.filter()? };
-    let conn = open_read(&a.db)?;
-    let found = rows(&conn, &a.db, a.table, &filter)?;
+    let filter = Filter { limit: a.limit, ..a.rows.filter()? };
+    let (db, table) = (&a.rows.db, a.rows.table);
+    let conn = open_read(db)?;
+    let found = rows(&conn, db, table, &filter)?;
     let mut out = super::out::stdout();
     if a.json {
         for r in &found {
             writeln!(out, "{}", serde_json::Value::Object(r.clone()))?;
         }
     } else {
-        print_table(&mut out, a.table, &found)?;
+        print_table(&mut out, table, &found)?;
     }
     out.flush()?;
-    eprintln!("forgemon: {} {}", found.len(), a.table.name());
+    eprintln!("forgemon: {} {}", found.len(), table.name());
     Ok(ExitCode::SUCCESS)
 }
 
