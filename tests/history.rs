@@ -242,6 +242,8 @@ fn history_export_equals_the_rows(dir: &Path, db: &Path, blows: &[Value]) {
             for col in &want[1..] {
                 let (x, y) = (&g[*col], &b[*col]);
                 let same = match (x.as_f64(), y.as_f64(), y.as_str()) {
+                    // Within an ulp or two: serde_json reads Python's JSON without
+                    // `float_roundtrip` (as in the demo test above).
                     (Some(x), Some(y), _) => (x - y).abs() <= 2.0 * f64::EPSILON * y.abs(),
                     // pandas reads a CSV column of digits as numbers ("4711").
                     (Some(_), None, Some(y)) if form == "csv" => serde_json::to_string(x).ok().as_deref() == Some(y),

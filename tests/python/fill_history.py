@@ -4,7 +4,7 @@ sqlite3 (tests/dashboard_browser.rs: the history page with 100 000 blows).
 Usage: fill_history.py DB BLOWS SEED
 
 The database must exist (forgemon made its tables). Blows come 8 to a billet, one every 3 s
-from 2026-11-02T06:00:00Z, on die sets D1-D4 (a change every 2500 billets, in turn) and lots
+from 2026-11-03T06:00:00Z, on die sets D1-D4 (a change every 2500 billets, in turn) and lots
 L01-L20 (a new lot every 625 billets); efficiency falls slowly along each die set's life with
 noise; 1 blow in 200 is NOK. Prints one JSON object: per die set and per lot the blows,
 billets, hard blows, NOK blows and mean efficiency, as Python computed them, and the time span.
@@ -15,7 +15,7 @@ import random
 import sqlite3
 import sys
 
-START_NS = 1793685600 * 10**9  # 2026-11-02T06:00:00Z
+START_NS = 1793685600 * 10**9  # 2026-11-03T06:00:00Z (date -u -d @1793685600)
 
 
 def main(db, n, seed):

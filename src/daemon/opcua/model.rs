@@ -158,7 +158,18 @@ fn machine_name(kind: MachineKind) -> &'static str {
     }
 }
 
-/// A read-only variable `name` (`ns`) with `value`, component or property of `parent`.
+/// Where a variable hangs: a property of its parent, or a component of a variable type
+/// (BaseDataVariableType or a subtype).
+#[derive(Debug, Clone, Copy)]
+enum Place {
+    Property,
+    Component(VariableTypeId),
+}
+
+const PROPERTY: Place = Place::Property;
+const COMPONENT: Place = Place::Component(VariableTypeId::BaseDataVariableType);
+
+/// A read-only variable `name` (`ns`) with `value`, placed under `parent` as `place` says.
 fn variable(
     space: &mut AddressSpace,
     id: &NodeId,
@@ -166,7 +177,7 @@ fn variable(
     value: impl Into<Variant>,
     data_type: DataTypeId,
     parent: &NodeId,
-    property: bool,
+    place: Place,
 ) {
     let display = LocalizedText::from(name.name.as_ref());
     let b = VariableBuilder::new(id, name, display)
@@ -174,11 +185,11 @@ fn variable(
         .data_type(data_type)
         .access_level(AccessLevel::CURRENT_READ)
         .user_access_level(AccessLevel::CURRENT_READ);
-    if property {
-        b.property_of(parent.clone()).has_type_definition(VariableTypeId::PropertyType).insert(space);
-    } else {
-        b.component_of(parent.clone()).has_type_definition(VariableTypeId::BaseDataVariableType).insert(space);
+    match place {
+        Place::Property => b.property_of(parent.clone()).has_type_definition(VariableTypeId::PropertyType),
+        Place::Component(ty) => b.component_of(parent.clone()).has_type_definition(ty),
     }
+    .insert(space);
 }
 
 /// The value a process value holds before the first blow.
@@ -221,13 +232,18 @@ pub fn build(space: &mut AddressSpace, model_ns: u16, forgemon_ns: u16, kind: Ma
     let mut values = Vec::new();
     for v in &VALUES {
         let (ns, id) = if v.forgemon { (forgemon_ns, f(v.name)) } else { (model_ns, m(v.name)) };
-        variable(space, &id, QualifiedName::new(ns, v.name), initial(v.data_type), v.data_type, &unit, false);
+        // A Double with units is an AnalogUnitType (OPC 10000-8 §5.3.2), whose mandatory
+        // property `engineering_units` adds.
+        let analog = v.unece.is_some() && v.data_type == DataTypeId::Double;
+        let ty = if analog { VariableTypeId::AnalogUnitType } else { VariableTypeId::BaseDataVariableType };
+        let name = QualifiedName::new(ns, v.name);
+        variable(space, &id, name, initial(v.data_type), v.data_type, &unit, Place::Component(ty));
         if !v.unit.is_empty() {
             let eu = NodeId::new(ns, format!("{}.Unit", v.name));
-            variable(space, &eu, QualifiedName::new(forgemon_ns, "Unit"), v.unit, DataTypeId::String, &id, true);
+            variable(space, &eu, QualifiedName::new(forgemon_ns, "Unit"), v.unit, DataTypeId::String, &id, PROPERTY);
         }
         if let Some(u) = v.unece {
-            engineering_units(space, &id, ns, v.name, u, v.data_type == DataTypeId::Double);
+            engineering_units(space, &id, ns, v.name, u);
         }
         values.push((v.name, id));
     }
@@ -250,22 +266,11 @@ pub fn build(space: &mut AddressSpace, model_ns: u16, forgemon_ns: u16, kind: Ma
     }
 }
 
-/// `EngineeringUnits` (OPC 10000-8 §5.3.2: an `EUInformation`) of the value `id`; a Double
-/// becomes an `AnalogUnitType`, whose property it is.
-fn engineering_units(space: &mut AddressSpace, id: &NodeId, ns: u16, name: &str, u: Unece, analog: bool) {
+/// `EngineeringUnits` (OPC 10000-8 §5.3.2: an `EUInformation`) of the value `id`.
+fn engineering_units(space: &mut AddressSpace, id: &NodeId, ns: u16, name: &str, u: Unece) {
     let eu = NodeId::new(ns, format!("{name}.EngineeringUnits"));
     let value = Variant::from(ExtensionObject::from_message(u.eu_information()));
-    variable(space, &eu, QualifiedName::new(0, "EngineeringUnits"), value, DataTypeId::EUInformation, id, true);
-    if analog {
-        // The value was made a BaseDataVariableType; AnalogUnitType is its subtype with
-        // mandatory units.
-        space.delete_reference(
-            id,
-            &NodeId::from(VariableTypeId::BaseDataVariableType),
-            ReferenceTypeId::HasTypeDefinition,
-        );
-        space.insert_reference(id, &NodeId::from(VariableTypeId::AnalogUnitType), ReferenceTypeId::HasTypeDefinition);
-    }
+    variable(space, &eu, QualifiedName::new(0, "EngineeringUnits"), value, DataTypeId::EUInformation, id, PROPERTY);
 }
 
 /// The text arguments of a method: name and description.
@@ -328,7 +333,7 @@ fn identification(space: &mut AddressSpace, ns: u16, machine: &NodeId, name: &st
     ];
     for (p, value) in props {
         let pid = NodeId::new(ns, format!("{name}.Identification.{p}"));
-        variable(space, &pid, QualifiedName::new(ns, p), value.as_str(), DataTypeId::String, &id, true);
+        variable(space, &pid, QualifiedName::new(ns, p), value.as_str(), DataTypeId::String, &id, PROPERTY);
     }
 }
 
@@ -401,7 +406,7 @@ fn condition(
         LocalizedText::from("Inactive"),
         DataTypeId::LocalizedText,
         &id,
-        false,
+        COMPONENT,
     );
     variable(
         space,
@@ -410,14 +415,14 @@ fn condition(
         LocalizedText::from("Acknowledged"),
         DataTypeId::LocalizedText,
         &id,
-        false,
+        COMPONENT,
     );
     let (active_id, acked_id, retain) = (sub("ActiveState.Id"), sub("AckedState.Id"), sub("Retain"));
-    variable(space, &active_id, base("Id"), false, DataTypeId::Boolean, &active, true);
-    variable(space, &acked_id, base("Id"), true, DataTypeId::Boolean, &acked, true);
-    variable(space, &retain, base("Retain"), false, DataTypeId::Boolean, &id, true);
-    variable(space, &sub("ConditionName"), base("ConditionName"), name, DataTypeId::String, &id, true);
-    variable(space, &sub("InputNode"), base("InputNode"), input.clone(), DataTypeId::NodeId, &id, true);
+    variable(space, &active_id, base("Id"), false, DataTypeId::Boolean, &active, PROPERTY);
+    variable(space, &acked_id, base("Id"), true, DataTypeId::Boolean, &acked, PROPERTY);
+    variable(space, &retain, base("Retain"), false, DataTypeId::Boolean, &id, PROPERTY);
+    variable(space, &sub("ConditionName"), base("ConditionName"), name, DataTypeId::String, &id, PROPERTY);
+    variable(space, &sub("InputNode"), base("InputNode"), input.clone(), DataTypeId::NodeId, &id, PROPERTY);
     let acknowledge = sub("Acknowledge");
     acknowledge_method(space, &id, &acknowledge, &sub("Acknowledge.InputArguments"));
     ConditionNodes {

@@ -77,7 +77,7 @@ pub fn die_change(block: &Block) -> Result<TraceUpdate, ExceptionCode> {
     Ok(TraceUpdate { die_set: text(block, Field::DieSet)?.map(Some), ..TraceUpdate::default() })
 }
 
-/// `s` as a field's registers, as a PLC writes it (NUL-padded; the tests' and the demo's).
+/// `s` as a field's registers, as a PLC writes it (NUL-padded; for tests and benches).
 pub fn encode(s: &str) -> [u16; FIELD_WORDS] {
     let mut bytes = [0u8; 2 * FIELD_WORDS];
     for (b, c) in bytes.iter_mut().zip(s.bytes()) {
