@@ -220,6 +220,87 @@ fn an_asyncua_client_browses_reads_and_receives_every_blow_of_the_demo() {
     );
 }
 
+/// The OPC Foundation's NodeSet2 files of fixtures/opcua-nodesets (node-opcua-nodesets
+/// 2.179.0; FIXTURES.md there says where they come from).
+fn nodesets() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/opcua-nodesets")
+}
+
+/// With the companion NodeSet2 files (`--opcua-nodesets`, `[opcua] nodesets_dir`) the machine
+/// is a Machine Tools `MachineToolType` in Machinery's `Machines` folder, its working unit a
+/// Metal Forming `FormingProcessWorkingUnitType`, each with every mandatory child its types
+/// declare (asyncua walks the types itself), and the blow event a `CyclicEventType` whose
+/// `CycleCount` and `PartId` a client reads with select clauses that name that type.
+#[test]
+fn with_the_companion_nodesets_the_machine_is_an_instance_of_their_types() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let url = format!("opc.tcp://127.0.0.1:{}", free_port());
+    let py =
+        client(&["companion", &url, "40"]).spawn().unwrap_or_else(|e| panic!("cannot run python3 ({e}): {INSTALL}"));
+    let demo = Command::new(env!("CARGO_BIN_EXE_forgemon"))
+        .args(["demo", "--billets", "1", "--interval", "0.4", "--opcua", &url, "--opcua-nodesets"])
+        .arg(nodesets())
+        .arg("--dir")
+        .arg(dir.path().join("rec"))
+        .output()
+        .expect("run the demo");
+    assert!(demo.status.success(), "demo: {}", String::from_utf8_lossy(&demo.stderr));
+    let seen = client_json(py.wait_with_output().expect("the client ends"));
+
+    let types = &seen["types"];
+    assert_eq!(types["machine"], "http://opcfoundation.org/UA/MachineTool/|MachineToolType", "{types}");
+    assert_eq!(types["unit"], "http://opcfoundation.org/UA/MetalForming/|FormingProcessWorkingUnitType", "{types}");
+    assert_eq!(types["identification"], "http://opcfoundation.org/UA/MachineTool/|MachineToolIdentificationType");
+    let ident = &seen["identification"];
+    assert_eq!(ident["http://opcfoundation.org/UA/DI/|Model"], "hammer", "DI's Model, in DI's namespace: {ident}");
+    assert_eq!(ident["http://opcfoundation.org/UA/DI/|ProductInstanceUri"], "urn:forgemon:machine:hammer", "{ident}");
+    let mandatory = &seen["mandatory"];
+    assert_eq!(mandatory["missing"], serde_json::json!([]), "mandatory children missing: {mandatory}");
+    // MachineToolType alone declares Identification, Monitoring, Production, Equipment and
+    // Notification mandatory (OPC 40501-1 §8.1): a check of fewer would be hollow.
+    assert!(mandatory["checked"].as_u64().unwrap_or(0) >= 10, "{mandatory}");
+    assert_eq!(seen["event_supertype"], "http://opcfoundation.org/UA/MetalForming/|CyclicEventType");
+
+    let results = recorded(&dir.path().join("rec"));
+    let events = seen["events"].as_array().expect("events");
+    let counts: Vec<u64> = events.iter().map(|e| e["CycleCount"].as_u64().expect("CycleCount")).collect();
+    let last = results.iter().map(|r| u64::from(r.blow)).max().expect("blows");
+    let first = counts.first().copied().expect("at least one cyclic event");
+    assert_eq!(counts, (first..=last).collect::<Vec<_>>(), "one cyclic event per blow, in order");
+    let set_at = seen["set_part"].as_u64().expect("SetPart was called");
+    for e in events {
+        let n = e["CycleCount"].as_u64().unwrap_or(0);
+        if n <= set_at {
+            assert_eq!(e["PartId"], "", "blow {n}: no part given yet");
+        } else if n > set_at + 1 {
+            assert_eq!(e["PartId"], "P-7", "blow {n}: after SetPart");
+        }
+    }
+    assert!(set_at + 2 <= last, "SetPart came in time to show: at blow {set_at} of {last}");
+}
+
+/// A directory whose files require a model none of them defines stops the start, naming the
+/// file and the model.
+#[test]
+fn a_nodesets_dir_missing_a_required_model_stops_the_demo_naming_it() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let sets = dir.path().join("sets");
+    std::fs::create_dir(&sets).expect("mkdir");
+    let name = "Opc.Ua.MetalForming.NodeSet2.xml";
+    std::fs::copy(nodesets().join(name), sets.join(name)).expect("copy");
+    let url = format!("opc.tcp://127.0.0.1:{}", free_port());
+    let out = Command::new(env!("CARGO_BIN_EXE_forgemon"))
+        .args(["demo", "--billets", "1", "--opcua", &url, "--opcua-nodesets"])
+        .arg(&sets)
+        .arg("--dir")
+        .arg(dir.path().join("rec"))
+        .output()
+        .expect("run the demo");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains(name) && stderr.contains("requires model http://opcfoundation.org/UA/"), "{stderr}");
+}
+
 /// A service file (`common::service_file`) with `opcua`'s table.
 fn service_file(dir: &Path, http: u16, opcua: &str) -> std::path::PathBuf {
     common::service_file(dir, http, &format!("[opcua]\n{opcua}"))

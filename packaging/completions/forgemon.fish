@@ -172,6 +172,7 @@ complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l plc -d 'Serve
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l foxglove -d 'Serve the Foxglove WebSocket protocol here' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l mqtt -d 'Publish Sparkplug B to this MQTT broker (`mqtt://host:port`, docs/interfaces.md §10), as group `forge`, node `forgemon`, device `machine`; queued under `--dir` while it is down' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l opcua -d 'Serve the OPC UA Metal Forming server here (`opc.tcp://127.0.0.1:4840`; loopback only: the demo\'s sessions are anonymous)' -r
+complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l opcua-nodesets -d 'With --opcua: the OPC Foundation\'s NodeSet2 files (Machinery, Machine Tools, Metal Forming and what they require; `[opcua] nodesets_dir`), whose types the machine\'s nodes are then instances of' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l recipe -d 'Judge every blow against this recipe (`forgemon teach`), OK/NOK' -r -F
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l target -d 'Run the live blow advisor towards this billet height, m: after each blow it plans the blows left (`[advisor]` in a service file)' -r
 complete -c forgemon -n "__fish_forgemon_using_subcommand demo" -l settings -d 'The hammer\'s impact speeds the advisor may choose from, m/s (its drop heights)' -r

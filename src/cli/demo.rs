@@ -73,6 +73,11 @@ pub struct DemoArgs {
     /// only: the demo's sessions are anonymous).
     #[arg(long, value_name = "URL")]
     pub opcua: Option<String>,
+    /// With --opcua: the OPC Foundation's NodeSet2 files (Machinery, Machine Tools, Metal
+    /// Forming and what they require; `[opcua] nodesets_dir`), whose types the machine's
+    /// nodes are then instances of.
+    #[arg(long, value_name = "DIR", requires = "opcua")]
+    pub opcua_nodesets: Option<PathBuf>,
     /// Judge every blow against this recipe (`forgemon teach`), OK/NOK.
     #[arg(long, value_name = "PART.recipe.toml")]
     pub recipe: Option<PathBuf>,
@@ -148,7 +153,8 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         .as_deref()
         .map(crate::config::opcua::OpcuaConfig::anonymous)
         .transpose()
-        .map_err(|e| anyhow::anyhow!("--opcua {e}"))?;
+        .map_err(|e| anyhow::anyhow!("--opcua {e}"))?
+        .map(|o| crate::config::opcua::OpcuaConfig { nodesets_dir: args.opcua_nodesets.clone(), ..o });
     let machine = parse_machine("hammer-lg1000.machine.toml", MACHINE)?.machine;
     let steel = parse_process("steel-16NiCrMo13.process.toml", STEEL)?;
     let billets = if args.billets == 0 { UNTIL_STOPPED_BILLETS } else { args.billets };

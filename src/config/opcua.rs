@@ -49,6 +49,7 @@ pub(super) struct RawOpcua {
     hello_timeout_s: Option<u64>,
     max_sessions: Option<u64>,
     max_connections: Option<u64>,
+    nodesets_dir: Option<String>,
 }
 
 /// Who may open a session.
@@ -75,6 +76,10 @@ pub struct OpcuaConfig {
     pub max_sessions: u64,
     /// `max_connections`: connections held at once, counted at accept.
     pub max_connections: u64,
+    /// `nodesets_dir`: the OPC Foundation's companion NodeSet2 files (Machinery, Machine
+    /// Tools, Metal Forming and what they require); when set, the machine's nodes are
+    /// instances of the companion types (`daemon/opcua/nodesets.rs`). Read at start.
+    pub nodesets_dir: Option<PathBuf>,
 }
 
 impl OpcuaConfig {
@@ -91,6 +96,7 @@ impl OpcuaConfig {
             hello_timeout_s: DEFAULT_HELLO_TIMEOUT_S,
             max_sessions: DEFAULT_MAX_SESSIONS,
             max_connections: DEFAULT_MAX_CONNECTIONS,
+            nodesets_dir: None,
         })
     }
 }
@@ -165,7 +171,19 @@ pub(super) fn parse_opcua(
         Some(n) => doc.in_whole_range("opcua.max_connections", n, &MAX_CONNECTIONS)?,
         None => DEFAULT_MAX_CONNECTIONS,
     };
-    Ok(Some(OpcuaConfig { url: raw.listen.clone(), listen, access, hello_timeout_s, max_sessions, max_connections }))
+    if raw.nodesets_dir.as_deref().is_some_and(|d| d.trim().is_empty()) {
+        return Err(doc.invalid("opcua.nodesets_dir", "must not be empty (leave it out to serve without them)"));
+    }
+    let nodesets_dir = raw.nodesets_dir.as_deref().map(path);
+    Ok(Some(OpcuaConfig {
+        url: raw.listen.clone(),
+        listen,
+        access,
+        hello_timeout_s,
+        max_sessions,
+        max_connections,
+        nodesets_dir,
+    }))
 }
 
 #[cfg(test)]
@@ -257,5 +275,16 @@ mod tests {
         assert!(e.contains("unknown key 'usr'") && e.contains("did you mean 'user'"), "{e}");
         let e = err("[opcua]\nlisten = \"tcp://127.0.0.1:4840\"\n");
         assert!(e.contains("key 'opcua.listen'") && e.contains("opc.tcp://"), "{e}");
+    }
+
+    #[test]
+    fn a_nodesets_dir_is_taken_from_the_configuration_files_directory() {
+        let c = parse("[opcua]\nlisten = \"opc.tcp://127.0.0.1:4840\"\n").unwrap().unwrap();
+        assert_eq!(c.nodesets_dir, None);
+        let c =
+            parse("[opcua]\nlisten = \"opc.tcp://127.0.0.1:4840\"\nnodesets_dir = \"ua-nodesets\"\n").unwrap().unwrap();
+        assert_eq!(c.nodesets_dir.as_deref(), Some(Path::new("/etc/forgemon/ua-nodesets")));
+        let e = err("[opcua]\nlisten = \"opc.tcp://127.0.0.1:4840\"\nnodesets_dir = \" \"\n");
+        assert!(e.contains("'opcua.nodesets_dir'") && e.contains("empty"), "{e}");
     }
 }

@@ -13,6 +13,15 @@ The client of issue 21 §2, for tests/opcua_python.rs. It decodes nothing with f
       definition. After blow 3 calls the working unit's SetPart("P-000418", "", "18")
       (after trying a part id with a leading space), and four blows later ChangeDies("19").
       Stops after SECONDS or when the server goes.
+  companion URL SECONDS
+      Anonymous, against a server given the companion NodeSet2 files. Reads the type
+      definitions of the machine (in Machinery's Machines folder), its working unit and its
+      Identification, and the Identification's properties; checks that every mandatory
+      child the types declare (outside namespace 0, with their supertypes and interfaces) is
+      on the instance, four levels down; reads the blow event type's supertype; subscribes
+      to the machine's events with select clauses that name Metal Forming's CyclicEventType
+      (CycleCount, PartId) and collects them until SECONDS or the server goes; after the
+      first event calls SetPart("P-7", "", "").
   auth URL SERVER_CERT_DER USER PASSWORD WORKDIR
       Tries an anonymous session, a wrong password and the right password (over
       Basic256Sha256 SignAndEncrypt with a self-signed client certificate made in WORKDIR);
@@ -90,6 +99,14 @@ async def event_filter(event_type):
     where.FilterOperands.append(ua.LiteralOperand(Value=ua.Variant(event_type.nodeid)))
     f.WhereClause = ua.ContentFilter(Elements=[where])
     return f
+
+
+async def quiet_disconnect(client):
+    """Disconnect; a server that has gone already is no error."""
+    try:
+        await client.disconnect()
+    except Exception:
+        pass
 
 
 async def connect(client, deadline):
@@ -185,10 +202,7 @@ async def demo(url, seconds):
                         result["ack"]["again"] = ua.StatusCode(e.code).name
             await asyncio.sleep(0.05)
     finally:
-        try:
-            await client.disconnect()
-        except Exception:
-            pass
+        await quiet_disconnect(client)
     return result
 
 
@@ -224,6 +238,123 @@ async def part_calls(unit, fm, result):
     elif "set_part" in calls and "change_dies" not in calls and counter >= calls["set_part"] + 4:
         await unit.call_method(f"{fm}:ChangeDies", "19")
         calls["change_dies"] = counter
+
+
+MACHINERY = "http://opcfoundation.org/UA/Machinery/"
+MACHINE_TOOL = "http://opcfoundation.org/UA/MachineTool/"
+METAL_FORMING = "http://opcfoundation.org/UA/MetalForming/"
+MANDATORY = ua.NodeId(ua.ObjectIds.ModellingRule_Mandatory)
+
+
+async def qualified(client, node):
+    """`URI|Name` of a node's browse name."""
+    bn = await node.read_browse_name()
+    return f"{(await client.get_namespace_array())[bn.NamespaceIndex]}|{bn.Name}"
+
+
+async def targets(node, ref, inverse=False):
+    direction = ua.BrowseDirection.Inverse if inverse else ua.BrowseDirection.Forward
+    refs = await node.get_references(refs=ref, direction=direction, includesubtypes=False)
+    return [node.session.get_node(r.NodeId) if hasattr(node, "session") else r.NodeId for r in refs]
+
+
+async def declarations(client, ty):
+    """The declarations under a type, its supertypes and interfaces outside namespace 0:
+    `{browse name: (declaration node, mandatory)}`, the most derived first."""
+    out, todo, seen = {}, [ty], set()
+    while todo:
+        t = todo.pop(0)
+        if t.nodeid.NamespaceIndex == 0 or t.nodeid in seen:
+            continue
+        seen.add(t.nodeid)
+        for ref in (ua.ObjectIds.HasComponent, ua.ObjectIds.HasProperty, ua.ObjectIds.HasAddIn, ua.ObjectIds.HasOrderedComponent):
+            for r in await t.get_references(refs=ref, direction=ua.BrowseDirection.Forward, includesubtypes=False):
+                d = client.get_node(r.NodeId)
+                key = r.BrowseName.to_string()
+                if key in out:
+                    continue
+                rules = await d.get_references(refs=ua.ObjectIds.HasModellingRule, direction=ua.BrowseDirection.Forward)
+                out[key] = (d, any(x.NodeId == MANDATORY for x in rules))
+        for r in await t.get_references(refs=ua.ObjectIds.HasInterface, direction=ua.BrowseDirection.Forward, includesubtypes=False):
+            todo.append(client.get_node(r.NodeId))
+        for r in await t.get_references(refs=ua.ObjectIds.HasSubtype, direction=ua.BrowseDirection.Inverse, includesubtypes=False):
+            todo.append(client.get_node(r.NodeId))
+    return out
+
+
+async def mandatory_check(client, instance, path, depth, report):
+    """Every mandatory declaration of the instance's type (and of the declaration the
+    instance was made from) has a child of the same browse name; counts what it checked."""
+    if depth == 0:
+        return
+    ty = client.get_node(await instance.read_type_definition())
+    decls = await declarations(client, ty)
+    children = {}
+    for c in await instance.get_children(refs=ua.ObjectIds.Aggregates):
+        children[(await c.read_browse_name()).to_string()] = c
+    for key, (decl, mandatory) in decls.items():
+        if not mandatory:
+            continue
+        report["checked"] += 1
+        if key not in children:
+            report["missing"].append(f"{path}/{key}")
+            continue
+        await mandatory_check(client, children[key], f"{path}/{key}", depth - 1, report)
+
+
+async def companion(url, seconds):
+    deadline = time.monotonic() + seconds
+    client = Client(url, timeout=4)
+    await connect(client, deadline)
+    result = {"events": []}
+    try:
+        nss = await client.get_namespace_array()
+        mf, mach, mt, forming = (nss.index(u) for u in (MODEL_NS, MACHINERY, MACHINE_TOOL, METAL_FORMING))
+        machine = await client.nodes.objects.get_child([f"{mach}:Machines", f"{mf}:Hammer"])
+        unit = await machine.get_child(f"{mf}:FormingWorkingUnit")
+        ident = await machine.get_child(f"{nss.index('http://opcfoundation.org/UA/DI/')}:Identification")
+        result["types"] = {
+            name: await qualified(client, client.get_node(await node.read_type_definition()))
+            for name, node in (("machine", machine), ("unit", unit), ("identification", ident))
+        }
+        result["identification"] = {
+            await qualified(client, c): plain(await c.read_value()) for c in await ident.get_children()
+        }
+        report = {"checked": 0, "missing": []}
+        await mandatory_check(client, machine, "Hammer", 4, report)
+        result["mandatory"] = report
+        blow_type = client.get_node(ua.NodeId("BlowCompletedEventType", nss.index(FORGEMON_NS)))
+        supers = await blow_type.get_references(refs=ua.ObjectIds.HasSubtype, direction=ua.BrowseDirection.Inverse)
+        result["event_supertype"] = await qualified(client, client.get_node(supers[0].NodeId))
+        # The standard's way to read a cyclic event: the select clauses name CyclicEventType.
+        cyclic = ua.NodeId(1016, forming)
+        evfilter = ua.EventFilter()
+        for ty, name in ((ua.NodeId(ua.ObjectIds.BaseEventType), "0:EventType"), (cyclic, f"{forming}:CycleCount"), (cyclic, f"{forming}:PartId")):
+            op = ua.SimpleAttributeOperand(TypeDefinitionId=ty, BrowsePath=[ua.QualifiedName.from_string(name)], AttributeId=ua.AttributeIds.Value)
+            evfilter.SelectClauses.append(op)
+        where = ua.ContentFilterElement(FilterOperator=ua.FilterOperator.OfType)
+        where.FilterOperands.append(ua.LiteralOperand(Value=ua.Variant(cyclic)))
+        evfilter.WhereClause = ua.ContentFilter(Elements=[where])
+        queue = asyncio.Queue()
+        sub = await client.create_subscription(20, Handler(queue))
+        await sub.subscribe_events(machine, evfilter=evfilter, queuesize=100)
+        while time.monotonic() < deadline:
+            try:
+                await machine.read_browse_name()
+            except Exception:  # the demo has stopped: its server is gone
+                break
+            while not queue.empty():
+                kind, item = queue.get_nowait()
+                if kind == "event":
+                    result["events"].append({k: plain(v) for k, v in item.items()})
+            if result["events"] and "set_part" not in result:
+                # What the next blows are forged as: their events' PartId.
+                result["set_part"] = result["events"][-1]["CycleCount"]
+                await unit.call_method(f"{nss.index(FORGEMON_NS)}:SetPart", "P-7", "", "")
+            await asyncio.sleep(0.05)
+    finally:
+        await quiet_disconnect(client)
+    return result
 
 
 async def try_session(client):
@@ -390,6 +521,8 @@ def main():
     args = sys.argv[1:]
     if len(args) == 3 and args[0] == "demo":
         out = asyncio.run(demo(args[1], float(args[2])))
+    elif len(args) == 3 and args[0] == "companion":
+        out = asyncio.run(companion(args[1], float(args[2])))
     elif len(args) == 6 and args[0] == "auth":
         out = asyncio.run(auth(*args[1:]))
     elif len(args) == 6 and args[0] == "peers":

@@ -7,7 +7,10 @@
 
 use opcua::core_namespace::events::AlarmConditionType;
 use opcua::nodes::{BaseEventType, Event};
-use opcua::types::{ByteString, DateTime, LocalizedText, NamespaceMap, NodeId, ObjectTypeId, UAString};
+use opcua::types::{
+    AttributeId, ByteString, DateTime, EventField, LocalizedText, NamespaceMap, NodeId, NumericRange, ObjectTypeId,
+    QualifiedName, UAString, Variant,
+};
 
 use crate::estimate::BlowEstimate;
 use crate::estimate::billet_book::Trace;
@@ -47,6 +50,8 @@ pub struct BlowCompletedEvent {
     pub part_id: UAString,
     pub lot: UAString,
     pub die_set: UAString,
+    /// Metal Forming's `CyclicEventType` field: the blow number again.
+    pub cycle_count: u32,
 }
 
 /// The fields of [`BlowCompletedEvent`] as browse names, in order (the type's properties).
@@ -93,7 +98,51 @@ impl BlowCompletedEvent {
             part_id: part.part_id.as_deref().unwrap_or_default().into(),
             lot: part.lot.as_deref().unwrap_or_default().into(),
             die_set: part.die_set.as_deref().unwrap_or_default().into(),
+            cycle_count: b.blow,
         }
+    }
+}
+
+/// A blow's event as the server sends it: when the blow event type is a subtype of Metal
+/// Forming's `CyclicEventType` (`cyclic`), a select clause that names that type
+/// (`CyclicEventType`/`PartId`, `CyclicEventType`/`CycleCount`) is answered too, where the
+/// derived impl answers only its own type's and BaseEventType's.
+pub struct BlowEvent {
+    pub event: BlowCompletedEvent,
+    pub cyclic: Option<NodeId>,
+}
+
+impl EventField for BlowEvent {
+    fn get_value(
+        &self,
+        attribute_id: AttributeId,
+        index_range: &NumericRange,
+        browse_path: &[QualifiedName],
+    ) -> Variant {
+        self.event.get_value(attribute_id, index_range, browse_path)
+    }
+}
+
+impl Event for BlowEvent {
+    fn get_field(
+        &self,
+        type_definition_id: &NodeId,
+        attribute_id: AttributeId,
+        index_range: &NumericRange,
+        browse_path: &[QualifiedName],
+    ) -> Variant {
+        if self.cyclic.as_ref() == Some(type_definition_id) {
+            return self.event.get_value(attribute_id, index_range, browse_path);
+        }
+        self.event.get_field(type_definition_id, attribute_id, index_range, browse_path)
+    }
+
+    fn time(&self) -> &DateTime {
+        self.event.time()
+    }
+
+    fn event_type_id(&self) -> &NodeId {
+        self.event.event_type_id()
     }
 }
 
@@ -159,8 +208,6 @@ pub fn as_dyn(e: &impl Event) -> &dyn Event {
 
 #[cfg(test)]
 mod tests {
-    use opcua::types::{AttributeId, NumericRange, QualifiedName, Variant};
-
     use super::*;
 
     fn field(e: &dyn Event, path: &[(u16, &str)]) -> Variant {
@@ -190,6 +237,27 @@ mod tests {
         // An incomplete blow has no energies: empty, not zero.
         let e = BlowCompletedEvent::of(&BlowEstimate { plastic_j: None, ..b }, &part, 3, &NodeId::null(), "Hammer");
         assert_eq!(field(&e, &[(3, "PlasticEnergy")]), Variant::Empty);
+    }
+
+    /// With Metal Forming loaded, a select clause naming `CyclicEventType` is answered: its
+    /// `PartId` and `CycleCount`; naming another type still gives nothing.
+    #[test]
+    fn the_blow_event_answers_as_a_cyclic_event() {
+        let part = Trace { part_id: Some("P-1".into()), ..Trace::default() };
+        let cyclic = NodeId::new(7, 1016u32);
+        let event = BlowCompletedEvent::of(&complete_blow(), &part, 3, &NodeId::new(2, "unit"), "Hammer");
+        let e = BlowEvent { event, cyclic: Some(cyclic.clone()) };
+        let at = |ty: &NodeId, name: &str| {
+            e.get_field(ty, AttributeId::Value, &NumericRange::None, &[QualifiedName::new(7, name)])
+        };
+        assert_eq!(at(&cyclic, "PartId"), Variant::from("P-1"));
+        assert_eq!(at(&cyclic, "CycleCount"), Variant::from(7u32));
+        assert_eq!(at(&NodeId::new(7, 1099u32), "PartId"), Variant::Empty);
+        let e = BlowEvent { cyclic: None, ..e };
+        assert_eq!(
+            e.get_field(&cyclic, AttributeId::Value, &NumericRange::None, &[QualifiedName::new(7, "PartId")]),
+            Variant::Empty
+        );
     }
 
     /// OPC 10000-9 §5.5: a condition is retained while active or unacknowledged.

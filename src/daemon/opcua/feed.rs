@@ -13,7 +13,7 @@ use opcua::server::node_manager::memory::SimpleNodeManager;
 use opcua::types::{DataValue, LocalizedText, NodeId, ObjectId, StatusCode, Variant};
 use tokio::sync::{broadcast, mpsc};
 
-use super::events::{BlowCompletedEvent, ConditionPlace, ConditionState, as_dyn, condition_event, event_id};
+use super::events::{BlowCompletedEvent, BlowEvent, ConditionPlace, ConditionState, as_dyn, condition_event, event_id};
 use super::model::Nodes;
 use crate::config::history::{TraceUpdate, check_id};
 use crate::daemon::Control;
@@ -79,13 +79,9 @@ impl Feed {
     /// A blow: its values, its event, and its alert's condition.
     pub fn on_blow(&self, b: &BlowEstimate) {
         self.write_values(b);
-        let e = BlowCompletedEvent::of(
-            b,
-            &self.part,
-            self.nodes.forgemon_ns,
-            &self.nodes.working_unit,
-            &self.nodes.machine_name,
-        );
+        let (ns, unit, name) = (self.nodes.forgemon_ns, &self.nodes.working_unit, &self.nodes.machine_name);
+        let event = BlowCompletedEvent::of(b, &self.part, ns, unit, name);
+        let e = BlowEvent { event, cyclic: self.nodes.cyclic_event_type.clone() };
         self.notify(as_dyn(&e));
         if let Some(a) = &b.alert {
             self.raise(a.kind, &format!("blow {}: {}", a.blow, a.reason));

@@ -17,7 +17,9 @@
 pub mod auth;
 pub mod events;
 pub mod feed;
+pub mod instance;
 pub mod model;
+pub mod nodesets;
 pub mod pki;
 
 use std::net::SocketAddr;
@@ -76,8 +78,13 @@ impl NodeSetImport for Namespaces {
     }
 }
 
-/// The server's builder for `cfg`: its endpoint and who may use it.
+/// The server's builder for `cfg`: its endpoint, who may use it, and the companion
+/// NodeSet2 files of `nodesets_dir` (read here: a bad file fails the start).
 fn builder(cfg: &OpcuaConfig) -> anyhow::Result<ServerBuilder> {
+    let mut imports = vec![Box::new(Namespaces) as Box<dyn NodeSetImport>];
+    if let Some(dir) = &cfg.nodesets_dir {
+        imports.extend(nodesets::imports(nodesets::read_dir(dir)?));
+    }
     let b = ServerBuilder::new()
         .application_name("forgemon")
         .application_uri("urn:forgemon")
@@ -95,10 +102,7 @@ fn builder(cfg: &OpcuaConfig) -> anyhow::Result<ServerBuilder> {
         .discovery_urls(vec![ENDPOINT_PATH.to_string()])
         .hello_timeout(u32::try_from(cfg.hello_timeout_s).unwrap_or(u32::MAX))
         .max_sessions(usize::try_from(cfg.max_sessions).unwrap_or(usize::MAX))
-        .with_node_manager(simple_node_manager_imports(
-            vec![Box::new(Namespaces) as Box<dyn NodeSetImport>],
-            "forgemon",
-        ));
+        .with_node_manager(simple_node_manager_imports(imports, "forgemon"));
     Ok(match &cfg.access {
         OpcuaAccess::Anonymous => b
             // Ours, so that an activated session admits its connection (`auth::Gate`).
@@ -132,6 +136,33 @@ fn builder(cfg: &OpcuaConfig) -> anyhow::Result<ServerBuilder> {
                 .trust_client_certs(false)
         }
     })
+}
+
+/// The companion types in the server's namespaces, each checked to be there by its
+/// browse name (the files of `dir` were imported by `builder`).
+fn companion(
+    handle: &ServerHandle,
+    manager: &SimpleNodeManager,
+    dir: &std::path::Path,
+) -> anyhow::Result<model::Companion> {
+    let ns = |uri: &str| {
+        handle
+            .get_namespace_index(uri)
+            .with_context(|| format!("opcua.nodesets_dir {}: {uri} was not loaded", dir.display()))
+    };
+    let c = model::Companion::new(ns(nodesets::MACHINERY)?, ns(nodesets::MACHINE_TOOL)?, ns(nodesets::METAL_FORMING)?);
+    let space = manager.address_space().read();
+    for (id, name) in c.expected() {
+        let found = space.find(id).map(|n| n.as_node().browse_name().name.to_string());
+        if found.as_deref() != Some(name) {
+            anyhow::bail!(
+                "opcua.nodesets_dir {}: node {id} is {} where the specification has {name}",
+                dir.display(),
+                found.unwrap_or_else(|| "missing".into())
+            );
+        }
+    }
+    Ok(c)
 }
 
 impl crate::daemon::faces::Face for OpcuaServer {}
@@ -183,7 +214,12 @@ pub async fn start(
     else {
         anyhow::bail!("opcua: forgemon's namespaces were not registered");
     };
-    let nodes = model::build(&mut manager.address_space().write(), model_ns, forgemon_ns, kind);
+    let companion = cfg.nodesets_dir.as_ref().map(|dir| companion(&handle, &manager, dir)).transpose()?;
+    let nodes = {
+        let tt = handle.type_tree().read();
+        let types = companion.as_ref().map(|c| (c, &*tt as &dyn opcua::nodes::TypeTree));
+        model::build(&mut manager.address_space().write(), model_ns, forgemon_ns, kind, types)
+    };
     let conditions = feed::quiet_conditions(&nodes);
     for (i, c) in nodes.conditions.iter().enumerate() {
         let (conditions, control) = (conditions.clone(), control.clone());
@@ -257,6 +293,7 @@ mod tests {
             hello_timeout_s: 2,
             max_sessions: 3,
             max_connections: 6,
+            nodesets_dir: None,
         };
         let b = builder(&cfg).expect("builds");
         let eps = &b.config().endpoints;

@@ -1,21 +1,27 @@
 //! The address space of the OPC UA server: the machine modelled after OPC 40001-1
 //! (Machinery: the `Machines` folder, a machine with its `Identification`) and OPC 40503-1
 //! (Metal Forming: the forming working unit with its cycle counter and process values),
-//! as far as they fit a hammer or a screw press. The companion specifications' NodeSets
-//! cannot be loaded here, so the nodes that follow them keep the specifications' browse
-//! names in a namespace of forgemon's own ([`MODEL_NS`]); the values the specifications
-//! have no place for (energies, efficiency, blow class, billet counter, the per-blow event
-//! type) are in the forgemon namespace ([`FORGEMON_NS`]). docs/guide.md "OPC UA server" lists
-//! which is which. Pure construction: no IO, no clock.
+//! as far as they fit a hammer or a screw press. The nodes that follow them keep the
+//! specifications' browse names in a namespace of forgemon's own ([`MODEL_NS`]); the values
+//! the specifications have no place for (energies, efficiency, blow class, billet counter,
+//! the per-blow event type) are in the forgemon namespace ([`FORGEMON_NS`]). docs/guide.md
+//! "OPC UA server" lists which is which. When the companion NodeSet2 files are loaded
+//! ([`Companion`], `[opcua] nodesets_dir`), the same nodes are instances of the companion
+//! types: the machine a `MachineToolType` in Machinery's `Machines` folder, its working unit
+//! a `FormingProcessWorkingUnitType`, the blow event a `CyclicEventType`, each with the
+//! mandatory children its type declares (`instance.rs`). Pure construction: no IO, no clock.
 
-use opcua::nodes::{AccessLevel, EventNotifier, MethodBuilder, ObjectBuilder, ObjectTypeBuilder, VariableBuilder};
+use opcua::nodes::{
+    AccessLevel, EventNotifier, MethodBuilder, NodeType, ObjectBuilder, ObjectTypeBuilder, TypeTree, VariableBuilder,
+};
 use opcua::server::address_space::AddressSpace;
 use opcua::types::{
-    Argument, DataTypeId, EUInformation, ExtensionObject, LocalizedText, NodeId, ObjectId, ObjectTypeId, QualifiedName,
-    ReferenceTypeId, VariableTypeId, Variant,
+    Argument, DataTypeId, DateTime, EUInformation, ExtensionObject, LocalizedText, NodeId, ObjectId, ObjectTypeId,
+    QualifiedName, ReferenceTypeId, VariableTypeId, Variant,
 };
 
 use super::events::BLOW_EVENT_FIELDS;
+use super::instance;
 use crate::estimate::result::AlertKind;
 use crate::physics::machine::MachineKind;
 
@@ -110,6 +116,42 @@ const VALUES: [ValueSpec; 14] = [
     value("DieSet", true, DataTypeId::String, "", None),
 ];
 
+/// The companion specifications' namespaces in the server, when their NodeSet2 files are
+/// loaded (`nodesets.rs`), and the types forgemon's nodes are instances of.
+#[derive(Debug, Clone)]
+pub struct Companion {
+    /// Machinery's `Machines` folder (OPC 40001-1 §9.2, `i=1001`).
+    pub machines: NodeId,
+    /// `MachineToolType` (OPC 40501-1, `i=13`).
+    pub machine_type: NodeId,
+    /// `FormingProcessWorkingUnitType` (Metal Forming, `i=1008`).
+    pub working_unit_type: NodeId,
+    /// `CyclicEventType` (Metal Forming, `i=1016`): the blow event's supertype.
+    pub cyclic_event_type: NodeId,
+}
+
+impl Companion {
+    /// The nodes in the namespaces `machinery`, `machine_tool` and `metal_forming`.
+    pub fn new(machinery: u16, machine_tool: u16, metal_forming: u16) -> Self {
+        Companion {
+            machines: NodeId::new(machinery, 1001u32),
+            machine_type: NodeId::new(machine_tool, 13u32),
+            working_unit_type: NodeId::new(metal_forming, 1008u32),
+            cyclic_event_type: NodeId::new(metal_forming, 1016u32),
+        }
+    }
+
+    /// Each node with the browse name the specifications give it.
+    pub fn expected(&self) -> [(&NodeId, &'static str); 4] {
+        [
+            (&self.machines, "Machines"),
+            (&self.machine_type, "MachineToolType"),
+            (&self.working_unit_type, "FormingProcessWorkingUnitType"),
+            (&self.cyclic_event_type, "CyclicEventType"),
+        ]
+    }
+}
+
 /// The ids of the nodes the feed writes and the events name.
 #[derive(Debug, Clone)]
 pub struct Nodes {
@@ -118,6 +160,8 @@ pub struct Nodes {
     pub machine: NodeId,
     pub machine_name: String,
     pub working_unit: NodeId,
+    /// Metal Forming's `CyclicEventType`, the blow event's supertype, when loaded.
+    pub cyclic_event_type: Option<NodeId>,
     /// A process value's node by its browse name.
     values: Vec<(&'static str, NodeId)>,
     /// Each condition: kind, node, browse name, severity, its `Acknowledge` method and its
@@ -202,33 +246,67 @@ fn initial(data_type: DataTypeId) -> Variant {
     }
 }
 
+/// The companion types and the type tree to read them with, when the NodeSet2 files are
+/// loaded.
+pub type Types<'a> = Option<(&'a Companion, &'a dyn TypeTree)>;
+
+/// An object `name` under `parent` (by `reference`), an instance of `ty`: with a companion
+/// type, of the companion's `companion_ty` with its mandatory children.
+#[allow(clippy::too_many_arguments)]
+fn object(
+    space: &mut AddressSpace,
+    types: Types<'_>,
+    ns: u16,
+    path: &str,
+    name: &str,
+    parent: &NodeId,
+    reference: ReferenceTypeId,
+    companion_ty: impl Fn(&Companion) -> &NodeId,
+) -> NodeId {
+    let id = NodeId::new(ns, path.to_string());
+    let ty = types.map_or_else(|| ObjectTypeId::BaseObjectType.into(), |(c, _)| companion_ty(c).clone());
+    ObjectBuilder::new(&id, QualifiedName::new(ns, name), name)
+        .has_type_definition(ty.clone())
+        .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
+        .insert(space);
+    space.insert_reference(parent, &id, reference);
+    if let Some((_, tt)) = types {
+        instance::add_mandatory(space, tt, ns, &id, path, &ty);
+    }
+    id
+}
+
 /// Build the machine's nodes into `space` (whose namespaces `model_ns` and `forgemon_ns`
-/// are this server's), for a machine of `kind`.
-pub fn build(space: &mut AddressSpace, model_ns: u16, forgemon_ns: u16, kind: MachineKind) -> Nodes {
+/// are this server's), for a machine of `kind`; as instances of the companion types when
+/// `types` is given.
+pub fn build(space: &mut AddressSpace, model_ns: u16, forgemon_ns: u16, kind: MachineKind, types: Types<'_>) -> Nodes {
     let m = |s: &str| NodeId::new(model_ns, s.to_string());
     let f = |s: &str| NodeId::new(forgemon_ns, s.to_string());
     let name = machine_name(kind);
 
-    blow_event_type(space, forgemon_ns);
-    let machines = m("Machines");
-    space.add_folder(&machines, QualifiedName::new(model_ns, "Machines"), "Machines", &ObjectId::ObjectsFolder.into());
-    let machine = m(name);
-    ObjectBuilder::new(&machine, QualifiedName::new(model_ns, name), name)
-        .organized_by(machines.clone())
-        .has_type_definition(ObjectTypeId::BaseObjectType)
-        .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
-        .insert(space);
+    blow_event_type(space, forgemon_ns, types.map(|(c, _)| &c.cyclic_event_type));
+    let machines = match types {
+        Some((c, _)) => c.machines.clone(),
+        None => {
+            let machines = m("Machines");
+            let (browse, objects) = (QualifiedName::new(model_ns, "Machines"), ObjectId::ObjectsFolder.into());
+            space.add_folder(&machines, browse, "Machines", &objects);
+            machines
+        }
+    };
+    let machine =
+        object(space, types, model_ns, name, name, &machines, ReferenceTypeId::Organizes, |c| &c.machine_type);
     // The Server object is the root notifier: a machine's events reach it too.
     space.insert_reference(&ObjectId::Server.into(), &machine, ReferenceTypeId::HasNotifier);
-    identification(space, model_ns, &machine, name, kind);
+    identification(space, types, model_ns, &machine, name, kind);
 
-    let unit = m(&format!("{name}.FormingWorkingUnit"));
-    ObjectBuilder::new(&unit, QualifiedName::new(model_ns, "FormingWorkingUnit"), "FormingWorkingUnit")
-        .component_of(machine.clone())
-        .has_type_definition(ObjectTypeId::BaseObjectType)
-        .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
-        .insert(space);
+    let path = format!("{name}.FormingWorkingUnit");
+    let component = ReferenceTypeId::HasComponent;
+    let unit =
+        object(space, types, model_ns, &path, "FormingWorkingUnit", &machine, component, |c| &c.working_unit_type);
     space.insert_reference(&machine, &unit, ReferenceTypeId::HasEventSource);
+    // MachineTool's ElementMonitoringType names its element (mandatory `Name`).
+    set_text(space, &NodeId::new(model_ns, format!("{path}.Name")), "FormingWorkingUnit");
     let mut values = Vec::new();
     for v in &VALUES {
         let (ns, id) = if v.forgemon { (forgemon_ns, f(v.name)) } else { (model_ns, m(v.name)) };
@@ -259,6 +337,7 @@ pub fn build(space: &mut AddressSpace, model_ns: u16, forgemon_ns: u16, kind: Ma
         machine,
         machine_name: name.to_string(),
         working_unit: unit,
+        cyclic_event_type: types.map(|(c, _)| c.cyclic_event_type.clone()),
         values,
         conditions,
         set_part: methods.0,
@@ -319,12 +398,23 @@ fn part_methods(space: &mut AddressSpace, ns: u16, unit: &NodeId) -> (NodeId, No
 
 /// `Identification` (OPC 40001-1 §8, MachineryItemIdentificationType's properties that
 /// forgemon knows).
-fn identification(space: &mut AddressSpace, ns: u16, machine: &NodeId, name: &str, kind: MachineKind) {
-    let id = NodeId::new(ns, format!("{name}.Identification"));
-    ObjectBuilder::new(&id, QualifiedName::new(ns, "Identification"), "Identification")
-        .component_of(machine.clone())
-        .has_type_definition(ObjectTypeId::BaseObjectType)
-        .insert(space);
+fn identification(
+    space: &mut AddressSpace,
+    types: Types<'_>,
+    ns: u16,
+    machine: &NodeId,
+    name: &str,
+    kind: MachineKind,
+) {
+    let path = format!("{name}.Identification");
+    let id = NodeId::new(ns, path.clone());
+    // A MachineToolType has its Identification already (`instance.rs`).
+    if !space.node_exists(&id) {
+        ObjectBuilder::new(&id, QualifiedName::new(ns, "Identification"), "Identification")
+            .component_of(machine.clone())
+            .has_type_definition(ObjectTypeId::BaseObjectType)
+            .insert(space);
+    }
     let props: [(&str, String); 4] = [
         ("ProductInstanceUri", format!("urn:forgemon:machine:{}", kind.as_str())),
         ("Model", kind.as_str().to_string()),
@@ -332,17 +422,38 @@ fn identification(space: &mut AddressSpace, ns: u16, machine: &NodeId, name: &st
         ("Manufacturer", "unknown (forgemon monitors it)".to_string()),
     ];
     for (p, value) in props {
-        let pid = NodeId::new(ns, format!("{name}.Identification.{p}"));
-        variable(space, &pid, QualifiedName::new(ns, p), value.as_str(), DataTypeId::String, &id, PROPERTY);
+        let pid = NodeId::new(ns, format!("{path}.{p}"));
+        // An optional property of the companion type (DI's `Model`) in its namespace.
+        if let Some((_, tt)) = types {
+            instance::add_declared(space, tt, ns, &id, &path, p);
+        }
+        if !set_text(space, &pid, &value) {
+            let browse = QualifiedName::new(ns, p);
+            variable(space, &pid, browse, value.as_str(), DataTypeId::String, &id, PROPERTY);
+        }
     }
 }
 
-/// `BlowCompletedEventType` (forgemon), a BaseEventType with one property per field.
-fn blow_event_type(space: &mut AddressSpace, ns: u16) {
+/// Set the text variable `id`, made from a companion type's declaration, to `value` in its
+/// declared data type (DI's `Manufacturer` and `Model` are LocalizedText): false when there
+/// is no such variable.
+fn set_text(space: &mut AddressSpace, id: &NodeId, value: &str) -> bool {
+    let Some(NodeType::Variable(v)) = space.find_mut(id) else { return false };
+    let text = v.data_type() == DataTypeId::LocalizedText;
+    let value = if text { Variant::from(LocalizedText::new("", value)) } else { Variant::from(value) };
+    let now = DateTime::now();
+    v.set_value_direct(value, opcua::types::StatusCode::Good, &now, &now)
+        .unwrap_or_else(|e| tracing::warn!("opcua: {id}: {e}"));
+    true
+}
+
+/// `BlowCompletedEventType` (forgemon), a subtype of `supertype` (Metal Forming's
+/// `CyclicEventType`) or else of BaseEventType, with one property per field.
+fn blow_event_type(space: &mut AddressSpace, ns: u16, supertype: Option<&NodeId>) {
     let ty = super::events::BlowCompletedEvent::event_type_id_from_index(ns);
     ObjectTypeBuilder::new(&ty, QualifiedName::new(ns, "BlowCompletedEventType"), "BlowCompletedEventType")
         .is_abstract(false)
-        .subtype_of(ObjectTypeId::BaseEventType)
+        .subtype_of(supertype.cloned().unwrap_or_else(|| ObjectTypeId::BaseEventType.into()))
         .insert(space);
     for field in BLOW_EVENT_FIELDS {
         let id = NodeId::new(ns, format!("BlowCompletedEventType.{field}"));
