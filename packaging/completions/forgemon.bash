@@ -223,7 +223,7 @@ _forgemon() {
             return 0
             ;;
         forgemon__subcmd__demo)
-            opts="-h --billets --interval --dir --fast --http --plc --foxglove --mqtt --opcua --opcua-nodesets --recipe --target --settings --without --dead --lot --die --scatter --help"
+            opts="-h --billets --interval --dir --fast --http --plc --foxglove --mqtt --opcua --opcua-nodesets --rotate-mib --recipe --target --settings --without --dead --lot --die --scatter --help"
             if [[ ${cur} == -* || ${COMP_CWORD} -eq 2 ]] ; then
                 COMPREPLY=( $(compgen -W "${opts}" -- "${cur}") )
                 return 0
@@ -262,6 +262,10 @@ _forgemon() {
                     return 0
                     ;;
                 --opcua-nodesets)
+                    COMPREPLY=($(compgen -f "${cur}"))
+                    return 0
+                    ;;
+                --rotate-mib)
                     COMPREPLY=($(compgen -f "${cur}"))
                     return 0
                     ;;

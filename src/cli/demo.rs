@@ -78,6 +78,10 @@ pub struct DemoArgs {
     /// nodes are then instances of.
     #[arg(long, value_name = "DIR", requires = "opcua")]
     pub opcua_nodesets: Option<PathBuf>,
+    /// Start a new recording file after this many MiB (`[recording] rotate_bytes`), as a
+    /// long run's files are rotated; default: the service's 512 MiB.
+    #[arg(long, value_name = "MIB", value_parser = clap::value_parser!(u64).range(1..=1_048_576))]
+    pub rotate_mib: Option<u64>,
     /// Judge every blow against this recipe (`forgemon teach`), OK/NOK.
     #[arg(long, value_name = "PART.recipe.toml")]
     pub recipe: Option<PathBuf>,
@@ -263,6 +267,10 @@ fn parts(args: &DemoArgs, opcua: Option<crate::config::opcua::OpcuaConfig>) -> a
         absent_channels: args.without.map_or(Channels::NONE, |r| Channels::NONE.with(r, true)),
         part: crate::config::history::Trace { part_id: None, lot: args.lot.clone(), die_set: args.die.clone() },
         ..ServiceConfig::minimal(PathBuf::from("hammer-lg1000.machine.toml"), args.dir.clone())
+    };
+    let config = match args.rotate_mib {
+        Some(mib) => ServiceConfig { rotate_bytes: mib << 20, ..config },
+        None => config,
     };
     // No new-billet signal: the service finds each billet from the encoder (issue 22), so it
     // tracks the billet's height and splits plastic from friction work on every billet.

@@ -136,7 +136,7 @@ impl ExportRow {
 }
 
 /// `ns` since the epoch as `2026-11-24T07:15:18.123456789Z`.
-pub(crate) fn rfc3339_ns(ns: i64) -> String {
+pub fn rfc3339_ns(ns: i64) -> String {
     chrono::DateTime::from_timestamp_nanos(ns).format("%Y-%m-%dT%H:%M:%S%.9fZ").to_string()
 }
 
@@ -151,39 +151,19 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     // What the blows are forged as, from each recording's `part.toml` (every file of a run
     // starts with the one in force).
     for (file, listed) in &files {
-        // A file without one was forged as nothing recorded.
-        let mut trace = Trace::default();
         // A file named on the command line must be a recording; one of a directory's that
         // cannot be read (empty, not MCAP) is named and skipped.
-        let mut reader = match RecordReader::open(file) {
-            Ok(r) => r,
+        match file_rows(file) {
+            Ok((file_rows, file_corrupt)) => {
+                rows.extend(file_rows);
+                corrupt |= file_corrupt;
+            }
             Err(e) if !listed => return Err(e).with_context(|| format!("{}: cannot export", file.display())),
             Err(e) => {
                 eprintln!("forgemon: skipped {}: {e}", file.display());
                 corrupt = true;
-                continue;
-            }
-        };
-        for m in reader.by_ref() {
-            match m {
-                Ok(m) => match &m.payload {
-                    Payload::Result(r) => rows.push(ExportRow::forged_as(file, m.log_time_ns, r, &trace)),
-                    Payload::Config(c) if c.name == PART_CONFIG_NAME => match parse_trace_text(&c.text) {
-                        Ok(t) => trace = t,
-                        Err(why) => {
-                            eprintln!("forgemon: {}: a recorded {PART_CONFIG_NAME} left out: {why}", file.display())
-                        }
-                    },
-                    _ => {}
-                },
-                Err(e) => {
-                    eprintln!("forgemon: {}: the rest of the file skipped: {e}", file.display());
-                    corrupt = true;
-                    break;
-                }
             }
         }
-        corrupt |= input_status(reader.report()) != ExitCode::SUCCESS;
     }
     match (&args.csv, &args.parquet) {
         (Some(out), _) => write_csv(out, &rows)?,
@@ -192,6 +172,38 @@ pub fn run(args: ExportArgs) -> anyhow::Result<ExitCode> {
     }
     eprintln!("forgemon: exported {} blows from {} recordings", rows.len(), files.len());
     Ok(if corrupt { ExitCode::from(EXIT_CORRUPT_INPUT) } else { ExitCode::SUCCESS })
+}
+
+/// The rows of the recording `file`, each forged as its recording's `part.toml` in force
+/// (every file of a run starts with the one in force; a file without one was forged as
+/// nothing recorded), and whether part of it could not be read (named on stderr). Fails
+/// when `file` is not a recording.
+pub fn file_rows(file: &Path) -> anyhow::Result<(Vec<ExportRow>, bool)> {
+    let mut reader = RecordReader::open(file)?;
+    let mut trace = Trace::default();
+    let mut rows = Vec::new();
+    let mut corrupt = false;
+    for m in reader.by_ref() {
+        match m {
+            Ok(m) => match &m.payload {
+                Payload::Result(r) => rows.push(ExportRow::forged_as(file, m.log_time_ns, r, &trace)),
+                Payload::Config(c) if c.name == PART_CONFIG_NAME => match parse_trace_text(&c.text) {
+                    Ok(t) => trace = t,
+                    Err(why) => {
+                        eprintln!("forgemon: {}: a recorded {PART_CONFIG_NAME} left out: {why}", file.display())
+                    }
+                },
+                _ => {}
+            },
+            Err(e) => {
+                eprintln!("forgemon: {}: the rest of the file skipped: {e}", file.display());
+                corrupt = true;
+                break;
+            }
+        }
+    }
+    corrupt |= input_status(reader.report()) != ExitCode::SUCCESS;
+    Ok((rows, corrupt))
 }
 
 /// `--csv -`, `--parquet -`: the table to standard output.
@@ -263,7 +275,7 @@ fn schema() -> Schema {
 }
 
 /// The rows as one Arrow batch, the columns in `schema()`'s order.
-fn batch(rows: &[ExportRow]) -> anyhow::Result<RecordBatch> {
+pub fn batch(rows: &[ExportRow]) -> anyhow::Result<RecordBatch> {
     fn f64s(rows: &[ExportRow], f: impl Fn(&ExportRow) -> Option<f64>) -> ArrayRef {
         Arc::new(rows.iter().map(f).collect::<Float64Array>())
     }

@@ -134,7 +134,7 @@ pub(crate) fn parse_process_warn(
 pub(crate) const CAPTURE_SOURCE: &str = "capture";
 
 /// The blow files of a capture directory (docs/interfaces.md §1), in blow order.
-pub(crate) fn capture_dir_files(dir: &Path) -> anyhow::Result<Vec<std::path::PathBuf>> {
+pub fn capture_dir_files(dir: &Path) -> anyhow::Result<Vec<std::path::PathBuf>> {
     let names = std::fs::read_dir(dir)
         .with_context(|| format!("{}: cannot list", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()));
@@ -146,7 +146,7 @@ pub(crate) fn capture_dir_files(dir: &Path) -> anyhow::Result<Vec<std::path::Pat
 }
 
 /// Each batch of a capture file, as the source `CAPTURE_SOURCE/<file name>`.
-pub(crate) fn for_each_capture_batch(
+pub fn for_each_capture_batch(
     path: &Path,
     mut f: impl FnMut(crate::signal::sample::SampleBatch) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {

@@ -137,7 +137,7 @@ pub(crate) fn load_recipe(path: &Path) -> anyhow::Result<crate::recipe::Recipe> 
 /// Replay `args.input` with its output to `out`, after `setup` prepared the pipeline (a
 /// recipe, the signatures `forgemon teach` keeps); the exit status and the feeder after the
 /// end of the input.
-pub(crate) fn replay_into<W: Write>(
+pub fn replay_into<W: Write>(
     args: &ReplayArgs,
     out: W,
     setup: impl FnOnce(&mut Pipeline),

@@ -137,8 +137,22 @@ fn options(args: &SimulateArgs) -> anyhow::Result<SimOptions> {
 }
 
 pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
-    let inputs = load_inputs(&args)?;
-    let opts = options(&args)?;
+    let out = output(&args)?;
+    let stdout = std::io::stdout();
+    let mut w = stdout.lock();
+    if args.json {
+        writeln!(w, "{out}")?;
+    } else {
+        write_table(&mut w, &out)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// What `forgemon simulate --json` prints (docs/interfaces.md §4), with the files `args`
+/// asks for (captures, trace) written.
+pub fn output(args: &SimulateArgs) -> anyhow::Result<Value> {
+    let inputs = load_inputs(args)?;
+    let opts = options(args)?;
     if let Some((bad, why)) = args.v0.iter().find_map(|v| IMPACT_SPEED_MPS.check(*v).err().map(|w| (v, w))) {
         bail!("--v0: impact speed {bad} m/s {why}");
     }
@@ -168,7 +182,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
         let process = load_process(process_path, &inputs.machine, &args.machine)?;
         results = simulate_sequence(&inputs.machine.machine, &inputs.set, &process, &args.v0, &opts)?;
         if let Some(dir) = &args.captures {
-            write_captures(dir, &inputs, &process, process_path, &args)
+            write_captures(dir, &inputs, &process, process_path, args)
                 .with_context(|| format!("{}: cannot write the capture directory", dir.display()))?;
         }
         out["blows"] = results
@@ -195,14 +209,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
     if let Some(path) = &args.trace {
         write_trace(path, &results).with_context(|| format!("{}: cannot write the trace", path.display()))?;
     }
-    let stdout = std::io::stdout();
-    let mut w = stdout.lock();
-    if args.json {
-        writeln!(w, "{out}")?;
-    } else {
-        write_table(&mut w, &out)?;
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok(out)
 }
 
 fn energy_json(e: &Ledger) -> Value {
