@@ -67,21 +67,26 @@ def _continues(prev, nxt):
     return True
 
 
-def plan(paths_or_glob, machine_of=None):
+def bounds_of(f):
+    """`(file, (first_log_ns, sources), None)`, or `(file, None, error)` when it cannot be
+    read. Runs on a worker."""
+    try:
+        first_log, sources = _forgemon.recording_bounds(f)
+    except Exception as e:  # noqa: BLE001 - named in the summary
+        return f, None, str(e)
+    if first_log is None:
+        return f, None, "holds no messages"
+    return f, (first_log, sources), None
+
+
+def plan(paths_or_glob, machine_of=None, client=None):
     """The runs to re-analyse, `[(machine, day, [files])]`, and the files left out with why,
-    `[(file, error)]`. Reads each file once (on this machine)."""
+    `[(file, error)]`. Reads each file once: on `client`'s workers when given, else here."""
     machine_of = machine_of or (lambda p: os.path.basename(os.path.dirname(os.path.abspath(p))))
-    bounds, unreadable = {}, []
-    for f in _files(paths_or_glob):
-        try:
-            first_log, sources = _forgemon.recording_bounds(f)
-        except Exception as e:  # noqa: BLE001 - named in the summary
-            unreadable.append((f, str(e)))
-            continue
-        if first_log is None:
-            unreadable.append((f, "holds no messages"))
-            continue
-        bounds[f] = (first_log, sources)
+    files = _files(paths_or_glob)
+    found = client.gather(client.map(bounds_of, files, pure=False)) if client is not None else [bounds_of(f) for f in files]
+    bounds = {f: b for f, b, _ in found if b is not None}
+    unreadable = [(f, e) for f, b, e in found if b is None]
     runs = []
     by_machine = {}
     for f in bounds:
@@ -130,10 +135,10 @@ def reanalyse(paths_or_glob, out, machine=None, process=None, client=None, machi
     for flag, value in (("--machine", machine), ("--process", process)):
         if value is not None:
             argv += [flag, os.fspath(getattr(value, "path", value))]
-    runs, unreadable = plan(paths_or_glob, machine_of)
     own = client is None
     client = client or Client(processes=True)
     try:
+        runs, unreadable = plan(paths_or_glob, machine_of, client)
         futures = {
             client.submit(run_task, m, d, files, os.fspath(out), argv, retries=retries, pure=False): files
             for m, d, files in runs

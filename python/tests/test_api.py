@@ -96,3 +96,32 @@ def test_the_gil_is_released_while_rust_works(fleet_dir):
     done.set()
     t.join()
     assert during > 10, f"the other thread ran {during} times during the call"
+
+
+@pytest.fixture(scope="module")
+def captures(forgemon_bin, tmp_path_factory):
+    """Calibration and held-out blows of the example hammer with a hidden contact
+    compliance, as `forgemon simulate --captures` writes them (tests/diagnose.rs's recipe)."""
+    root = tmp_path_factory.mktemp("captures")
+    for name, v0, seed in (("calib", "4.0,4.5,5.0,5.3,5.3", "3"), ("holdout", "4.2,4.8,5.1,5.3,5.3", "4")):
+        cli(forgemon_bin, "simulate", "--machine", MACHINE, "--process", STEEL, "--v0", v0, "--effect", "elastic_recovery:k_contact_N_per_m=1.5e9", "--captures", root / name, "--capture-seed", seed)
+    return root
+
+
+def test_identify_writes_what_the_cli_writes(forgemon_bin, captures, tmp_path):
+    args = ["--kind", "hammer", "--reference", captures / "calib", "--starts", "2", "--monte-carlo", "8", "--seed", "5"]
+    cli(forgemon_bin, "identify", *args, "--out", tmp_path / "cli.toml")
+    got = forgemon.identify("hammer", captures / "calib", out=tmp_path / "py.toml", starts=2, monte_carlo=8, seed=5)
+    from forgemon import _toml
+
+    want = _toml(tmp_path / "cli.toml")
+    assert {k: v for k, v in got.items() if not k.startswith("_")} == want
+    assert got["_path"] == str(tmp_path / "py.toml") and got["kind"] == "hammer"
+
+
+def test_diagnose_reports_what_the_cli_reports(forgemon_bin, captures, tmp_path):
+    cli(forgemon_bin, "diagnose", "--machine", MACHINE, "--calib", captures / "calib", "--holdout", captures / "holdout", "--out", tmp_path / "cli")
+    want = json.loads((tmp_path / "cli" / "report.json").read_text())
+    got = forgemon.diagnose(forgemon.Machine.from_toml(MACHINE), captures / "calib", captures / "holdout")
+    assert got == want
+    assert got["verdict"]["effect"] == "elastic_recovery"
