@@ -242,6 +242,11 @@ fn batches_of(path: &Path) -> anyhow::Result<Vec<forgemon::signal::sample::Sampl
 }
 
 fn samples(path: &Path, channels: &[String], t0: Option<f64>, t1: Option<f64>) -> anyhow::Result<Vec<u8>> {
+    use forgemon::signal::sample::Role;
+    if let Some(bad) = channels.iter().find(|c| Role::from_column(c).is_none()) {
+        let known: Vec<&str> = Role::ALL.iter().map(|r| r.column()).collect();
+        anyhow::bail!("channels: '{bad}' is not a channel; the channels are {}", known.join(", "));
+    }
     let batches = batches_of(path)?;
     let mut names: Vec<String> = channels.to_vec();
     if names.is_empty() {

@@ -57,6 +57,8 @@ def test_read_samples_has_every_sample_of_the_recording(forgemon_bin, fleet_dir)
     w = forgemon.read_samples(f, channels=["load_N"], t0=t0, t1=t1)
     assert list(w.columns) == ["source", "t_s", "load_N"]
     assert len(w) == 1001 and w["load_N"].tolist() == s["load_N"].iloc[1000:2001].tolist()
+    with pytest.raises(forgemon.ForgemonError, match="'load' is not a channel; the channels are load_N, disp_m, acc_mps2"):
+        forgemon.read_samples(f, channels=["load"])
 
 
 def test_bad_files_raise_with_the_file_line_and_key_the_cli_names(forgemon_bin, tmp_path):
