@@ -52,7 +52,7 @@ def main():
     print(f"{len(files)} recordings, {mb:.0f} MB, {len(runs)} runs, {os.cpu_count()} cores")
 
     def anchor():
-        for _, _, fs in runs:
+        for _, _, fs, _ in runs:
             subprocess.run([bin_, "replay", os.path.dirname(fs[0]), "--json"], check=True, capture_output=True)
 
     rows = [("anchor: forgemon replay, runs one after another", timed(anchor, a.repeats))]

@@ -55,7 +55,7 @@ def _day(ns):
 def _continues(prev, nxt):
     """Whether the file `nxt` goes on where `prev` stopped: every source of `nxt` was in
     `prev` and its first batch follows `prev`'s last (sequence + 1, later device time)."""
-    (_, prev_sources), (_, next_sources) = prev, nxt
+    (_, prev_sources, _), (_, next_sources, _) = prev, nxt
     if not next_sources:
         return False
     for source, (first_seq, _, first_dev, _) in next_sources.items():
@@ -71,17 +71,18 @@ def bounds_of(f):
     """`(file, (first_log_ns, sources), None)`, or `(file, None, error)` when it cannot be
     read. Runs on a worker."""
     try:
-        first_log, sources = _forgemon.recording_bounds(f)
+        first_log, sources, blows = _forgemon.recording_bounds(f)
     except Exception as e:  # noqa: BLE001 - named in the summary
         return f, None, str(e)
     if first_log is None:
         return f, None, "holds no messages"
-    return f, (first_log, sources), None
+    return f, (first_log, sources, blows), None
 
 
 def plan(paths_or_glob, machine_of=None, client=None):
-    """The runs to re-analyse, `[(machine, day, [files])]`, and the files left out with why,
-    `[(file, error)]`. Reads each file once: on `client`'s workers when given, else here."""
+    """The runs to re-analyse, `[(machine, day, [files], [recorded blows per file])]`, and
+    the files left out with why, `[(file, error)]`. Reads each file once: on `client`'s
+    workers when given, else here."""
     machine_of = machine_of or (lambda p: os.path.basename(os.path.dirname(os.path.abspath(p))))
     files = _files(paths_or_glob)
     found = client.gather(client.map(bounds_of, files, pure=False)) if client is not None else [bounds_of(f) for f in files]
@@ -98,8 +99,9 @@ def plan(paths_or_glob, machine_of=None, client=None):
             last = runs[-1] if runs else None
             if last and last[0] == machine and last[1] == day and _continues(bounds[last[2][-1]], bounds[f]):
                 last[2].append(f)
+                last[3].append(bounds[f][2])
             else:
-                runs.append((machine, day, [f]))
+                runs.append((machine, day, [f], [bounds[f][2]]))
     return runs, unreadable
 
 
@@ -110,10 +112,10 @@ def _write(table, path):
     os.replace(tmp, path)
 
 
-def run_task(machine, day, files, out, argv):
+def run_task(machine, day, files, recorded, out, argv):
     """One run: replay its files in order and write its blows and billets. Returns the
     paths written. Runs on a worker."""
-    blows, billets = _forgemon.reanalyse_run(files, argv)
+    blows, billets = _forgemon.reanalyse_run(files, recorded, argv)
     stem = os.path.basename(files[0]).split(".")[0]
     written = []
     for kind, ipc in (("blows", blows), ("billets", billets)):
@@ -140,8 +142,8 @@ def reanalyse(paths_or_glob, out, machine=None, process=None, client=None, machi
     try:
         runs, unreadable = plan(paths_or_glob, machine_of, client)
         futures = {
-            client.submit(run_task, m, d, files, os.fspath(out), argv, retries=retries, pure=False): files
-            for m, d, files in runs
+            client.submit(run_task, m, d, files, recorded, os.fspath(out), argv, retries=retries, pure=False): files
+            for m, d, files, recorded in runs
         }
         written, failed = [], []
         for fut in as_completed(futures):

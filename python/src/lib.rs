@@ -302,30 +302,38 @@ fn diagnose_run(py: Python<'_>, argv: Vec<String>) -> PyResult<()> {
     Ok(())
 }
 
-/// What the fleet re-analysis needs to order and chain a recording: the log time of its
-/// first message (ns, UTC), and per sample source the first and last batch's sequence
-/// number and device time (ns): `(first_log_ns, {source: (first_seq, last_seq,
-/// first_device_ns, last_device_ns)})`.
+/// The bounds of a source in a recording: its first and last batch's sequence number and
+/// device time, ns.
+type SourceBounds = (u64, u64, i64, i64);
+
+/// What the fleet re-analysis needs to order, chain and attribute a recording, in one pass:
+/// the log time of its first message (ns, UTC), per sample source its bounds, and each
+/// recorded blow's device end time `t_end_s` with its log (wall) time, ns.
 #[pyfunction]
 #[allow(clippy::type_complexity)]
 fn recording_bounds(
     py: Python<'_>,
     path: PathBuf,
-) -> PyResult<(Option<i64>, std::collections::BTreeMap<String, (u64, u64, i64, i64)>)> {
+) -> PyResult<(Option<i64>, std::collections::BTreeMap<String, SourceBounds>, Vec<(f64, i64)>)> {
     py.detach(|| -> anyhow::Result<_> {
         let mut first_log = None;
         let mut sources = std::collections::BTreeMap::new();
+        let mut blows = Vec::new();
         for m in RecordReader::open(&path)? {
             let m = m?;
             first_log.get_or_insert(m.log_time_ns);
-            if let Payload::Samples(b) = m.payload {
-                let end = b.device_time_ns + (b.len().saturating_sub(1) as f64 * b.period_ns) as i64;
-                let e = sources.entry(b.source.clone()).or_insert((b.seq, b.seq, b.device_time_ns, end));
-                e.1 = b.seq;
-                e.3 = end;
+            match m.payload {
+                Payload::Samples(b) => {
+                    let end = b.device_time_ns + (b.len().saturating_sub(1) as f64 * b.period_ns) as i64;
+                    let e = sources.entry(b.source.clone()).or_insert((b.seq, b.seq, b.device_time_ns, end));
+                    e.1 = b.seq;
+                    e.3 = end;
+                }
+                Payload::Result(r) => blows.push((r.t_end_s, m.log_time_ns)),
+                _ => {}
             }
         }
-        Ok((first_log, sources))
+        Ok((first_log, sources, blows))
     })
     .map_err(|e| error(e, Some(&path)))
 }
@@ -333,16 +341,26 @@ fn recording_bounds(
 /// Re-analyse `files`, one run's recordings in order (each continues the last), as
 /// `forgemon replay` replays a directory of them with ARGV: the blows in `forgemon export`'s
 /// columns, each attributed to the file that recorded it (matched by its device end time
-/// `t_end_s`, which a re-analysis does not move) with that file's wall time; a blow no file
-/// recorded keeps the file before it and its replayed time. And the billets.
+/// `t_end_s`, which a re-analysis does not move; `recorded[i]` is what `recording_bounds`
+/// found in `files[i]`) with that file's wall time; a blow no file recorded keeps the file
+/// before it and its replayed time. And the billets.
 #[pyfunction]
-fn reanalyse_run(py: Python<'_>, files: Vec<PathBuf>, argv: Vec<String>) -> PyResult<(Py<PyBytes>, Py<PyBytes>)> {
+fn reanalyse_run(
+    py: Python<'_>,
+    files: Vec<PathBuf>,
+    recorded: Vec<Vec<(f64, i64)>>,
+    argv: Vec<String>,
+) -> PyResult<(Py<PyBytes>, Py<PyBytes>)> {
     let first = files.first().cloned();
-    let (blows, billets) = py.detach(|| reanalyse(&files, &argv)).map_err(|e| error(e, first.as_deref()))?;
+    let (blows, billets) = py.detach(|| reanalyse(&files, &recorded, &argv)).map_err(|e| error(e, first.as_deref()))?;
     Ok((PyBytes::new(py, &blows).unbind(), PyBytes::new(py, &billets).unbind()))
 }
 
-fn reanalyse(files: &[PathBuf], argv: &[String]) -> anyhow::Result<(Vec<u8>, Vec<u8>)> {
+fn reanalyse(
+    files: &[PathBuf],
+    recorded_in: &[Vec<(f64, i64)>],
+    argv: &[String],
+) -> anyhow::Result<(Vec<u8>, Vec<u8>)> {
     // The run as `replay` takes one: a directory of its files in name order.
     let dir = tempfile::tempdir()?;
     let run = dir.path().join("run");
@@ -351,8 +369,9 @@ fn reanalyse(files: &[PathBuf], argv: &[String]) -> anyhow::Result<(Vec<u8>, Vec
     for (i, f) in files.iter().enumerate() {
         let abs = std::fs::canonicalize(f).map_err(|e| anyhow::anyhow!("{}: {e}", f.display()))?;
         std::os::unix::fs::symlink(&abs, run.join(format!("{i:06}.mcap")))?;
-        let (rows, _) = forgemon::cli::export::file_rows(f)?;
-        recorded.extend(rows.into_iter().map(|r| (r.t_end_s.to_bits(), r.file, r.wall_time_ns)));
+        let name = f.display().to_string();
+        let blows = recorded_in.get(i).map(Vec::as_slice).unwrap_or_default();
+        recorded.extend(blows.iter().map(|&(t, wall)| (t.to_bits(), name.clone(), wall)));
     }
     let (blows, billets) = replay_rows(&run, argv)?;
     let mut rows = blows;

@@ -20,7 +20,7 @@ def test_reanalysis_equals_the_export_with_a_worker_killed(forgemon_bin, fleet_d
     files = sorted(str(p) for p in fleet_dir.glob("*/*.mcap"))
     assert len(files) == 8
     runs, unreadable = fleet.plan(files)
-    assert [(m, len(f)) for m, _, f in runs] == [("hammer-a", 4), ("hammer-b", 4)], "each machine's files chain into one run"
+    assert [(m, len(f)) for m, _, f, _ in runs] == [("hammer-a", 4), ("hammer-b", 4)], "each machine's files chain into one run"
     bad = fleet_dir.parent / "broken" / "hammer-c"
     bad.mkdir(parents=True, exist_ok=True)
     (bad / "forgemon-00001.mcap").write_bytes(b"not an mcap file")
