@@ -92,6 +92,13 @@ fn flatten(v: &Value) -> Value {
     Value::Object(out)
 }
 
+/// The configuration file `path`, read and checked by `parse` as the CLI does.
+fn read_config<T>(path: &Path, parse: impl Fn(&str, &str) -> Result<T, ConfigError>) -> PyResult<T> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| error(anyhow::anyhow!("{}: cannot read: {e}", path.display()), Some(path)))?;
+    parse(&path.display().to_string(), &text).map_err(|e| error(e.into(), Some(path)))
+}
+
 /// A machine model (`machine.toml`), checked as the CLI checks it.
 #[pyclass(frozen, module = "forgemon")]
 struct Machine {
@@ -106,9 +113,7 @@ impl Machine {
     /// Read and check the machine model at `path`.
     #[staticmethod]
     fn from_toml(path: PathBuf) -> PyResult<Self> {
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| error(anyhow::anyhow!("{}: cannot read: {e}", path.display()), Some(&path)))?;
-        let m = parse_machine(&path.display().to_string(), &text).map_err(|e| error(e.into(), Some(&path)))?;
+        let m = read_config(&path, parse_machine)?;
         Ok(Machine { kind: m.machine.kind().as_str().to_string(), path })
     }
 
@@ -134,9 +139,7 @@ impl Process {
     /// Read and check the process sheet at `path`.
     #[staticmethod]
     fn from_toml(path: PathBuf) -> PyResult<Self> {
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| error(anyhow::anyhow!("{}: cannot read: {e}", path.display()), Some(&path)))?;
-        let p = parse_process_sheet(&path.display().to_string(), &text).map_err(|e| error(e.into(), Some(&path)))?;
+        let p = read_config(&path, parse_process_sheet)?;
         Ok(Process { machine: p.value.machine.as_str().to_string(), warnings: p.warnings, path })
     }
 

@@ -94,130 +94,118 @@ fn type_definition(space: &AddressSpace, tt: &dyn TypeTree, node: &NodeId) -> Op
     targets(space, tt, node, ReferenceTypeId::HasTypeDefinition).into_iter().next()
 }
 
-/// Add to `instance` (node id `ns`, `path`) its type's child `name`, a declaration of any
-/// modelling rule (an optional property such as DI's `Model`), with its mandatory children:
-/// its node id, or `None` when the type declares no such child.
-pub fn add_declared(
-    space: &mut AddressSpace,
-    tt: &dyn TypeTree,
-    ns: u16,
-    instance: &NodeId,
-    path: &str,
-    name: &str,
-) -> Option<NodeId> {
-    let ty = type_definition(space, tt, instance)?;
-    let sources = type_chain(space, tt, &ty);
-    let (decl, reference) = sources.iter().find_map(|source| {
-        AGGREGATES.iter().find_map(|&r| {
-            targets(space, tt, source, r)
-                .into_iter()
-                .find(|d| space.find(d).is_some_and(|n| n.as_node().browse_name().name.as_ref() == name))
-                .map(|d| (d, r))
-        })
-    })?;
-    add_one(space, tt, ns, instance, path, decl, reference, DEPTH);
-    Some(NodeId::new(ns, format!("{path}.{name}")))
+/// Where instances are made: the address space, the type tree to read it with, and the
+/// namespace of the instances' node ids.
+pub struct Instances<'a> {
+    pub space: &'a mut AddressSpace,
+    pub tt: &'a dyn TypeTree,
+    pub ns: u16,
 }
 
-/// Add to `instance` (node id `ns`, `path`) the mandatory children of its type `ty`;
-/// returns how many nodes were added.
-pub fn add_mandatory(
-    space: &mut AddressSpace,
-    tt: &dyn TypeTree,
-    ns: u16,
-    instance: &NodeId,
-    path: &str,
-    ty: &NodeId,
-) -> usize {
-    let sources = type_chain(space, tt, ty);
-    add_children(space, tt, ns, instance, path, &sources, DEPTH)
-}
-
-/// The children of `instance` declared mandatory under `sources`.
-fn add_children(
-    space: &mut AddressSpace,
-    tt: &dyn TypeTree,
-    ns: u16,
-    instance: &NodeId,
-    path: &str,
-    sources: &[NodeId],
-    depth: usize,
-) -> usize {
-    let mut added = 0;
-    for (decl, reference) in mandatory(space, tt, sources) {
-        added += add_one(space, tt, ns, instance, path, decl, reference, depth);
+impl Instances<'_> {
+    /// Add to `instance` (node id `path`) its type's child `name`, a declaration of any
+    /// modelling rule (an optional property such as DI's `Model`), with its mandatory
+    /// children: its node id, or `None` when the type declares no such child.
+    pub fn add_declared(&mut self, instance: &NodeId, path: &str, name: &str) -> Option<NodeId> {
+        let (space, tt) = (&*self.space, self.tt);
+        let ty = type_definition(space, tt, instance)?;
+        let sources = type_chain(space, tt, &ty);
+        let (decl, reference) = sources.iter().find_map(|source| {
+            AGGREGATES.iter().find_map(|&r| {
+                targets(space, tt, source, r)
+                    .into_iter()
+                    .find(|d| space.find(d).is_some_and(|n| n.as_node().browse_name().name.as_ref() == name))
+                    .map(|d| (d, r))
+            })
+        })?;
+        self.add_one(instance, path, decl, reference, DEPTH);
+        Some(NodeId::new(self.ns, format!("{path}.{name}")))
     }
-    added
-}
 
-/// Add the declaration `decl` to `instance` by `reference`, with its mandatory children:
-/// how many nodes were added (none when a node of its id is there already).
-#[allow(clippy::too_many_arguments)]
-fn add_one(
-    space: &mut AddressSpace,
-    tt: &dyn TypeTree,
-    ns: u16,
-    instance: &NodeId,
-    path: &str,
-    decl: NodeId,
-    reference: ReferenceTypeId,
-    depth: usize,
-) -> usize {
-    let Some(node) = space.find(&decl) else { return 0 };
-    let name = node.as_node().browse_name().clone();
-    let display = node.as_node().display_name().clone();
-    let child_path = format!("{path}.{}", name.name);
-    let id = NodeId::new(ns, child_path.clone());
-    if space.node_exists(&id) {
-        return 0;
+    /// Add to `instance` (node id `path`) the mandatory children of its type `ty`; returns
+    /// how many nodes were added.
+    pub fn add_mandatory(&mut self, instance: &NodeId, path: &str, ty: &NodeId) -> usize {
+        let sources = type_chain(self.space, self.tt, ty);
+        self.add_children(instance, path, &sources, DEPTH)
     }
-    // What the declaration is, read before the address space is written.
-    let variable = match node {
-        NodeType::Object(_) => None,
-        NodeType::Variable(v) => Some((
-            v.data_type(),
-            v.value_rank(),
-            v.value(TimestampsToReturn::Neither, &NumericRange::None, &DataEncoding::Binary, 0.0)
-                .value
-                .unwrap_or(Variant::Empty),
-        )),
-        _ => return 0,
-    };
-    let ty = type_definition(space, tt, &decl);
-    let inserted = match variable {
-        None => {
-            let b = ObjectBuilder::new(&id, name, display);
-            match &ty {
-                Some(t) => b.has_type_definition(t.clone()),
-                None => b,
+
+    /// The children of `instance` declared mandatory under `sources`.
+    fn add_children(&mut self, instance: &NodeId, path: &str, sources: &[NodeId], depth: usize) -> usize {
+        let mut added = 0;
+        for (decl, reference) in mandatory(self.space, self.tt, sources) {
+            added += self.add_one(instance, path, decl, reference, depth);
+        }
+        added
+    }
+
+    /// Add the declaration `decl` to `instance` by `reference`, with its mandatory
+    /// children: how many nodes were added (none when a node of its id is there already).
+    fn add_one(
+        &mut self,
+        instance: &NodeId,
+        path: &str,
+        decl: NodeId,
+        reference: ReferenceTypeId,
+        depth: usize,
+    ) -> usize {
+        let (tt, ns) = (self.tt, self.ns);
+        let space = &mut *self.space;
+        let Some(node) = space.find(&decl) else { return 0 };
+        let name = node.as_node().browse_name().clone();
+        let display = node.as_node().display_name().clone();
+        let child_path = format!("{path}.{}", name.name);
+        let id = NodeId::new(ns, child_path.clone());
+        if space.node_exists(&id) {
+            return 0;
+        }
+        // What the declaration is, read before the address space is written.
+        let variable = match node {
+            NodeType::Object(_) => None,
+            NodeType::Variable(v) => Some((
+                v.data_type(),
+                v.value_rank(),
+                v.value(TimestampsToReturn::Neither, &NumericRange::None, &DataEncoding::Binary, 0.0)
+                    .value
+                    .unwrap_or(Variant::Empty),
+            )),
+            _ => return 0,
+        };
+        let ty = type_definition(space, tt, &decl);
+        let inserted = match variable {
+            None => {
+                let b = ObjectBuilder::new(&id, name, display);
+                match &ty {
+                    Some(t) => b.has_type_definition(t.clone()),
+                    None => b,
+                }
+                .insert(space)
             }
-            .insert(space)
-        }
-        Some((data_type, value_rank, value)) => {
-            let b = VariableBuilder::new(&id, name, display)
-                .data_type(data_type)
-                .value_rank(value_rank)
-                .value(value)
-                .access_level(AccessLevel::CURRENT_READ)
-                .user_access_level(AccessLevel::CURRENT_READ);
-            match &ty {
-                Some(t) => b.has_type_definition(t.clone()),
-                None => b,
+            Some((data_type, value_rank, value)) => {
+                let b = VariableBuilder::new(&id, name, display)
+                    .data_type(data_type)
+                    .value_rank(value_rank)
+                    .value(value)
+                    .access_level(AccessLevel::CURRENT_READ)
+                    .user_access_level(AccessLevel::CURRENT_READ);
+                match &ty {
+                    Some(t) => b.has_type_definition(t.clone()),
+                    None => b,
+                }
+                .insert(space)
             }
-            .insert(space)
+        };
+        if !inserted {
+            return 0;
         }
-    };
-    if !inserted {
-        return 0;
-    }
-    space.insert_reference(instance, &id, reference);
-    let mut added = 1;
-    if depth > 0 {
-        let mut sources = vec![decl];
-        if let Some(t) = &ty {
-            sources.extend(type_chain(space, tt, t));
+        space.insert_reference(instance, &id, reference);
+        let mut added = 1;
+        if depth > 0 {
+            let mut sources = vec![decl];
+            if let Some(t) = &ty {
+                sources.extend(type_chain(space, tt, t));
+            }
+            added += self.add_children(&id, &child_path, &sources, depth - 1);
         }
-        added += add_children(space, tt, ns, &id, &child_path, &sources, depth - 1);
+        added
     }
-    added
 }

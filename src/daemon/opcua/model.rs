@@ -250,20 +250,20 @@ fn initial(data_type: DataTypeId) -> Variant {
 /// loaded.
 pub type Types<'a> = Option<(&'a Companion, &'a dyn TypeTree)>;
 
-/// An object `name` under `parent` (by `reference`), an instance of `ty`: with a companion
-/// type, of the companion's `companion_ty` with its mandatory children.
-#[allow(clippy::too_many_arguments)]
+/// The object `path` (node id; its last `.`-part is its browse name) under `parent` (by
+/// `reference`): a BaseObjectType, or with the companion types an instance of
+/// `companion_ty` with its mandatory children.
 fn object(
     space: &mut AddressSpace,
     types: Types<'_>,
     ns: u16,
     path: &str,
-    name: &str,
     parent: &NodeId,
     reference: ReferenceTypeId,
     companion_ty: impl Fn(&Companion) -> &NodeId,
 ) -> NodeId {
     let id = NodeId::new(ns, path.to_string());
+    let name = path.rsplit('.').next().unwrap_or(path);
     let ty = types.map_or_else(|| ObjectTypeId::BaseObjectType.into(), |(c, _)| companion_ty(c).clone());
     ObjectBuilder::new(&id, QualifiedName::new(ns, name), name)
         .has_type_definition(ty.clone())
@@ -271,7 +271,7 @@ fn object(
         .insert(space);
     space.insert_reference(parent, &id, reference);
     if let Some((_, tt)) = types {
-        instance::add_mandatory(space, tt, ns, &id, path, &ty);
+        instance::Instances { space, tt, ns }.add_mandatory(&id, path, &ty);
     }
     id
 }
@@ -294,16 +294,14 @@ pub fn build(space: &mut AddressSpace, model_ns: u16, forgemon_ns: u16, kind: Ma
             machines
         }
     };
-    let machine =
-        object(space, types, model_ns, name, name, &machines, ReferenceTypeId::Organizes, |c| &c.machine_type);
+    let machine = object(space, types, model_ns, name, &machines, ReferenceTypeId::Organizes, |c| &c.machine_type);
     // The Server object is the root notifier: a machine's events reach it too.
     space.insert_reference(&ObjectId::Server.into(), &machine, ReferenceTypeId::HasNotifier);
     identification(space, types, model_ns, &machine, name, kind);
 
     let path = format!("{name}.FormingWorkingUnit");
     let component = ReferenceTypeId::HasComponent;
-    let unit =
-        object(space, types, model_ns, &path, "FormingWorkingUnit", &machine, component, |c| &c.working_unit_type);
+    let unit = object(space, types, model_ns, &path, &machine, component, |c| &c.working_unit_type);
     space.insert_reference(&machine, &unit, ReferenceTypeId::HasEventSource);
     // MachineTool's ElementMonitoringType names its element (mandatory `Name`).
     set_text(space, &NodeId::new(model_ns, format!("{path}.Name")), "FormingWorkingUnit");
@@ -425,7 +423,7 @@ fn identification(
         let pid = NodeId::new(ns, format!("{path}.{p}"));
         // An optional property of the companion type (DI's `Model`) in its namespace.
         if let Some((_, tt)) = types {
-            instance::add_declared(space, tt, ns, &id, &path, p);
+            instance::Instances { space: &mut *space, tt, ns }.add_declared(&id, &path, p);
         }
         if !set_text(space, &pid, &value) {
             let browse = QualifiedName::new(ns, p);
