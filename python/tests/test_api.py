@@ -127,3 +127,15 @@ def test_diagnose_reports_what_the_cli_reports(forgemon_bin, captures, tmp_path)
     got = forgemon.diagnose(forgemon.Machine.from_toml(MACHINE), captures / "calib", captures / "holdout")
     assert got == want
     assert got["verdict"]["effect"] == "elastic_recovery"
+
+
+def test_read_samples_reads_a_capture_directory_file_by_file(captures):
+    """A capture directory: each blow file its own source (`capture/blow_NN.csv`), every
+    row of every file once."""
+    d = captures / "calib"
+    s = forgemon.read_samples(d)
+    files = sorted(d.glob("blow_*.csv"))
+    assert sorted(s["source"].unique()) == sorted(f"capture/{f.name}" for f in files)
+    for f in files:
+        rows = sum(1 for line in f.read_text().splitlines()[1:] if line.strip() and not line.startswith("#"))
+        assert (s["source"] == f"capture/{f.name}").sum() == rows, f.name
