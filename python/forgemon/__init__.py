@@ -61,14 +61,22 @@ def simulate(machine, process, v0s, effects=(), bare=False, raw=False):
 
 def replay(path, machine=None, process=None, service=None, recipe=None):
     """`forgemon replay PATH`: the blows as `forgemon export` writes them (its columns;
-    `file` names PATH) and the billets (the `/billets` summaries), as two DataFrames.
+    `file` names PATH) and the billets as `forgemon history export --table billets` writes
+    them (`wall_time` the replay's: the device clock), as two DataFrames.
     PATH is a recording, a directory of them (a rotated run) or a capture directory."""
     argv = []
     for flag, value in (("--machine", machine), ("--process", process), ("--service", service), ("--recipe", recipe)):
         if value is not None:
             argv += [flag, _path(value)]
     blows, billets = _forgemon.replay_frames(os.fspath(path), argv)
-    return frame(blows), frame(billets)
+    return frame(blows), billet_table(billets).to_pandas()
+
+
+def billet_table(parquet_bytes):
+    """The billets as `forgemon history export --table billets --parquet` writes them."""
+    import pyarrow.parquet as pq
+
+    return pq.read_table(pa.BufferReader(parquet_bytes))
 
 
 def read_samples(path, channels=(), t0=None, t1=None):

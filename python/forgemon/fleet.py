@@ -16,7 +16,7 @@ and runs are independent, so the cluster takes them in parallel.
 What it writes: Parquet under `out`, partitioned by machine and date:
 `blows/machine=M/date=YYYY-MM-DD/<first file>.parquet` with the columns of `forgemon
 export` (each blow attributed to the file that recorded it, with its wall time), and
-`billets/machine=M/date=.../<first file>.parquet` with the billet summaries. A task writes
+`billets/machine=M/date=.../<first file>.parquet` with `history export`'s billet columns. A task writes
 its files under a temporary name and renames them, so a retried or repeated task leaves
 one copy. Failed tasks are retried (`retries`); a run that still fails is named in the
 summary with its error and the others go on. A file whose bounds cannot be read is named
@@ -32,6 +32,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from . import _forgemon
+from . import billet_table
 
 
 def _files(paths_or_glob):
@@ -55,7 +56,7 @@ def _day(ns):
 def _continues(prev, nxt):
     """Whether the file `nxt` goes on where `prev` stopped: every source of `nxt` was in
     `prev` and its first batch follows `prev`'s last (sequence + 1, later device time)."""
-    (_, prev_sources, _), (_, next_sources, _) = prev, nxt
+    prev_sources, next_sources = prev[1], nxt[1]
     if not next_sources:
         return False
     for source, (first_seq, _, first_dev, _) in next_sources.items():
@@ -71,16 +72,17 @@ def bounds_of(f):
     """`(file, (first_log_ns, sources), None)`, or `(file, None, error)` when it cannot be
     read. Runs on a worker."""
     try:
-        first_log, sources, blows = _forgemon.recording_bounds(f)
+        first_log, sources, blows, billets = _forgemon.recording_bounds(f)
     except Exception as e:  # noqa: BLE001 - named in the summary
         return f, None, str(e)
     if first_log is None:
         return f, None, "holds no messages"
-    return f, (first_log, sources, blows), None
+    return f, (first_log, sources, blows, billets), None
 
 
 def plan(paths_or_glob, machine_of=None, client=None):
-    """The runs to re-analyse, `[(machine, day, [files], [recorded blows per file])]`, and
+    """The runs to re-analyse, `[(machine, day, [files], [(recorded blows, recorded
+    billets) per file])]`, and
     the files left out with why, `[(file, error)]`. Reads each file once: on `client`'s
     workers when given, else here."""
     machine_of = machine_of or (lambda p: os.path.basename(os.path.dirname(os.path.abspath(p))))
@@ -99,9 +101,9 @@ def plan(paths_or_glob, machine_of=None, client=None):
             last = runs[-1] if runs else None
             if last and last[0] == machine and last[1] == day and _continues(bounds[last[2][-1]], bounds[f]):
                 last[2].append(f)
-                last[3].append(bounds[f][2])
+                last[3].append((bounds[f][2], bounds[f][3]))
             else:
-                runs.append((machine, day, [f], [bounds[f][2]]))
+                runs.append((machine, day, [f], [(bounds[f][2], bounds[f][3])]))
     return runs, unreadable
 
 
@@ -112,14 +114,31 @@ def _write(table, path):
     os.replace(tmp, path)
 
 
+def _billets_at(table, recorded, blows):
+    """The billets with the wall time each was recorded at, matched by its device start time
+    `t_start_s` (a re-analysis does not move it), and `first_blow_ns` its first blow's wall
+    time in `blows` (attributed the same way); where no file recorded it, the replay's."""
+    at = {t: wall for _, billets in recorded for t, wall in billets}
+    first = {}
+    for b, w in zip(blows.column("billet").to_pylist(), blows.column("wall_time").cast(pa.int64()).to_pylist()):
+        first[b] = min(first.get(b, w), w)
+    walls = [at.get(t, w) for t, w in zip(table.column("t_start_s").to_pylist(), table.column("wall_time").cast(pa.int64()).to_pylist())]
+    firsts = [first.get(b, f) for b, f in zip(table.column("billet").to_pylist(), table.column("first_blow_ns").to_pylist())]
+    i = table.schema.get_field_index("wall_time")
+    table = table.set_column(i, table.schema.field(i), pa.array(walls, pa.int64()).cast(table.schema.field(i).type))
+    j = table.schema.get_field_index("first_blow_ns")
+    return table.set_column(j, table.schema.field(j), pa.array(firsts, table.schema.field(j).type))
+
+
 def run_task(machine, day, files, recorded, out, argv):
     """One run: replay its files in order and write its blows and billets. Returns the
     paths written. Runs on a worker."""
-    blows, billets = _forgemon.reanalyse_run(files, recorded, argv)
+    blows, billets = _forgemon.reanalyse_run(files, [b for b, _ in recorded], argv)
     stem = os.path.basename(files[0]).split(".")[0]
     written = []
-    for kind, ipc in (("blows", blows), ("billets", billets)):
-        table = pa.ipc.open_stream(pa.py_buffer(ipc)).read_all()
+    blows = pa.ipc.open_stream(pa.py_buffer(blows)).read_all()
+    tables = (("blows", blows), ("billets", _billets_at(billet_table(billets), recorded, blows)))
+    for kind, table in tables:
         path = os.path.join(out, kind, f"machine={machine}", f"date={day}", f"{stem}.parquet")
         _write(table, path)
         written.append(path)

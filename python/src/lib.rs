@@ -164,7 +164,8 @@ fn simulate_json(py: Python<'_>, argv: Vec<String>) -> PyResult<(String, Py<PyBy
 }
 
 /// `forgemon replay ARGV --out TMP`: the blows as `forgemon export` has them (the file
-/// column names the input) and the billets, as IPC streams.
+/// column names the input), an IPC stream, and the billets as `forgemon history export`
+/// has them, Parquet.
 #[pyfunction]
 fn replay_frames(py: Python<'_>, input: PathBuf, argv: Vec<String>) -> PyResult<(Py<PyBytes>, Py<PyBytes>)> {
     let (blows, billets) = py.detach(|| replay(&input, &argv)).map_err(|e| error(e, Some(&input)))?;
@@ -176,12 +177,14 @@ fn replay(input: &Path, argv: &[String]) -> anyhow::Result<(Vec<u8>, Vec<u8>)> {
     for r in &mut rows {
         r.file = input.display().to_string();
     }
-    Ok((ipc(&forgemon::cli::export::batch(&rows)?)?, ipc(&json_batch(&billets)?)?))
+    Ok((ipc(&forgemon::cli::export::batch(&rows)?)?, billets))
 }
 
-/// `forgemon replay INPUT ARGV --out TMP`, read back: the blows as export rows and the
-/// billets as JSON.
-fn replay_rows(input: &Path, argv: &[String]) -> anyhow::Result<(Vec<forgemon::cli::export::ExportRow>, Vec<Value>)> {
+/// `forgemon replay INPUT ARGV --out TMP`, read back: the blows as `forgemon export` reads
+/// them from that recording, and the billets as `forgemon history export --table billets
+/// --parquet` writes them from a database `forgemon history rebuild` made of it (Parquet
+/// bytes).
+fn replay_rows(input: &Path, argv: &[String]) -> anyhow::Result<(Vec<forgemon::cli::export::ExportRow>, Vec<u8>)> {
     let dir = tempfile::tempdir()?;
     let out = dir.path().join("replay.mcap");
     let mut full = vec![input.display().to_string(), "--out".into(), out.display().to_string(), "--json".into()];
@@ -189,13 +192,17 @@ fn replay_rows(input: &Path, argv: &[String]) -> anyhow::Result<(Vec<forgemon::c
     let args: forgemon::cli::replay::ReplayArgs = verb_args("replay", &full).map_err(|e| anyhow::anyhow!("{e}"))?;
     forgemon::cli::replay::replay_into(&args, std::io::sink(), |_| {})?;
     let (rows, _) = forgemon::cli::export::file_rows(&out)?;
-    let mut billets = Vec::new();
-    for m in RecordReader::open(&out)?.flatten() {
-        if let Payload::Billet(b) = m.payload {
-            billets.push(serde_json::to_value(&*b)?);
-        }
+    let (db, parquet) = (dir.path().join("history.sqlite"), dir.path().join("billets.parquet"));
+    let (out, db, pq) = (out.display().to_string(), db.display().to_string(), parquet.display().to_string());
+    for verb in
+        [["rebuild", &out, "--db", &db, "", "", ""], ["export", "--db", &db, "--table", "billets", "--parquet", &pq]]
+    {
+        let argv: Vec<String> = verb.iter().filter(|a| !a.is_empty()).map(|a| a.to_string()).collect();
+        let args: forgemon::cli::history::HistoryArgs =
+            verb_args("history", &argv).map_err(|e| anyhow::anyhow!("{e}"))?;
+        forgemon::cli::history::run(args)?;
     }
-    Ok((rows, billets))
+    Ok((rows, std::fs::read(&parquet)?))
 }
 
 /// The samples of a recording (or a capture directory), `channels` (all when empty), device
@@ -311,17 +318,18 @@ type SourceBounds = (u64, u64, i64, i64);
 
 /// What the fleet re-analysis needs to order, chain and attribute a recording, in one pass:
 /// the log time of its first message (ns, UTC), per sample source its bounds, and each
-/// recorded blow's device end time `t_end_s` with its log (wall) time, ns.
+/// recorded blow's device end time `t_end_s` with its log (wall) time, ns, and each recorded
+/// billet's device start time `t_start_s` with its log time.
 #[pyfunction]
 #[allow(clippy::type_complexity)]
 fn recording_bounds(
     py: Python<'_>,
     path: PathBuf,
-) -> PyResult<(Option<i64>, std::collections::BTreeMap<String, SourceBounds>, Vec<(f64, i64)>)> {
+) -> PyResult<(Option<i64>, std::collections::BTreeMap<String, SourceBounds>, Vec<(f64, i64)>, Vec<(f64, i64)>)> {
     py.detach(|| -> anyhow::Result<_> {
         let mut first_log = None;
         let mut sources = std::collections::BTreeMap::new();
-        let mut blows = Vec::new();
+        let (mut blows, mut billets) = (Vec::new(), Vec::new());
         for m in RecordReader::open(&path)? {
             let m = m?;
             first_log.get_or_insert(m.log_time_ns);
@@ -333,10 +341,11 @@ fn recording_bounds(
                     e.3 = end;
                 }
                 Payload::Result(r) => blows.push((r.t_end_s, m.log_time_ns)),
+                Payload::Billet(b) => billets.push((b.t_start_s, m.log_time_ns)),
                 _ => {}
             }
         }
-        Ok((first_log, sources, blows))
+        Ok((first_log, sources, blows, billets))
     })
     .map_err(|e| error(e, Some(&path)))
 }
@@ -390,7 +399,7 @@ fn reanalyse(
             None => r.file.clone_from(&last_file),
         }
     }
-    Ok((ipc(&forgemon::cli::export::batch(&rows)?)?, ipc(&json_batch(&billets)?)?))
+    Ok((ipc(&forgemon::cli::export::batch(&rows)?)?, billets))
 }
 
 #[pymodule]
