@@ -377,20 +377,23 @@ fn reanalyse(
     let dir = tempfile::tempdir()?;
     let run = dir.path().join("run");
     std::fs::create_dir(&run)?;
-    let mut recorded: Vec<(u64, String, i64)> = Vec::new();
+    // Each recorded blow by its end time's bits: the first file that recorded it.
+    let mut recorded: std::collections::HashMap<u64, (String, i64)> = std::collections::HashMap::new();
     for (i, f) in files.iter().enumerate() {
         let abs = std::fs::canonicalize(f).map_err(|e| anyhow::anyhow!("{}: {e}", f.display()))?;
         std::os::unix::fs::symlink(&abs, run.join(format!("{i:06}.mcap")))?;
         let name = f.display().to_string();
         let blows = recorded_in.get(i).map(Vec::as_slice).unwrap_or_default();
-        recorded.extend(blows.iter().map(|&(t, wall)| (t.to_bits(), name.clone(), wall)));
+        for &(t, wall) in blows {
+            recorded.entry(t.to_bits()).or_insert_with(|| (name.clone(), wall));
+        }
     }
     let (blows, billets) = replay_rows(&run, argv)?;
     let mut rows = blows;
     let mut last_file = files.first().map(|f| f.display().to_string()).unwrap_or_default();
     for r in &mut rows {
-        match recorded.iter().find(|(t, _, _)| *t == r.t_end_s.to_bits()) {
-            Some((_, file, wall)) => {
+        match recorded.get(&r.t_end_s.to_bits()) {
+            Some((file, wall)) => {
                 r.file.clone_from(file);
                 r.wall_time_ns = *wall;
                 r.wall_time = forgemon::cli::export::rfc3339_ns(*wall);
