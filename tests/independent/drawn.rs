@@ -35,7 +35,8 @@ use super::{ADC_LSB_N, Billet, Hidden, Kind, Rig, read_billet, speeds};
 use forgemon::config::{MachineFile, parse_machine, parse_process};
 use forgemon::physics::process::Process;
 
-/// The first case seed of the set the diagnosis may be tuned on.
+/// The first case seed of the set the diagnosis may be tuned on (4100-4177 looked at so far;
+/// the set runs up to `REPORT`).
 pub const TUNE: u64 = 4100;
 /// The first case seed of the set the rates are reported on.
 pub const REPORT: u64 = 4900;
