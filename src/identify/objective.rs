@@ -124,9 +124,11 @@ pub enum Heights {
     /// alignment, read off the encoder's approach (`EncoderApproach::at`): a load-level
     /// contact comes late where the load rises from nothing (a fresh copper billet on the
     /// press: ~117 µm on issue #17's independent renderer), and the chain would carry that to
-    /// every later blow. A chained blow is simulated from the reading at its load's contact
-    /// sample (its own first contact is not known before it is simulated); the chain goes on
-    /// from its model's contact. Hand-measured heights carry a caliper's scatter (±0.2 mm on
+    /// every later blow. A chained blow is simulated first from the reading at its load's
+    /// contact sample (its own first contact is not known before it is simulated); where its
+    /// model met the billet earlier than that by more than the contact's uncertainty (a press
+    /// die crossing its clearance before the load rises), it is simulated again from the
+    /// height there. The chain goes on from its model's contact. Hand-measured heights carry a caliper's scatter (±0.2 mm on
     /// issue #17's independent renderer), the chain its contacts' uncertainty. Elsewhere as
     /// `Sheet`: without measured heights the model's own chain is kept.
     Encoder,
@@ -190,6 +192,21 @@ pub struct Objective {
     pub signal: Signal,
     /// The prior model's second mode, Hz (`ModePrior::mode2_hz`).
     prior_mode2_hz: f64,
+}
+
+/// One blow simulated and where the model's clock sits on the measured window's.
+struct OneBlow {
+    sim: Simulated,
+    /// The model's alignment crossing, model time; the measured one, window time.
+    t_cross: f64,
+    t_align_s: f64,
+}
+
+impl OneBlow {
+    /// A model instant (model time 0 is first contact) on the window's clock.
+    fn on_window(&self, t: f64) -> f64 {
+        t - self.t_cross + self.t_align_s
+    }
 }
 
 /// One reference simulated: the load at the measured samples and its spectrum.
@@ -328,8 +345,7 @@ impl Objective {
         let mut prev: Option<(usize, f64, Option<f64>)> = None;
         for r in &self.refs[..n] {
             // This blow's index, start height, and whether the chain gave it.
-            let mut link: Option<(usize, f64, bool)> = None;
-            let plant = match (&self.setting, r.blow_index, h) {
+            let link: Option<(usize, f64, bool)> = match (&self.setting, r.blow_index, h) {
                 (Setting::Billet(p), Some(n), Some(h_start)) => {
                     // The sheet's measured height after the previous blow, when given.
                     let sheet =
@@ -345,65 +361,80 @@ impl Objective {
                         }
                         _ => None,
                     };
-                    let h0 = encoder.unwrap_or(sheet);
-                    link = Some((n, h0, encoder.is_some()));
-                    blow_plant(machine, &self.effects, p, n, h0)
+                    Some((n, encoder.unwrap_or(sheet), encoder.is_some()))
                 }
-                _ => Plant::new(machine, &self.effects, None, 0.0),
+                _ => None,
             };
-            // Through a declared anti-alias filter, the trace on a step fine enough for the
-            // filter (`LoadFilter::steps_per_sample`); else read at the samples.
-            let over = self.effects.load_filter.steps_per_sample(r.dt_s);
-            let fine_dt = r.dt_s / over as f64;
-            let opts = SimOptions {
-                method: Method::Dopri5 { rtol: FIT_RTOL },
-                post_s: r.duration_s(),
-                trace_dt_s: Some(fine_dt),
-            };
-            // The blow ends a window after the model's alignment crossing (the last sample
-            // compared), never before the contact opens (`TraceEnd`).
-            let threshold = ALIGN_FRACTION * r.peak_n;
-            let end = TraceEnd { threshold_n: threshold, after_s: r.duration_s() - r.t_align_s };
-            let (res, trace) = match self.signal {
-                Signal::Load => simulate_blow_sensor_until(&plant, r.v0_mps, &opts, end).ok()?,
-                Signal::RamForce { m_ram_kg } => {
-                    // The model's ram flies free of gravity (its blow starts at contact), so
-                    // its acceleration is all the billet's: a rigid-plastic billet pushes at
-                    // once, from the first sample.
-                    let (res, acc) = simulate_blow_ram_until(&plant, r.v0_mps, &opts, end).ok()?;
-                    (res, acc.iter().map(|a| -m_ram_kg * a).collect())
-                }
-            };
-            h = res.forming.map(|f| f.h_end_m).or(h);
-            // The DAQ's view: its anti-alias filter as the machine file declares it.
-            let trace = self.effects.load_filter.apply(&trace, fine_dt, r.dt_s);
-            let (load, t_cross) = aligned(&trace, fine_dt, over, r.load_n.len(), threshold, r.t_align_s);
-            let spectrum =
-                SIM_PLANNER.with_borrow_mut(|p| p.amplitudes_up_to(&load, r.dt_s, PAD_FACTOR, 0, self.f_max_hz));
-            // The model's instants on the window's clock (model time 0 is first contact).
-            let on_window = |t: f64| t - t_cross + r.t_align_s;
+            let mut blow = self.simulate_one(machine, r, link.map(|(n, h0, _)| (n, h0)))?;
             if let Some((n, h0, chained)) = link {
                 // The encoder's reading where the model met the billet, and the height there:
-                // a chained start was taken at the load's contact sample, which a load rising
-                // from nothing (a fresh billet's first blow) reaches late.
-                let touch = r.approach.map(|a| (a.at(on_window(0.0)), a.x_m()));
+                // a chained start was taken at the load's contact sample, which the ram
+                // reaches late where the load rises from nothing (a fresh billet's first blow)
+                // or only once a lower die has crossed its clearance (a press's: the ram
+                // travels the closure first, and a start taken there leaves the billet that
+                // much too thin, 0.1-0.3 mm on the family's press clearances, issue 41). Such
+                // a blow is simulated again from the height where its model met the billet.
+                let touch = r.approach.map(|a| (a.at(blow.on_window(0.0)), a.x_m()));
                 let h_touch = match touch {
                     Some((x_touch, x_sample)) if chained => h0 - (x_touch - x_sample),
                     _ => h0,
                 };
-                prev = Some((n, h_touch, touch.map(|(x, _)| x)));
+                let mut x_touch = touch.map(|(x, _)| x);
+                if chained && (h_touch - h0).abs() > contact_tolerance_m(r) {
+                    blow = self.simulate_one(machine, r, Some((n, h_touch)))?;
+                    x_touch = r.approach.map(|a| a.at(blow.on_window(0.0)));
+                }
+                prev = Some((n, h_touch, x_touch));
             }
-            let forming_end = res.forming.map(|f| f.forming_time_s);
-            out.push(Simulated {
-                load_n: load,
-                spectrum,
-                h_end_m: res.forming.map(|f| f.h_end_m),
-                h_start_m: res.forming.map(|_| res.h_start_m),
-                t_contact_s: on_window(0.0),
-                t_forming_end_s: forming_end.map(on_window),
-            });
+            h = blow.sim.h_end_m.or(h);
+            out.push(blow.sim);
         }
         Some(out)
+    }
+
+    /// One reference simulated, a billet blow (`blow`: its index and start height) or a bare
+    /// strike, through the declared anti-alias filter and aligned on the measured clock.
+    fn simulate_one(&self, machine: &Machine, r: &Reference, blow: Option<(usize, f64)>) -> Option<OneBlow> {
+        let plant = match (&self.setting, blow) {
+            (Setting::Billet(p), Some((n, h0))) => blow_plant(machine, &self.effects, p, n, h0),
+            _ => Plant::new(machine, &self.effects, None, 0.0),
+        };
+        // Through a declared anti-alias filter, the trace on a step fine enough for the
+        // filter (`LoadFilter::steps_per_sample`); else read at the samples.
+        let over = self.effects.load_filter.steps_per_sample(r.dt_s);
+        let fine_dt = r.dt_s / over as f64;
+        let opts =
+            SimOptions { method: Method::Dopri5 { rtol: FIT_RTOL }, post_s: r.duration_s(), trace_dt_s: Some(fine_dt) };
+        // The blow ends a window after the model's alignment crossing (the last sample
+        // compared), never before the contact opens (`TraceEnd`).
+        let threshold = ALIGN_FRACTION * r.peak_n;
+        let end = TraceEnd { threshold_n: threshold, after_s: r.duration_s() - r.t_align_s };
+        let (res, trace) = match self.signal {
+            Signal::Load => simulate_blow_sensor_until(&plant, r.v0_mps, &opts, end).ok()?,
+            Signal::RamForce { m_ram_kg } => {
+                // The model's ram flies free of gravity (its blow starts at contact), so
+                // its acceleration is all the billet's: a rigid-plastic billet pushes at
+                // once, from the first sample.
+                let (res, acc) = simulate_blow_ram_until(&plant, r.v0_mps, &opts, end).ok()?;
+                (res, acc.iter().map(|a| -m_ram_kg * a).collect())
+            }
+        };
+        // The DAQ's view: its anti-alias filter as the machine file declares it.
+        let trace = self.effects.load_filter.apply(&trace, fine_dt, r.dt_s);
+        let (load, t_cross) = aligned(&trace, fine_dt, over, r.load_n.len(), threshold, r.t_align_s);
+        let spectrum = SIM_PLANNER.with_borrow_mut(|p| p.amplitudes_up_to(&load, r.dt_s, PAD_FACTOR, 0, self.f_max_hz));
+        // The model's instants on the window's clock (model time 0 is first contact).
+        let on_window = |t: f64| t - t_cross + r.t_align_s;
+        let forming_end = res.forming.map(|f| f.forming_time_s);
+        let sim = Simulated {
+            load_n: load,
+            spectrum,
+            h_end_m: res.forming.map(|f| f.h_end_m),
+            h_start_m: res.forming.map(|_| res.h_start_m),
+            t_contact_s: on_window(0.0),
+            t_forming_end_s: forming_end.map(on_window),
+        };
+        Some(OneBlow { sim, t_cross, t_align_s: r.t_align_s })
     }
 
     /// The weighted residuals of eq. 4 (module docs), appended to `out`; false when a
