@@ -128,8 +128,9 @@ pub enum Heights {
     /// contact sample (its own first contact is not known before it is simulated); where its
     /// model met the billet earlier than that by more than the contact's uncertainty (a press
     /// die crossing its clearance before the load rises), it is simulated again from the
-    /// height there. The chain goes on from its model's contact. Hand-measured heights carry a caliper's scatter (±0.2 mm on
-    /// issue #17's independent renderer), the chain its contacts' uncertainty. Elsewhere as
+    /// height there. The chain goes on from its model's contact. Hand-measured heights carry a
+    /// caliper's scatter (±0.2 mm on issue #17's independent renderer), the chain its
+    /// contacts' uncertainty. Elsewhere as
     /// `Sheet`: without measured heights the model's own chain is kept.
     Encoder,
 }
