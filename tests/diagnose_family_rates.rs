@@ -31,8 +31,8 @@ use independent::drawn::{self, EFFECTS};
 use independent::family::{RENDERERS, Renderer};
 use independent::verdict::{UNCERTAIN, names, own_shrink, strength, verdict_of};
 
-/// Seeds per cell by default: 3 renderers × 2 kinds × 6 effects × 20 = 720 diagnoses, about
-/// 35 min one after the other on this 2-core machine. A cell's rate moves in steps of 5 %, so
+/// Seeds per cell by default: 3 renderers × 2 kinds × 6 effects × 20 = 720 diagnoses, 40-50 min
+/// one after the other on this 2-core machine. A cell's rate moves in steps of 5 %, so
 /// that the goals (≤ 5 % false positives, ≥ 95 % found) can be told apart from a single case
 /// (at 6 seeds a cell, one miss was 83 %).
 const DEFAULT_SEEDS: u64 = 20;
