@@ -8,7 +8,7 @@
 //! from that seed on (to look at one case again).
 //!
 //! Run: `cargo test --release --test diagnose_family_rates -- --ignored --nocapture`, with
-//! - `FORGEMON_FAMILY_SEEDS=6` seeds per cell (the default);
+//! - `FORGEMON_FAMILY_SEEDS=20` seeds per cell (the default, `DEFAULT_SEEDS`);
 //! - `FORGEMON_FAMILY_RENDERERS=rigid-eq3,elastic-siebel,hertz-tresca` (the default; any
 //!   contact `rigid|elastic|hertz` with any friction `eq3|siebel|tresca`);
 //! - `FORGEMON_FAMILY_KINDS=hammer,press`, `FORGEMON_FAMILY_EFFECTS=none,clearance,…`;

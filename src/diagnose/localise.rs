@@ -463,6 +463,7 @@ mod tests {
             spectrum: Vec::new(),
             h_end_m: None,
             h_start_m: None,
+            start_sd_m: None,
             t_contact_s: 1e-3,
             t_forming_end_s: Some(9e-3),
         };

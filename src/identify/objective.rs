@@ -125,10 +125,11 @@ pub enum Heights {
     /// contact comes late where the load rises from nothing (a fresh copper billet on the
     /// press: ~117 µm on issue #17's independent renderer), and the chain would carry that to
     /// every later blow. A chained blow is simulated first from the reading at its load's
-    /// contact sample (its own first contact is not known before it is simulated); where its
-    /// model met the billet earlier than that by more than the contact's uncertainty (a press
-    /// die crossing its clearance before the load rises), it is simulated again from the
-    /// height there. The chain goes on from its model's contact. Hand-measured heights carry a
+    /// contact sample plus the blow before's lead (the ram's travel from its model's contact
+    /// to that sample: its own first contact is not known before it is simulated, and a
+    /// billet's blows lead alike); where its model met the billet elsewhere by more than the
+    /// contact's uncertainty (a press die crossing its clearance before the load rises), it
+    /// is simulated again from the height there. The chain goes on from its model's contact. Hand-measured heights carry a
     /// caliper's scatter (±0.2 mm on issue #17's independent renderer), the chain its
     /// contacts' uncertainty. Elsewhere as
     /// `Sheet`: without measured heights the model's own chain is kept.
@@ -193,6 +194,9 @@ pub struct Objective {
     pub signal: Signal,
     /// The prior model's second mode, Hz (`ModePrior::mode2_hz`).
     prior_mode2_hz: f64,
+    /// A billet blow's start moved (reference index, m) and, through the encoder's chain,
+    /// the blows after it: the heights' part of the uncertainty (`fit::uncertainty`).
+    start_offset: Option<(usize, f64)>,
 }
 
 /// One blow simulated and where the model's clock sits on the measured window's.
@@ -219,6 +223,9 @@ pub struct Simulated {
     pub h_end_m: Option<f64>,
     /// Billet height before the blow, m.
     pub h_start_m: Option<f64>,
+    /// The start height's standard uncertainty where the encoder's chain gave it
+    /// (`Heights::Encoder`), m.
+    pub start_sd_m: Option<f64>,
     /// The model's first contact and end of forming (`None` for a bare strike), s on the
     /// window's clock (sample i at i·dt).
     pub t_contact_s: f64,
@@ -260,6 +267,7 @@ impl Objective {
             heights: Heights::Sheet,
             signal: Signal::Load,
             prior_mode2_hz: prior.mode2_hz,
+            start_offset: None,
         }
     }
 
@@ -287,6 +295,12 @@ impl Objective {
     /// The same references with the model's effects.
     pub fn with_effects(&self, effects: EffectSet) -> Objective {
         Objective { effects, ..self.clone() }
+    }
+
+    /// The same references with reference `i`'s start height moved by `dh_m` (a billet blow's;
+    /// through the encoder's chain, the blows after it move with it).
+    pub fn with_start_offset(&self, i: usize, dh_m: f64) -> Objective {
+        Objective { start_offset: Some((i, dh_m)), ..self.clone() }
     }
 
     /// The same references under another objective.
@@ -344,7 +358,10 @@ impl Objective {
         // The blow before's index, its start height at the model's first contact and the
         // encoder's reading there, for the encoder's chain.
         let mut prev: Option<(usize, f64, Option<f64>)> = None;
-        for r in &self.refs[..n] {
+        // The blow before's lead: how far the ram travelled from its model's contact to its
+        // load's contact sample, m (module docs of `Heights::Encoder`).
+        let mut lead_m = 0.0;
+        for (i, r) in self.refs[..n].iter().enumerate() {
             // This blow's index, start height, and whether the chain gave it.
             let link: Option<(usize, f64, bool)> = match (&self.setting, r.blow_index, h) {
                 (Setting::Billet(p), Some(n), Some(h_start)) => {
@@ -366,25 +383,41 @@ impl Objective {
                 }
                 _ => None,
             };
-            let mut blow = self.simulate_one(machine, r, link.map(|(n, h0, _)| (n, h0)))?;
-            if let Some((n, h0, chained)) = link {
-                // The encoder's reading where the model met the billet, and the height there:
-                // a chained start was taken at the load's contact sample, which the ram
-                // reaches late where the load rises from nothing (a fresh billet's first blow)
-                // or only once a lower die has crossed its clearance (a press's: the ram
-                // travels the closure first, and a start taken there leaves the billet that
-                // much too thin, 0.1-0.3 mm on the family's press clearances, issue 41). Such
-                // a blow is simulated again from the height where its model met the billet.
+            // A chained start is taken at the load's contact sample, which the ram reaches
+            // late where the load rises from nothing (a fresh billet's first blow, every blow
+            // on an elastic contact) or only once a lower die has crossed its clearance (a
+            // press's: the ram travels the closure first, and a start taken there leaves the
+            // billet that much too thin, 0.1-0.3 mm on the family's press clearances, issue
+            // 41). So it starts thicker by the blow before's lead (a billet's blows lead
+            // alike), and is simulated again from the height where its model met the billet
+            // when that guess is off by more than the contact's uncertainty: most blows are
+            // simulated once.
+            // The start moved for the heights' part of the uncertainty (`fit::uncertainty`).
+            let link = link.map(|(n, h0, c)| match self.start_offset {
+                Some((k, dh)) if k == i => (n, h0 + dh, c),
+                _ => (n, h0, c),
+            });
+            let start = link.map(|(n, h0, chained)| (n, if chained { h0 + lead_m } else { h0 }));
+            let mut blow = self.simulate_one(machine, r, start)?;
+            if let (Some((n, h0, chained)), Some((_, h_start))) = (link, start) {
+                // The encoder's reading where the model met the billet, and the height there.
                 let touch = r.approach.map(|a| (a.at(blow.on_window(0.0)), a.x_m()));
-                let h_touch = match touch {
+                let mut h_touch = match touch {
                     Some((x_touch, x_sample)) if chained => h0 - (x_touch - x_sample),
-                    _ => h0,
+                    _ => h_start,
                 };
                 let mut x_touch = touch.map(|(x, _)| x);
-                if chained && (h_touch - h0).abs() > contact_tolerance_m(r) {
+                if chained && (h_touch - h_start).abs() > contact_tolerance_m(r) {
                     blow = self.simulate_one(machine, r, Some((n, h_touch)))?;
                     x_touch = r.approach.map(|a| a.at(blow.on_window(0.0)));
+                } else {
+                    h_touch = h_start;
                 }
+                if let Some((x_touch, x_sample)) = x_touch.zip(r.approach.map(|a| a.x_m())) {
+                    lead_m = x_sample - x_touch;
+                }
+                // Each link of the chain is known to the contact's uncertainty (± it, uniform).
+                blow.sim.start_sd_m = chained.then(|| contact_tolerance_m(r) / 3f64.sqrt());
                 prev = Some((n, h_touch, x_touch));
             }
             h = blow.sim.h_end_m.or(h);
@@ -432,6 +465,7 @@ impl Objective {
             spectrum,
             h_end_m: res.forming.map(|f| f.h_end_m),
             h_start_m: res.forming.map(|_| res.h_start_m),
+            start_sd_m: None,
             t_contact_s: on_window(0.0),
             t_forming_end_s: forming_end.map(on_window),
         };
