@@ -129,10 +129,11 @@ pub enum Heights {
     /// to that sample: its own first contact is not known before it is simulated, and a
     /// billet's blows lead alike); where its model met the billet elsewhere by more than the
     /// contact's uncertainty (a press die crossing its clearance before the load rises), it
-    /// is simulated again from the height there. The chain goes on from its model's contact. Hand-measured heights carry a
-    /// caliper's scatter (±0.2 mm on issue #17's independent renderer), the chain its
-    /// contacts' uncertainty. Elsewhere as
-    /// `Sheet`: without measured heights the model's own chain is kept.
+    /// is simulated again from the height there. The chain goes on from its model's contact.
+    /// Hand-measured heights carry a caliper's scatter (±0.2 mm on issue #17's independent
+    /// renderer), the chain its contacts' uncertainty (`Simulated::start_sd_m`, which
+    /// `fit::uncertainty` passes through the fit). Elsewhere as `Sheet`: without measured
+    /// heights the model's own chain is kept.
     Encoder,
 }
 
