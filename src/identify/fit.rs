@@ -314,18 +314,17 @@ pub fn uncertainty(obj: &Objective, set: &ParamSet, values: &[f64], speed_rel_sd
         .simulate(&set.machine(values))
         .map(|sims| sims.iter().enumerate().filter_map(|(i, s)| Some((i, s.start_sd_m?))).collect())
         .unwrap_or_default();
-    let mut shifts: Vec<(DVector<f64>, f64)> = (0..obj.refs.len())
+    // Each independent error's 1σ move of the optimum, δ: it adds δ δᵀ.
+    let mut shifts: Vec<DVector<f64>> = (0..obj.refs.len())
         .into_par_iter()
         .filter_map(|i| {
             let sd = speed_rel_sd.get(i).copied().filter(|sd| *sd > 0.0 && sd.is_finite())?;
-            Some((speed_shift(obj, set, values, i, &r0, &pinv_jt)?, sd))
+            Some(speed_shift(obj, set, values, i, &r0, &pinv_jt)? * sd)
         })
         .collect();
-    shifts.par_extend(
-        chained.into_par_iter().filter_map(|(i, sd)| Some((height_shift(obj, set, values, i, sd, &pinv_jt)?, 1.0))),
-    );
-    for (d, sd) in &shifts {
-        cov_ln += d * d.transpose() * (sd * sd);
+    shifts.par_extend(chained.into_par_iter().filter_map(|(i, sd)| height_shift(obj, set, values, i, sd, &pinv_jt)));
+    for d in &shifts {
+        cov_ln += d * d.transpose();
     }
     for (i, flag) in unconstrained.iter().enumerate() {
         if *flag {
