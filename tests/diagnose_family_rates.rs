@@ -39,6 +39,9 @@ const DEFAULT_SEEDS: u64 = 20;
 /// A case counts as strong when its hidden effect's own error (`effect_strength`) is above this
 /// over the noise (twice the verdict rule's `NOISE_FACTOR` of 2).
 const STRONG: f64 = 4.0;
+/// Issue 41's goal for a diagnosis's time on this machine, s.
+const HAMMER_GOAL_S: f64 = 5.0;
+const PRESS_GOAL_S: f64 = 30.0;
 /// The columns of the confusion matrix beyond `EFFECTS` and the other effects named.
 const ERROR: &str = "error";
 
@@ -57,7 +60,10 @@ struct Outcome {
     own_shrink: f64,
     /// The bootstrap's share of resamples with the case's verdict (`verdict.confidence`).
     agreement: f64,
+    /// The case's time, its render and its diagnosis, s; the diagnosis's alone (what
+    /// `forgemon diagnose` spends on its captures, the issue's speed goal).
     secs: f64,
+    diagnose_secs: f64,
     /// The hidden effect with its drawn parameters (`Debug`).
     hidden: String,
 }
@@ -88,10 +94,13 @@ fn run_case(renderer: Renderer, kind: Kind, effect: &'static str, seed: u64) -> 
         own_shrink: f64::NAN,
         agreement: f64::NAN,
         secs: 0.0,
+        diagnose_secs: f64::NAN,
         hidden: String::new(),
     };
+
     let run = std::panic::catch_unwind(|| {
         let c = drawn::case(renderer, kind, effect, seed)?;
+        let td = std::time::Instant::now();
         let d = diagnose(
             &c.machine.file.machine,
             &c.machine.file.effect_set(),
@@ -100,10 +109,11 @@ fn run_case(renderer: Renderer, kind: Kind, effect: &'static str, seed: u64) -> 
             &|| {},
         )
         .ok_or_else(|| "no diagnosis (a simulation failed)".to_string())?;
-        Ok::<_, String>((c.hidden, d))
+        Ok::<_, String>((c.hidden, d, td.elapsed().as_secs_f64()))
     });
     let d = match run {
-        Ok(Ok((hidden, d))) => {
+        Ok(Ok((hidden, d, secs))) => {
+            o.diagnose_secs = secs;
             o.hidden = format!("{hidden:?}");
             o.verdict = verdict_of(&d);
             o.strength = strength(&d);
@@ -389,15 +399,27 @@ fn document(all: &[Outcome], set: &str, seeds: u64, renderer_names: &[String]) -
     let total: f64 = all.iter().map(|o| o.secs).sum();
     let _ = writeln!(
         s,
-        "## Time per case (render and diagnosis), s\n\nAll {} cases: {:.0} min, one after the other.\n\n| kind | cases | median | max |\n|---|---|---|---|",
+        "## Time per case, s\n\nAll {} cases: {:.0} min, one after the other. Diagnosis: `diagnose` on the rendered captures, what `forgemon diagnose` spends (goal: under {HAMMER_GOAL_S} s on the hammer, {PRESS_GOAL_S} s on the press); case: the render of its blows at the fine step and the diagnosis.\n\n| kind | cases | diagnosis median | diagnosis max | over the goal | case median | case max |\n|---|---|---|---|---|---|---|",
         all.len(),
         total / 60.0
     );
     for kind in [Kind::Hammer, Kind::Press] {
-        let t: Vec<f64> = all.iter().filter(|o| o.kind == kind).map(|o| o.secs).collect();
+        let of = |f: fn(&Outcome) -> f64| -> Vec<f64> { all.iter().filter(|o| o.kind == kind).map(f).collect() };
+        let (t, d) = (of(|o| o.secs), of(|o| o.diagnose_secs));
         if !t.is_empty() {
-            let max = t.iter().copied().fold(0.0, f64::max);
-            let _ = writeln!(s, "| {} | {} | {:.1} | {max:.1} |", kind_name(kind), t.len(), median(t.clone()));
+            let max = |v: &[f64]| v.iter().copied().filter(|x| !x.is_nan()).fold(f64::NAN, f64::max);
+            let goal = if kind == Kind::Hammer { HAMMER_GOAL_S } else { PRESS_GOAL_S };
+            let over = d.iter().filter(|x| **x > goal).count();
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.1} | {:.1} | {over} | {:.1} | {:.1} |",
+                kind_name(kind),
+                t.len(),
+                median(d.iter().copied().filter(|x| !x.is_nan()).collect()),
+                max(&d),
+                median(t.clone()),
+                max(&t)
+            );
         }
     }
     s.push_str(&agreements(all));
@@ -497,7 +519,7 @@ fn family_verdict_rates() {
                         let line = serde_json::json!({
                             "renderer": o.renderer, "kind": kind_name(kind), "effect": effect, "seed": seed, "set": set,
                             "hidden": o.hidden, "verdict": o.verdict, "error": o.error,
-                            "strength": o.strength, "own_shrink": o.own_shrink, "secs": o.secs,
+                            "strength": o.strength, "own_shrink": o.own_shrink, "secs": o.secs, "diagnose_secs": o.diagnose_secs,
                             "report": d.as_ref().map(|d| d.to_json()),
                         });
                         writeln!(f, "{line}").unwrap_or_else(|e| panic!("FORGEMON_FAMILY_OUT: {e}"));
@@ -532,6 +554,7 @@ fn outcome_from_json(v: &serde_json::Value) -> Outcome {
         own_shrink: num("own_shrink"),
         agreement: v["report"]["verdict"]["confidence"]["agreement"].as_f64().unwrap_or(f64::NAN),
         secs: num("secs"),
+        diagnose_secs: num("diagnose_secs"),
         hidden: text("hidden"),
     }
 }

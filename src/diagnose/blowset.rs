@@ -38,6 +38,17 @@ impl BlowSet {
         Some(out)
     }
 
+    /// A lower bound of the cost (the sum of squares of `residuals`) that simulates only the
+    /// first blow: its part of the sum, weighted as in the whole set. INFINITY when it fails.
+    pub fn first_blow_cost(&self, machine: &Machine, effects: &EffectSet) -> f64 {
+        let Some(sims) = self.obj.with_effects(*effects).simulate_to(machine, 1) else { return f64::INFINITY };
+        let (Some(r), Some(s), Some(&(a, b))) = (self.obj.refs.first(), sims.first(), self.windows.first()) else {
+            return 0.0;
+        };
+        let w = 1.0 / (self.obj.refs.len() as f64 * r.peak_n * r.peak_n * (b - a).max(1) as f64);
+        w * (a..b).map(|i| (r.load_n[i] - s.load_n.get(i).copied().unwrap_or(0.0)).powi(2)).sum::<f64>()
+    }
+
     /// Sensor noise over the peak, mean over the blows: the load's spread before each
     /// window (less 10 samples), where nothing touches the sensor.
     pub fn noise_nrmse(&self) -> f64 {

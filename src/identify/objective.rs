@@ -350,7 +350,7 @@ impl Objective {
     }
 
     /// Simulate the first `n` references.
-    fn simulate_to(&self, machine: &Machine, n: usize) -> Option<Vec<Simulated>> {
+    pub fn simulate_to(&self, machine: &Machine, n: usize) -> Option<Vec<Simulated>> {
         let mut h = match &self.setting {
             Setting::Billet(p) => Some(p.billet.height_m),
             Setting::Bare => None,
