@@ -310,21 +310,32 @@ pub fn uncertainty(obj: &Objective, set: &ParamSet, values: &[f64], speed_rel_sd
         }
         pinv * j.transpose()
     };
-    let chained: Vec<(usize, f64)> = obj
+    let chained: Option<Vec<(usize, f64)>> = obj
         .simulate(&set.machine(values))
-        .map(|sims| sims.iter().enumerate().filter_map(|(i, s)| Some((i, s.start_sd_m?))).collect())
-        .unwrap_or_default();
-    // Each independent error's 1σ move of the optimum, δ: it adds δ δᵀ.
-    let mut shifts: Vec<DVector<f64>> = (0..obj.refs.len())
+        .map(|sims| sims.iter().enumerate().filter_map(|(i, s)| Some((i, s.start_sd_m?))).collect());
+    // Each independent error's 1σ move of the optimum, δ: it adds δ δᵀ. One that cannot be
+    // taken (its shifted blows do not simulate) is named in every parameter's note: the
+    // errors then leave it out.
+    let mut shifts: Vec<(String, Option<DVector<f64>>)> = (0..obj.refs.len())
         .into_par_iter()
         .filter_map(|i| {
             let sd = speed_rel_sd.get(i).copied().filter(|sd| *sd > 0.0 && sd.is_finite())?;
-            Some(speed_shift(obj, set, values, i, &r0, &pinv_jt)? * sd)
+            let what = format!("{}'s impact speed", obj.refs[i].label);
+            Some((what, speed_shift(obj, set, values, i, &r0, &pinv_jt).map(|d| d * sd)))
         })
         .collect();
-    shifts.par_extend(chained.into_par_iter().filter_map(|(i, sd)| height_shift(obj, set, values, i, sd, &pinv_jt)));
-    for d in &shifts {
-        cov_ln += d * d.transpose();
+    match chained {
+        Some(chained) => shifts.par_extend(chained.into_par_iter().map(|(i, sd)| {
+            (format!("{}'s chained start height", obj.refs[i].label), height_shift(obj, set, values, i, sd, &pinv_jt))
+        })),
+        None => shifts.push(("the chained start heights".to_string(), None)),
+    }
+    let mut left_out = Vec::new();
+    for (what, d) in &shifts {
+        match d {
+            Some(d) => cov_ln += d * d.transpose(),
+            None => left_out.push(what.as_str()),
+        }
     }
     for (i, flag) in unconstrained.iter().enumerate() {
         if *flag {
@@ -356,6 +367,9 @@ pub fn uncertainty(obj: &Objective, set: &ParamSet, values: &[f64], speed_rel_sd
         determined.push(note.is_empty());
         if let Some(b) = worst.filter(|&b| correlations[i][b].abs() > NOTED_CORR) {
             note.push(format!("correlated with {} (r = {:.3})", set.params[b].key, correlations[i][b]));
+        }
+        if !left_out.is_empty() {
+            note.push(format!("without the error of {} (the fit did not simulate it moved)", left_out.join(", ")));
         }
         notes.push(note.join("; "));
     }
