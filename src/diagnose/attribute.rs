@@ -8,7 +8,8 @@
 //! determine, a damping ratio or a flow-stress level) and a fine scan of a clearance's gap
 //! from the best grid points (its valley can be narrower than the grid's step) and at the gap
 //! the measured closure shows (the ram's contact leading the load's), followed by
-//! Levenberg–Marquardt (`identify::fit`) from the best points found. The residuals are the
+//! Levenberg–Marquardt (`identify::fit`) from the best points found. The global stage's
+//! points and costs are `scan.rs`'s. The residuals are the
 //! load errors over each blow's baseline window, over the peak, so the cost is the mean
 //! nrmse² the contract scores.
 
@@ -19,6 +20,7 @@ use crate::physics::machine::{Machine, MachineKind};
 
 use super::blowset::{BlowSet, mean};
 use super::evidence::MIN_PAIR_SHRINK;
+use super::scan::{Costs, GRID_STARTS, Scan, fine_points};
 
 /// One library effect: all its parameters fitted (issue #17 item 5: the whole family),
 /// with their bounds, the coarse grid the global stage searches, and the effect they give.
@@ -49,15 +51,15 @@ impl Candidate {
     }
 
     /// Whether the first parameter's valleys can be narrower than the coarse grid's step,
-    /// so that it is scanned finely (`FINE`) before the local search: a clearance's gap,
+    /// so that it is scanned finely (`scan::FINE`) before the local search: a clearance's gap,
     /// whose closure may last a few samples (issue #17: a 0.3 mm gap under a 50 kg die on a
     /// 20 kHz press was fitted at 52 µm from the coarse grid).
-    fn fine_first(&self) -> bool {
+    pub(super) fn fine_first(&self) -> bool {
         self.name == "clearance"
     }
 
     /// The coarse grid's points, each as parameter values.
-    fn grid_points(&self) -> Vec<Vec<f64>> {
+    pub(super) fn grid_points(&self) -> Vec<Vec<f64>> {
         let axes: Vec<Vec<f64>> = self
             .params
             .iter()
@@ -76,7 +78,7 @@ impl Candidate {
 }
 
 /// `n` log-spaced values over `p`'s bounds, at the centres of equal log-intervals.
-fn log_points(p: &Param, n: usize) -> Vec<f64> {
+pub(super) fn log_points(p: &Param, n: usize) -> Vec<f64> {
     (0..n).map(|i| (p.lo.ln() + (p.hi.ln() - p.lo.ln()) * (i as f64 + 0.5) / n as f64).exp()).collect()
 }
 
@@ -236,9 +238,6 @@ pub struct Fitted {
     pub holdout_per_blow: Vec<f64>,
 }
 
-/// Local searches from the best grid points.
-const GRID_STARTS: usize = 3;
-
 /// Levenberg–Marquardt's evaluation budget per parameter for a diagnosis's fits, half
 /// identification's (`identify::fit::PATIENCE`). A search that has not converged by then
 /// crawls along a valley toward a bound, an exponent heading for its floor: on the
@@ -248,10 +247,6 @@ const GRID_STARTS: usize = 3;
 /// this one (the Jacobians' simulations are outside the budget). No verdict or agreement
 /// of the family's 108 hammer tune cases moved.
 const PATIENCE: usize = 30;
-
-/// Points of the fine scan of a `fine_first` parameter over its bounds: a gap within a
-/// factor 1.15 (5000^(1/60)) of any in 1 µm..5 mm.
-const FINE: usize = 60;
 
 /// Fit `cands` jointly (one effect, or a pair) on `calib` and score on `holdout`. The
 /// first `held.len()` parameters start at `held` (a single effect's fit, when a second is
@@ -368,142 +363,6 @@ fn set_of(base: &EffectSet, cands: &[&Candidate], v: &[f64]) -> EffectSet {
     s
 }
 
-/// A point's cost, and a lower bound of it that is cheaper to take (the first blow's part).
-#[derive(Clone, Copy)]
-struct Costs<'c> {
-    cost: &'c (dyn Fn(&[f64]) -> f64 + Sync),
-    bound: &'c (dyn Fn(&[f64]) -> f64 + Sync),
-}
-
-/// The global stage's points and their costs, each distinct point costed once (`Costed`).
-/// Only the `GRID_STARTS` lowest costs are used (the starts, the scans around them, and the
-/// lowest against a pair's first effect alone), so a point that cannot be among them is
-/// not costed in full: its cost is INFINITY (`Costed::costs`).
-struct Scan<'c> {
-    points: Vec<Vec<f64>>,
-    costs: Vec<f64>,
-    known: Costed,
-    f: Costs<'c>,
-}
-
-impl<'c> Scan<'c> {
-    /// The coarse grid over each candidate not held (every combination), then each
-    /// fine-scanned parameter over its whole range and the gaps the measured closure shows,
-    /// the others at each of the best grid points.
-    fn global(
-        cands: &[&Candidate],
-        params: &[Param],
-        held: &[f64],
-        calib: &BlowSet,
-        machine: &Machine,
-        f: Costs<'c>,
-    ) -> Scan<'c> {
-        let mut k = 0;
-        let mut points: Vec<Vec<f64>> = vec![Vec::new()];
-        for c in cands {
-            let n = c.params.len();
-            let axis = if k + n <= held.len() { vec![held[k..k + n].to_vec()] } else { c.grid_points() };
-            k += n;
-            points =
-                points.into_iter().flat_map(|pt| axis.iter().map(move |v| [pt.clone(), v.clone()].concat())).collect();
-        }
-        let mut scan = Scan { points: Vec::new(), costs: Vec::new(), known: Costed::default(), f };
-        scan.add(points);
-        let fine = fine_points(cands, params, held.len(), &scan.best_points(), true);
-        scan.add(fine);
-        let closure = closure_points(cands, held.len(), calib, machine, &scan.best_points());
-        scan.add(closure);
-        scan
-    }
-
-    fn add(&mut self, points: Vec<Vec<f64>>) {
-        let new = self.known.costs(&points, self.f, &self.costs);
-        self.costs.extend(new);
-        self.points.extend(points);
-    }
-
-    /// Adds `points`; the index of the best of them, if any.
-    fn add_best(&mut self, points: Vec<Vec<f64>>) -> Option<usize> {
-        let k = self.points.len();
-        self.add(points);
-        best(&self.costs[k..], 1).next().map(|i| i + k)
-    }
-
-    /// The `GRID_STARTS` best points so far.
-    fn best_points(&self) -> Vec<Vec<f64>> {
-        best(&self.costs, GRID_STARTS).map(|i| self.points[i].clone()).collect()
-    }
-
-    /// The indices of the `k` best points, each distinct: a start that repeats an earlier
-    /// one (a point the scans reached twice) would repeat its search to the bit.
-    fn distinct_best(&self, k: usize) -> Vec<usize> {
-        let mut seen = Vec::new();
-        best(&self.costs, k)
-            .filter(|&i| {
-                let key = bits(&self.points[i]);
-                let fresh = !seen.contains(&key);
-                seen.push(key);
-                fresh
-            })
-            .collect()
-    }
-}
-
-/// The costs the global stage has evaluated, by point. The fine and closure scans around
-/// several grid points repeat each other where the scanned gap is its candidate's only free
-/// parameter (a hammer's clearance, alone or as a pair's second effect: 3 × 60 + 3 × 7
-/// points, 67 of them distinct, and the scan after the local search all repeats): a point
-/// already costed takes its cost again instead of another simulation of every calibration
-/// blow. The cost is a function of the point alone, so nothing else changes.
-#[derive(Default)]
-struct Costed(std::collections::HashMap<Vec<u64>, f64>);
-
-impl Costed {
-    /// The cost of each of `points`, in order; each new distinct point evaluated once, in
-    /// parallel. A new point whose bound (its first blow's cost) is already no lower than
-    /// the `GRID_STARTS`th lowest cost of `so_far` and of the points costed before it (in
-    /// the order of their bounds) cannot be among the lowest: it is not simulated further,
-    /// nor remembered, and its cost is INFINITY. The lowest costs are those a full costing
-    /// finds. On the family's tune seed 4107 (hertz-tresca hammer, friction_rise hidden),
-    /// the foundation grids (289 points) took 0.8 s of each of their fits' 1.1-1.5 s.
-    fn costs(&mut self, points: &[Vec<f64>], f: Costs, so_far: &[f64]) -> Vec<f64> {
-        use rayon::prelude::*;
-        let mut queued = std::collections::HashSet::new();
-        let fresh: Vec<(Vec<u64>, &Vec<f64>)> = points
-            .iter()
-            .map(|p| (bits(p), p))
-            .filter(|(key, _)| !self.0.contains_key(key) && queued.insert(key.clone()))
-            .collect();
-        let bounds: Vec<f64> = fresh.par_iter().map(|(_, v)| (f.bound)(v)).collect();
-        let mut order: Vec<usize> = (0..fresh.len()).collect();
-        order.sort_by(|a, b| bounds[*a].total_cmp(&bounds[*b]));
-        let mut lowest: Vec<f64> = so_far.to_vec();
-        let batch = 2 * rayon::current_num_threads();
-        for chunk in order.chunks(batch) {
-            lowest.sort_by(f64::total_cmp);
-            lowest.truncate(GRID_STARTS);
-            let limit = if lowest.len() < GRID_STARTS { f64::INFINITY } else { lowest[GRID_STARTS - 1] };
-            // In the bounds' order: once one reaches the limit, so do the rest.
-            let todo: Vec<usize> =
-                chunk.iter().copied().take_while(|&i| bounds[i] < limit || bounds[i].is_nan()).collect();
-            if todo.is_empty() {
-                break;
-            }
-            let new: Vec<f64> = todo.par_iter().map(|&i| (f.cost)(fresh[i].1)).collect();
-            for (&i, c) in todo.iter().zip(new) {
-                self.0.insert(fresh[i].0.clone(), c);
-                lowest.push(c);
-            }
-        }
-        points.iter().map(|p| self.0.get(&bits(p)).copied().unwrap_or(f64::INFINITY)).collect()
-    }
-}
-
-/// A point's coordinates to the bit, as a key (distinct NaNs are distinct points).
-fn bits(point: &[f64]) -> Vec<u64> {
-    point.iter().map(|x| x.to_bits()).collect()
-}
-
 /// Whether a pair (`cands[0]` at `held`, plus another) cannot pass the verdict's pair rule
 /// (`verdict.rs`: its holdout error at most 1 − `MIN_PAIR_SHRINK` of the first effect's
 /// alone): no model's error falls below the sensor noise, so when the first effect alone
@@ -540,186 +399,4 @@ fn spoils_its_first(
     let alone = calib.residuals(machine, &set_of(base, &cands[..1], held));
     let Some(alone) = alone.map(|r| r.iter().map(|x| x * x).sum::<f64>()) else { return false };
     scan.costs.iter().all(|c| *c > alone)
-}
-
-/// The indices of the `k` lowest costs, lowest first.
-fn best(costs: &[f64], k: usize) -> impl Iterator<Item = usize> {
-    let mut order: Vec<usize> = (0..costs.len()).collect();
-    order.sort_by(|a, b| costs[*a].total_cmp(&costs[*b]));
-    order.into_iter().take(k)
-}
-
-/// For each free parameter of a `fine_first` candidate (its first, past the `held` ones),
-/// `FINE` log-spaced values over its bounds, the other parameters as at each of `around`.
-/// With `whole_grid`, also at each of the candidate's grid values of its other parameters
-/// (a press's lower die), the rest as at `around[0]`.
-fn fine_points(
-    cands: &[&Candidate],
-    params: &[Param],
-    held: usize,
-    around: &[Vec<f64>],
-    whole_grid: bool,
-) -> Vec<Vec<f64>> {
-    let mut first = 0;
-    let mut out = Vec::new();
-    for c in cands {
-        if c.fine_first() && first >= held {
-            let fine = log_points(&params[first], FINE);
-            let n = c.params.len();
-            let mut at: Vec<Vec<f64>> = around.to_vec();
-            if whole_grid && n > 1 && !around.is_empty() {
-                let mut others: Vec<Vec<f64>> = c.grid_points().into_iter().map(|g| g[1..].to_vec()).collect();
-                others.dedup();
-                at.extend(others.into_iter().map(|g| {
-                    let mut v = around[0].clone();
-                    v[first + 1..first + n].copy_from_slice(&g);
-                    v
-                }));
-            }
-            for pt in &at {
-                out.extend((0..FINE).map(|i| {
-                    let mut v = pt.clone();
-                    v[first] = fine[i];
-                    v
-                }));
-            }
-        }
-        first += c.params.len();
-    }
-    out
-}
-
-/// Points of the fine scan of a press's lower die over its bounds at the closure's gaps: a
-/// mass within a factor 1.04 (1e4^(1/240)) of any in 10 kg..100 t.
-const FINE_DIE: usize = 240;
-
-/// Multiples of the closure's gap (`BlowSet::closure_gap_m`) the global stage tries. Where
-/// the closure is the ram's travel over the lead (a press): a lower tool struck off a heavier
-/// ram as an elastic ball crosses up to twice that (2), one at the ram's speed all along the
-/// whole (1), one accelerated from rest at a constant rate until it reaches the ram's speed
-/// half (1/2), and one pushed by a load that builds up over the closure, with the load's rise
-/// found at a level above its noise, less: 0.29 on the independent hammer at 0.25 mm (seed 3),
-/// when its closure was the ram's travel too, so down to a quarter. The hammer's closure is
-/// now what its lower tool crosses from rest (`closure_gap_m`), within 21 % of the hidden gap
-/// on the independent blows, the press's within 12 %
-/// (`tests/diagnose_independent.rs` `the_measured_closure_brackets_the_hidden_gap`, 0.1–0.5 mm).
-const CLOSURE_SHARES: [f64; 7] = [0.25, 0.35, 0.5, 0.7, 1.0, 1.4, 2.0];
-
-/// For a clearance not held (the first parameter of a `fine_first` candidate), its gap at
-/// `CLOSURE_SHARES` of the measured closure's, the other parameters as at each of `around`
-/// (issue #17 item 3: "for a clearance, start from the gap the measured impact shows").
-/// None when the calibration blows show no closure.
-fn closure_points(
-    cands: &[&Candidate],
-    held: usize,
-    calib: &BlowSet,
-    machine: &Machine,
-    around: &[Vec<f64>],
-) -> Vec<Vec<f64>> {
-    let Some(gap) = calib.closure_gap_m(machine) else { return Vec::new() };
-    let mut first = 0;
-    let mut out = Vec::new();
-    for c in cands {
-        if c.fine_first() && first >= held {
-            let p = &c.params[0];
-            for pt in around {
-                out.extend(CLOSURE_SHARES.iter().map(|k| {
-                    let mut v = pt.clone();
-                    v[first] = (k * gap).clamp(p.lo, p.hi);
-                    v
-                }));
-            }
-            // A press's lower die: at each of those gaps, its mass finely over its bounds. Its
-            // valley is narrow (tests/independent/drawn.rs, tune seed 4101: a 0.14 mm gap under
-            // 1.5 t has a calibration cost 100× below the fit's, and under 1.2 t or 1.8 t one
-            // above the base model's), far narrower than the coarse grid's step (×1.7).
-            if let (Some(die), Some(pt)) = (c.params.get(1), around.first()) {
-                let masses = log_points(die, FINE_DIE);
-                for k in CLOSURE_SHARES {
-                    out.extend(masses.iter().map(|m| {
-                        let mut v = pt.clone();
-                        v[first] = (k * gap).clamp(p.lo, p.hi);
-                        v[first + 1] = *m;
-                        v
-                    }));
-                }
-            }
-        }
-        first += c.params.len();
-    }
-    out
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use std::sync::atomic::{AtomicUsize, Ordering};
-
-    #[test]
-    fn a_point_costed_once_keeps_its_cost_and_is_not_costed_again() {
-        // The scans as a one-parameter clearance makes them: the same fine points around
-        // three grid points, then again around the fitted one, with NaN and -0.0 among them
-        // (kept apart from 0.0 and from each other by their bits: a key, not a comparison).
-        let calls = AtomicUsize::new(0);
-        let cost = |v: &[f64]| {
-            calls.fetch_add(1, Ordering::Relaxed);
-            v.iter().map(|x| (x - 0.3).powi(2)).sum::<f64>()
-        };
-        // A bound of 0 prunes nothing.
-        let f = Costs { cost: &cost, bound: &|_: &[f64]| 0.0 };
-        let line: Vec<Vec<f64>> = (0..60).map(|i| vec![1e-6 * 1.15f64.powi(i)]).collect();
-        let mut known = Costed::default();
-        let mut all = Vec::new();
-        for _ in 0..3 {
-            all.extend(known.costs(&line, f, &[]));
-        }
-        assert_eq!(calls.load(Ordering::Relaxed), 60);
-        let odd = vec![vec![f64::NAN], vec![-0.0], vec![0.0], vec![f64::NAN], line[7].clone()];
-        let got = known.costs(&odd, f, &all);
-        assert_eq!(calls.load(Ordering::Relaxed), 63, "NaN, -0.0 and 0.0 once each; line[7] known");
-        // Every cost is the cost function's own value at that point, in the points' order.
-        for (p, c) in line.iter().cycle().zip(&all).chain(odd.iter().zip(&got)) {
-            assert_eq!(c.to_bits(), cost(p).to_bits(), "{p:?}");
-        }
-    }
-
-    #[test]
-    fn points_whose_bound_rules_them_out_are_not_costed_and_the_lowest_costs_are_kept() {
-        // A cost of five "blows", the first of which bounds it: a 17 × 17 grid with a valley
-        // off its axes, and a few points whose simulation fails (INFINITY).
-        let blow = |v: &[f64], k: usize| {
-            ((v[0] - 0.37).powi(2) + (v[1] - 0.61 - 0.01 * k as f64).powi(2)) * (1.0 + 0.1 * k as f64)
-        };
-        let calls = AtomicUsize::new(0);
-        let cost = |v: &[f64]| {
-            calls.fetch_add(1, Ordering::Relaxed);
-            if v[0] > 0.95 { f64::INFINITY } else { (0..5).map(|k| blow(v, k)).sum() }
-        };
-        let bound = |v: &[f64]| if v[0] > 0.95 { f64::INFINITY } else { blow(v, 0) };
-        let grid: Vec<Vec<f64>> =
-            (0..17).flat_map(|i| (0..17).map(move |j| vec![i as f64 / 16.0, j as f64 / 16.0])).collect();
-        let full: Vec<f64> = grid.iter().map(|p| cost(p)).collect();
-        calls.store(0, Ordering::Relaxed);
-        let mut known = Costed::default();
-        let got = known.costs(&grid, Costs { cost: &cost, bound: &bound }, &[]);
-        let n = calls.load(Ordering::Relaxed);
-        assert!(n < grid.len() / 4, "{n} of {} points costed in full", grid.len());
-        // The lowest GRID_STARTS are the full costing's, at the same points; every other cost
-        // is either the point's own or INFINITY, never lower than the lowest ones.
-        assert_eq!(best(&got, GRID_STARTS).collect::<Vec<_>>(), best(&full, GRID_STARTS).collect::<Vec<_>>());
-        let third = full[best(&full, GRID_STARTS).last().unwrap()];
-        for (g, c) in got.iter().zip(&full) {
-            assert!(g.to_bits() == c.to_bits() || (*g == f64::INFINITY && *c >= third), "{g} against {c}");
-        }
-        // A point left out is not remembered: asked again beside lower costs, it is pruned
-        // again; asked alone, it is costed.
-        let out =
-            got.iter().position(|c| c.is_infinite() && full[got.iter().position(|g| g == c).unwrap()].is_finite());
-        let out = out.map(|i| grid[i].clone()).expect("a finite point left out");
-        let before = calls.load(Ordering::Relaxed);
-        assert!(known.costs(std::slice::from_ref(&out), Costs { cost: &cost, bound: &bound }, &got)[0].is_infinite());
-        assert_eq!(calls.load(Ordering::Relaxed), before);
-        let alone = known.costs(std::slice::from_ref(&out), Costs { cost: &cost, bound: &bound }, &[])[0];
-        assert_eq!(alone.to_bits(), cost(&out).to_bits());
-    }
 }

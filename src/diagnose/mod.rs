@@ -16,6 +16,7 @@ pub mod location;
 pub mod phases;
 #[cfg(test)]
 mod rates;
+mod scan;
 pub mod verdict;
 pub mod words;
 
