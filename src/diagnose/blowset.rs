@@ -1,7 +1,7 @@
 //! The blows a diagnosis fits or scores (`BlowSet`): the objective's references with each
 //! blow's baseline window, and how a model with given effects is scored on them.
 
-use crate::identify::objective::{Objective, Setting};
+use crate::identify::objective::{Objective, Reference, Setting, Simulated};
 use crate::physics::billet::{BilletLaw, LoadEffects};
 use crate::physics::effects::EffectSet;
 use crate::physics::machine::Machine;
@@ -31,22 +31,21 @@ impl BlowSet {
         let sims = self.obj.with_effects(*effects).simulate(machine)?;
         let nb: f64 = weights.iter().sum();
         let mut out = Vec::new();
-        for (((r, s), (a, b)), wt) in self.obj.refs.iter().zip(&sims).zip(&self.windows).zip(weights) {
-            let w = (wt / nb).sqrt() / (r.peak_n * ((b - a).max(1) as f64).sqrt());
-            out.extend((*a..*b).map(|i| w * (r.load_n[i] - s.load_n.get(i).copied().unwrap_or(0.0))));
+        for (((r, s), w), wt) in self.obj.refs.iter().zip(&sims).zip(&self.windows).zip(weights) {
+            out.extend(blow_residuals(r, s, *w, wt / nb));
         }
         Some(out)
     }
 
     /// A lower bound of the cost (the sum of squares of `residuals`) that simulates only the
-    /// first blow: its part of the sum, weighted as in the whole set. INFINITY when it fails.
+    /// first blow: its part of the sum, the same terms in the same order, so no larger in
+    /// floating point either. INFINITY when it fails.
     pub fn first_blow_cost(&self, machine: &Machine, effects: &EffectSet) -> f64 {
         let Some(sims) = self.obj.with_effects(*effects).simulate_to(machine, 1) else { return f64::INFINITY };
-        let (Some(r), Some(s), Some(&(a, b))) = (self.obj.refs.first(), sims.first(), self.windows.first()) else {
+        let (Some(r), Some(s), Some(w)) = (self.obj.refs.first(), sims.first(), self.windows.first()) else {
             return 0.0;
         };
-        let w = 1.0 / (self.obj.refs.len() as f64 * r.peak_n * r.peak_n * (b - a).max(1) as f64);
-        w * (a..b).map(|i| (r.load_n[i] - s.load_n.get(i).copied().unwrap_or(0.0)).powi(2)).sum::<f64>()
+        blow_residuals(r, s, *w, 1.0 / self.obj.refs.len() as f64).map(|x| x * x).sum()
     }
 
     /// Sensor noise over the peak, mean over the blows: the load's spread before each
@@ -122,6 +121,13 @@ impl BlowSet {
         let sims = self.obj.with_effects(*effects).simulate(machine)?;
         Some(self.obj.refs.iter().zip(&sims).map(|(r, s)| nrmse(r, s)).collect())
     }
+}
+
+/// Blow `r`'s load residuals against `s` over its window `(a, b)`, over its peak, weighted so
+/// that their sum of squares is `share` times its nrmse².
+fn blow_residuals(r: &Reference, s: &Simulated, (a, b): (usize, usize), share: f64) -> impl Iterator<Item = f64> {
+    let w = share.sqrt() / (r.peak_n * ((b - a).max(1) as f64).sqrt());
+    (a..b).map(move |i| w * (r.load_n[i] - s.load_n.get(i).copied().unwrap_or(0.0)))
 }
 
 /// The mean of `v` (NaN when empty): a set's errors over its blows.
