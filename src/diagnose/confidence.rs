@@ -31,7 +31,7 @@ use crate::physics::machine::Machine;
 use super::attribute::{Fitted, refit};
 use super::blowset::{BlowSet, mean};
 use super::evidence::{ALPHA, equivalent, improves};
-use super::verdict::{MIN_SHRINK, NOISE_FACTOR, decide, level_only};
+use super::verdict::{MIN_SHRINK, NOISE_FACTOR, PARSIMONY_WINDOW, decide, level_only};
 
 /// Holdout resamples: the agreement's Monte Carlo standard error is at most 0.5/√4000 =
 /// 0.8 points (2.5 with 400), so that the draw itself rarely decides which side of
@@ -333,7 +333,18 @@ fn why_lost(inp: &Scores, chosen: Option<&Fitted>, equivalent_to: &[(String, Opt
     let Some(c) = chosen else {
         return format!("it shrinks the holdout error by {:.0} %, but the rule named none", shrink * 100.0);
     };
-    if equivalent_to.iter().any(|(n, _)| n == runner) || equivalent(&c.holdout_per_blow, &r.holdout_per_blow) {
+    let tie = equivalent_to.iter().any(|(n, _)| n == runner) || equivalent(&c.holdout_per_blow, &r.holdout_per_blow);
+    if tie && r.n_params < c.n_params && r.holdout > c.holdout * (1.0 + PARSIMONY_WINDOW) {
+        format!(
+            "the holdout cannot tell it from {} by the test ({:.4} against {:.4}), but it predicts the holdout more than {:.0} % worse, beyond where its fewer fitted parameters ({} against {}) decide",
+            c.name,
+            r.holdout,
+            c.holdout,
+            PARSIMONY_WINDOW * 100.0,
+            r.n_params,
+            c.n_params
+        )
+    } else if tie {
         format!(
             "the holdout cannot tell it from {} ({:.4} against {:.4}); {} has {} fitted parameters against its {}",
             c.name, r.holdout, c.holdout, c.name, c.n_params, r.n_params
@@ -418,6 +429,25 @@ mod tests {
         let r = c.runner_up.unwrap();
         assert_eq!(r.name, "friction_rise");
         assert!(r.why.contains("under the rule's 20 %"), "{}", r.why);
+    }
+
+    // The runner-up with fewer parameters that the holdout test cannot tell from the verdict
+    // lost on the parsimony window: said so, not "the verdict has fewer parameters".
+    #[test]
+    fn a_tie_with_fewer_parameters_lost_on_the_window_says_so() {
+        let m = hammer();
+        let singles = [
+            fitted("clearance", 2, &[0.018, 0.020, 0.052, 0.044, 0.063]),
+            fitted("elastic_recovery", 1, &[0.078, 0.051, 0.035, 0.034, 0.030]),
+        ];
+        let scores = Scores { machine: &m, base_hold: &BASE, noise_nrmse: 0.005, singles: &singles, pairs: &[] };
+        let v = decide(&m, &BASE, 0.005, &singles, &[]);
+        assert_eq!(v.chosen.as_ref().map(|f| f.name.as_str()), Some("clearance"), "{}", v.why);
+        let why = why_lost(&scores, v.chosen.as_ref(), &v.equivalent, "elastic_recovery");
+        assert!(
+            why.contains("more than 10 % worse, beyond where its fewer fitted parameters (1 against 2) decide"),
+            "{why}"
+        );
     }
 
     // Two effects that each win on some blows and not on others: the rule names one, but

@@ -283,7 +283,7 @@ impl Diagnosis {
             },
             "rule": {
                 "noise_nrmse": self.noise_nrmse, "noise_factor": NOISE_FACTOR, "min_shrink": MIN_SHRINK,
-                "min_pair_shrink": MIN_PAIR_SHRINK,
+                "min_pair_shrink": MIN_PAIR_SHRINK, "parsimony_window": verdict::PARSIMONY_WINDOW,
                 "test": evidence::TESTS,
                 "test_level": evidence::ALPHA,
                 "explanation": self.why,
