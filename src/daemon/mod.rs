@@ -302,18 +302,17 @@ async fn run_loop(
     let mut tick = tokio::time::interval(watchdog.map_or(Duration::from_secs(1), |d| d / 2));
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     loop {
-        // Biased, in this order: a signal announced with a device time (`NewBilletAs` from
-        // a DAQ's billet line) is sent before the samples from that time on, and it must be
-        // taken before them, or the estimator starts the billet from the encoder first, under
-        // the trace before. Everything ahead of the samples is rare, so they never wait
-        // long; the tick is ahead of them, so a backlog of samples cannot starve the watchdog.
         tokio::select! {
-            biased;
-            _ = sigterm.recv() => { tracing::info!("SIGTERM: finishing the recording"); break; }
-            _ = tokio::signal::ctrl_c() => { tracing::info!("interrupted: finishing the recording"); break; }
-            Ok(()) = stop.changed() => if *stop.borrow() { break },
+            ev = rx.recv() => match ev {
+                None => break,
+                Some(queue::Received::Event(ev)) => service.on_source_event(ev),
+                Some(queue::Received::Dropped(n)) => service.on_dropped(n),
+            },
             Some(c) = control_rx.recv() => service.on_control(c),
             Some(r) = recipe_rx.recv() => service.switch_recipe(r),
+            _ = sigterm.recv() => { tracing::info!("SIGTERM: finishing the recording"); break; }
+            _ = tokio::signal::ctrl_c() => { tracing::info!("interrupted: finishing the recording"); break; }
+            _ = stop.changed() => if *stop.borrow() { break },
             _ = sighup.recv() => service.reload(),
             _ = tick.tick() => {
                 if watchdog.is_some() {
@@ -321,11 +320,6 @@ async fn run_loop(
                 }
                 service.on_tick();
             }
-            ev = rx.recv() => match ev {
-                None => break,
-                Some(queue::Received::Event(ev)) => service.on_source_event(ev),
-                Some(queue::Received::Dropped(n)) => service.on_dropped(n),
-            },
         }
     }
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
