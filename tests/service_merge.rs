@@ -152,9 +152,15 @@ fn roles_from_two_daqs_on_their_own_clocks_are_merged() {
         assert_eq!(l.class, r.class, "blow {}", l.blow);
     }
     // Both billets end in hard blows and raise the alert once each, as with one DAQ.
+    let alerts = |blows: &[BlowEstimate]| -> Vec<(u32, String)> {
+        blows.iter().filter_map(|e| Some((e.blow, e.alert.as_ref()?.reason.clone()))).collect()
+    };
     assert_eq!(
-        live.iter().filter(|e| e.alert.is_some()).count(),
-        reference.iter().filter(|e| e.alert.is_some()).count()
+        alerts(&live).len(),
+        alerts(&reference).len(),
+        "alerts (blow, reason), live {:?} against one DAQ {:?}",
+        alerts(&live),
+        alerts(&reference)
     );
 
     // Live equals replay: the recording holds both sources' raw batches with their receive
