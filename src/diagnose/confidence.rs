@@ -31,7 +31,7 @@ use crate::physics::machine::Machine;
 use super::attribute::{Fitted, refit};
 use super::blowset::{BlowSet, mean};
 use super::evidence::{ALPHA, equivalent, improves};
-use super::verdict::{MIN_SHRINK, NOISE_FACTOR, PARSIMONY_WINDOW, decide, level_only};
+use super::verdict::{MIN_SHRINK, NOISE_FACTOR, PARSIMONY_WINDOW, decide, level_only, near_best};
 
 /// Holdout resamples: the agreement's Monte Carlo standard error is at most 0.5/√4000 =
 /// 0.8 points (2.5 with 400), so that the draw itself rarely decides which side of
@@ -334,7 +334,7 @@ fn why_lost(inp: &Scores, chosen: Option<&Fitted>, equivalent_to: &[(String, Opt
         return format!("it shrinks the holdout error by {:.0} %, but the rule named none", shrink * 100.0);
     };
     let tie = equivalent_to.iter().any(|(n, _)| n == runner) || equivalent(&c.holdout_per_blow, &r.holdout_per_blow);
-    if tie && r.n_params < c.n_params && r.holdout > c.holdout * (1.0 + PARSIMONY_WINDOW) {
+    if tie && r.n_params < c.n_params && !near_best(r, c) {
         format!(
             "the holdout cannot tell it from {} by the test ({:.4} against {:.4}), but it predicts the holdout more than {:.0} % worse, beyond where its fewer fitted parameters ({} against {}) decide",
             c.name,
@@ -445,7 +445,10 @@ mod tests {
         assert_eq!(v.chosen.as_ref().map(|f| f.name.as_str()), Some("clearance"), "{}", v.why);
         let why = why_lost(&scores, v.chosen.as_ref(), &v.equivalent, "elastic_recovery");
         assert!(
-            why.contains("more than 10 % worse, beyond where its fewer fitted parameters (1 against 2) decide"),
+            why.contains(&format!(
+                "more than {:.0} % worse, beyond where its fewer fitted parameters (1 against 2) decide",
+                PARSIMONY_WINDOW * 100.0
+            )),
             "{why}"
         );
     }

@@ -185,7 +185,7 @@ pub fn decide(machine: &Machine, base_hold: &[f64], noise_nrmse: f64, singles: &
 
 /// Whether `f`, a tie of the best real effect `best`, is near enough to it for parsimony to
 /// decide between them (rule 3): its holdout error at most `PARSIMONY_WINDOW` above the best's.
-fn near_best(f: &Fitted, best: &Fitted) -> bool {
+pub fn near_best(f: &Fitted, best: &Fitted) -> bool {
     f.holdout <= best.holdout * (1.0 + PARSIMONY_WINDOW)
 }
 
@@ -386,7 +386,10 @@ mod tests {
         assert_eq!(v.chosen.unwrap().name, "clearance");
         assert_eq!(v.equivalent.len(), 1, "{:?}", v.equivalent);
         assert!(
-            v.why.contains("elastic_recovery with fewer fitted parameters predicts the holdout more than 10 % worse"),
+            v.why.contains(&format!(
+                "elastic_recovery with fewer fitted parameters predicts the holdout more than {:.0} % worse",
+                PARSIMONY_WINDOW * 100.0
+            )),
             "{}",
             v.why
         );
