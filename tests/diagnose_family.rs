@@ -299,3 +299,12 @@ fn hertz_tresca_press_compliant_is_elastic_recovery() {
 fn hertz_tresca_press_clearance_is_clearance() {
     diagnosed(RENDERERS[2], Kind::Press, clearance, "clearance");
 }
+
+/// The press clearance on the elastic billet, which throws the loose die ahead of
+/// the tool. With the rigid die contact alone, the family's tune seeds 4102 and 4111 were
+/// uncertain on this renderer; the die's contact is a parameter of the press's clearance
+/// since (`k_die_contact_N_per_m`, set on tune seeds 4100–4119).
+#[test]
+fn elastic_siebel_press_clearance_is_clearance() {
+    diagnosed(RENDERERS[1], Kind::Press, clearance, "clearance");
+}

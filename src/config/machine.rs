@@ -330,7 +330,7 @@ mod tests {
     fn effects_tables_are_read_and_checked() {
         let text = format!("{HAMMER}[effects.clearance]\ngap_m = 2e-4\n");
         let m = parse_machine("m.toml", &text).unwrap();
-        assert_eq!(m.effects, vec![Effect::Clearance { gap_m: 2e-4, m_lower_kg: 0.0 }]);
+        assert_eq!(m.effects, vec![Effect::Clearance { gap_m: 2e-4, m_lower_kg: 0.0, k_die_n_per_m: f64::INFINITY }]);
         let e = err(&format!("{HAMMER}[effects.clearance]\ngap = 2e-4\n"));
         assert!(
             e.starts_with("m.toml:6:") && e.contains("key 'effects.clearance'") && e.contains("no parameter 'gap'"),
@@ -343,6 +343,6 @@ mod tests {
         let e = err(&format!("{HAMMER}{die}"));
         assert!(e.contains("key 'effects.clearance'") && e.contains("m_lower_kg does not apply"), "{e}");
         let m = parse_machine("m.toml", &format!("{PRESS}{die}")).unwrap();
-        assert_eq!(m.effects, vec![Effect::Clearance { gap_m: 2e-4, m_lower_kg: 800.0 }]);
+        assert_eq!(m.effects, vec![Effect::Clearance { gap_m: 2e-4, m_lower_kg: 800.0, k_die_n_per_m: f64::INFINITY }]);
     }
 }

@@ -212,12 +212,7 @@ fn fit_pairs(
         .filter_map(|((ia, fa), (ib, _))| {
             let cands: Vec<&Candidate> = vec![&lib[*ia], &lib[*ib]];
             // The best single effect starts where its own fit ended.
-            let all = fa.effects[0].params();
-            let held: Vec<f64> = lib[*ia]
-                .params
-                .iter()
-                .map(|p| all.iter().find(|(k, _)| *k == p.key).map_or(p.lo, |(_, v)| *v))
-                .collect();
+            let held = lib[*ia].values_of(&fa.effects[0]);
             let f = attribute::fit_candidates(machine, effects, &cands, &held, calib, holdout);
             progress();
             f

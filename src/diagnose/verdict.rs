@@ -370,7 +370,11 @@ mod tests {
     #[test]
     fn parsimony_decides_only_among_ties_within_the_window() {
         let clearance = |per_blow: &[f64]| {
-            let mut f = fitted("clearance", vec![Effect::Clearance { gap_m: 1e-4, m_lower_kg: 100.0 }], per_blow);
+            let mut f = fitted(
+                "clearance",
+                vec![Effect::Clearance { gap_m: 1e-4, m_lower_kg: 100.0, k_die_n_per_m: f64::INFINITY }],
+                per_blow,
+            );
             f.n_params = 2;
             f
         };

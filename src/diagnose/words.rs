@@ -2,7 +2,7 @@
 //! engineering units with its interval, the holdout shrink and where it acts, then the
 //! runner-up and the confidence.
 
-use crate::physics::effects::Effect;
+use crate::physics::effects::{Effect, K_DIE_KEY};
 
 use super::Diagnosis;
 use super::confidence::ParamInterval;
@@ -19,7 +19,7 @@ fn value(key: &str, params: &[ParamInterval], v: f64) -> String {
         );
     let unit = match key {
         "gap_m" => format!("{:.2} mm", v * 1e3),
-        "k_contact_N_per_m" | "k3_N_per_m" => format!("{:.2} GN/m", v / 1e9),
+        "k_contact_N_per_m" | "k3_N_per_m" | K_DIE_KEY => format!("{:.2} GN/m", v / 1e9),
         "m_lower_kg" | "m3_kg" if v >= 1000.0 => format!("{:.1} t", v / 1e3),
         "m_lower_kg" | "m3_kg" => format!("{v:.0} kg"),
         "c3_Ns_per_m" => format!("{:.0} kN s/m", v / 1e3),
@@ -34,8 +34,14 @@ fn value(key: &str, params: &[ParamInterval], v: f64) -> String {
 pub fn describe(e: &Effect, params: &[ParamInterval]) -> String {
     let v = |key: &str, x: f64| value(key, params, x);
     match *e {
-        Effect::Clearance { gap_m, m_lower_kg } if m_lower_kg > 0.0 => {
-            format!("a clearance of {} under a lower die of {}", v("gap_m", gap_m), v("m_lower_kg", m_lower_kg))
+        Effect::Clearance { gap_m, m_lower_kg, k_die_n_per_m } if m_lower_kg > 0.0 => {
+            let die =
+                format!("a clearance of {} under a lower die of {}", v("gap_m", gap_m), v("m_lower_kg", m_lower_kg));
+            if k_die_n_per_m.is_finite() {
+                format!("{die}, struck through a contact of {}", v(K_DIE_KEY, k_die_n_per_m))
+            } else {
+                die
+            }
         }
         Effect::Clearance { gap_m, .. } => format!("a clearance of {} under the lower tool", v("gap_m", gap_m)),
         Effect::ElasticRecovery { k_contact_n_per_m } => {

@@ -18,6 +18,8 @@ pub const DEFAULT_RATE_REF_PER_S: f64 = 10.0;
 pub const DEFAULT_EPS_REF: f64 = 0.2;
 /// Default foundation damping when the spec leaves it out, N s/m (undamped foundation).
 pub const DEFAULT_FOUNDATION_DAMPING: f64 = 0.0;
+/// `clearance`'s contract key for the billet's contact stiffness with a press's loose die.
+pub const K_DIE_KEY: &str = "k_die_contact_N_per_m";
 
 /// One effect with its parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -25,9 +27,14 @@ pub enum Effect {
     /// `m_lower_kg`: the press's lower die, which the base press model lacks (its sensor path
     /// is massless). 0 leaves it out: the gap is then dead travel. A hammer's lower mass is
     /// its machine's `m2_kg`, so there it must be 0.
+    /// `k_die_n_per_m`: the press's loose die is struck through the billet's contact, of
+    /// this stiffness (a rigid-plastic billet brings the die to the tool's speed; an elastic
+    /// one throws it ahead, and the closure, the die's rebound and the load's rise follow
+    /// from it). Infinite is the rigid contact; only with a die.
     Clearance {
         gap_m: f64,
         m_lower_kg: f64,
+        k_die_n_per_m: f64,
     },
     ElasticRecovery {
         k_contact_n_per_m: f64,
@@ -105,8 +112,12 @@ impl Effect {
     /// Parameter names and values, with their unit-carrying contract names.
     pub fn params(&self) -> Vec<(&'static str, f64)> {
         match *self {
-            Effect::Clearance { gap_m, m_lower_kg } if m_lower_kg > 0.0 => {
-                vec![("gap_m", gap_m), ("m_lower_kg", m_lower_kg)]
+            Effect::Clearance { gap_m, m_lower_kg, k_die_n_per_m } if m_lower_kg > 0.0 => {
+                let mut p = vec![("gap_m", gap_m), ("m_lower_kg", m_lower_kg)];
+                if k_die_n_per_m.is_finite() {
+                    p.push((K_DIE_KEY, k_die_n_per_m));
+                }
+                p
             }
             Effect::Clearance { gap_m, .. } => vec![("gap_m", gap_m)],
             Effect::ElasticRecovery { k_contact_n_per_m } => {
@@ -155,7 +166,7 @@ impl Effect {
             .find(|n| *n == name)
             .ok_or_else(|| EffectError::UnknownEffect { name: name.to_string() })?;
         let allowed: &[&'static str] = match effect {
-            "clearance" => &["gap_m", "m_lower_kg"],
+            "clearance" => &["gap_m", "m_lower_kg", K_DIE_KEY],
             "elastic_recovery" => &["k_contact_N_per_m"],
             "friction_rise" => &["exponent"],
             "strain_rate" => &["m", "rate_ref_per_s"],
@@ -170,7 +181,11 @@ impl Effect {
         let req = |p: &'static str| given.get(p).copied().ok_or(EffectError::MissingParam { effect, param: p });
         let opt = |p: &'static str, d: f64| given.get(p).copied().unwrap_or(d);
         let e = match effect {
-            "clearance" => Effect::Clearance { gap_m: req("gap_m")?, m_lower_kg: opt("m_lower_kg", 0.0) },
+            "clearance" => Effect::Clearance {
+                gap_m: req("gap_m")?,
+                m_lower_kg: opt("m_lower_kg", 0.0),
+                k_die_n_per_m: opt(K_DIE_KEY, f64::INFINITY),
+            },
             "elastic_recovery" => Effect::ElasticRecovery { k_contact_n_per_m: req("k_contact_N_per_m")? },
             "friction_rise" => Effect::FrictionRise { exponent: req("exponent")? },
             "strain_rate" => {
@@ -229,10 +244,12 @@ impl Effect {
             if ok && !value.is_nan() { Ok(()) } else { Err(EffectError::OutOfRange { effect, param, value, why }) }
         };
         match *self {
-            Effect::Clearance { gap_m, m_lower_kg } => {
+            Effect::Clearance { gap_m, m_lower_kg, k_die_n_per_m: k } => {
                 check("gap_m", gap_m, (0.0..f64::INFINITY).contains(&gap_m), "must be finite and >= 0 m")?;
                 let m = m_lower_kg;
-                check("m_lower_kg", m, (0.0..f64::INFINITY).contains(&m), "must be finite and >= 0 kg")
+                check("m_lower_kg", m, (0.0..f64::INFINITY).contains(&m), "must be finite and >= 0 kg")?;
+                check(K_DIE_KEY, k, k > 0.0, "must be > 0 (infinite is the rigid contact)")?;
+                check(K_DIE_KEY, k, m > 0.0 || k.is_infinite(), "needs a lower die (m_lower_kg > 0)")
             }
             Effect::ElasticRecovery { k_contact_n_per_m: k } => {
                 check("k_contact_N_per_m", k, k > 0.0, "must be > 0 (infinite is neutral)")
@@ -288,6 +305,8 @@ pub struct EffectSet {
     pub clearance_gap_m: f64,
     /// `clearance`: the press's lower die, kg, at rest at first contact. 0 is neutral.
     pub clearance_lower_kg: f64,
+    /// `clearance`: the billet's contact with that die, N/m. Infinite is neutral (rigid).
+    pub clearance_die_k_n_per_m: f64,
     /// `elastic_recovery`: contact compliance in series with the billet. Infinite is neutral.
     pub k_contact_n_per_m: f64,
     /// Load-side effects.
@@ -307,6 +326,7 @@ impl EffectSet {
     pub const NONE: EffectSet = EffectSet {
         clearance_gap_m: 0.0,
         clearance_lower_kg: 0.0,
+        clearance_die_k_n_per_m: f64::INFINITY,
         k_contact_n_per_m: f64::INFINITY,
         load: LoadEffects::NEUTRAL,
         foundation: None,
@@ -325,9 +345,10 @@ impl EffectSet {
 
     pub fn apply(&mut self, effect: &Effect) {
         match *effect {
-            Effect::Clearance { gap_m, m_lower_kg } => {
+            Effect::Clearance { gap_m, m_lower_kg, k_die_n_per_m } => {
                 self.clearance_gap_m = gap_m;
                 self.clearance_lower_kg = m_lower_kg;
+                self.clearance_die_k_n_per_m = k_die_n_per_m;
             }
             Effect::ElasticRecovery { k_contact_n_per_m } => self.k_contact_n_per_m = k_contact_n_per_m,
             Effect::FrictionRise { exponent } => self.load.friction_exponent = exponent,
@@ -404,6 +425,25 @@ mod tests {
         assert!(err.to_string().contains("m_lower_kg = -1"), "{err}");
         // Without a die the gap is the old dead travel, and prints back as before.
         assert_eq!(Effect::parse_spec("clearance:gap_m=3e-4").unwrap().to_string(), "clearance:gap_m=3e-4");
+    }
+
+    #[test]
+    fn a_die_contact_is_optional_rigid_by_default_and_needs_a_die() {
+        let rigid = Effect::parse_spec("clearance:gap_m=3e-4,m_lower_kg=800").unwrap();
+        assert_eq!(rigid, Effect::Clearance { gap_m: 3e-4, m_lower_kg: 800.0, k_die_n_per_m: f64::INFINITY });
+        // A rigid contact prints as before: the key is only there when it is finite.
+        assert_eq!(rigid.to_string(), "clearance:gap_m=3e-4,m_lower_kg=8e2");
+        let spec = "clearance:gap_m=3e-4,m_lower_kg=800,k_die_contact_N_per_m=1e12";
+        let compliant = Effect::parse_spec(spec).unwrap();
+        assert_eq!(compliant, Effect::Clearance { gap_m: 3e-4, m_lower_kg: 800.0, k_die_n_per_m: 1e12 });
+        assert_eq!(Effect::parse_spec(&compliant.to_string()).unwrap(), compliant);
+        let mut set = EffectSet::NONE;
+        set.apply(&compliant);
+        assert_eq!((set.clearance_die_k_n_per_m, set.k_contact_n_per_m), (1e12, f64::INFINITY));
+        let err = Effect::parse_spec("clearance:gap_m=3e-4,k_die_contact_N_per_m=1e12").unwrap_err();
+        assert!(err.to_string().contains("needs a lower die"), "{err}");
+        let err = Effect::parse_spec("clearance:gap_m=3e-4,m_lower_kg=800,k_die_contact_N_per_m=0").unwrap_err();
+        assert!(err.to_string().contains("k_die_contact_N_per_m = 0"), "{err}");
     }
 
     #[test]

@@ -196,8 +196,8 @@ impl Plant {
                     k_n_per_m: series(k_s, p.k_frame_n_per_m),
                     c_ns_per_m: p.c_frame_ns_per_m * share * share,
                 };
-                let k_contact =
-                    if billet.is_some() { kc_effect } else { series(DEFAULT_HAMMER_TOOL_CONTACT_N_PER_M, kc_effect) };
+                let kc = series(kc_effect, effects.clearance_die_k_n_per_m);
+                let k_contact = if billet.is_some() { kc } else { series(DEFAULT_HAMMER_TOOL_CONTACT_N_PER_M, kc) };
                 let ram = Some((p.m_ram_kg, p.k_link_n_per_m, p.c_link_ns_per_m));
                 (p.m_tool_kg, ram, lower, k_contact, false, effects.clearance_gap_m, 0.0)
             }
