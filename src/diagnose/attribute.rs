@@ -327,10 +327,28 @@ pub fn fit_candidates(
             start = polished;
         }
     }
-    let values = start.1;
-    let set = set_of(base, cands, &values);
-    let calib_n = calib.nrmse(machine, &set)?;
-    let hold_n = holdout.nrmse(machine, &set)?;
+    let used = |v: &[f64]| effects_of(cands, v).iter().map(|e| e.params().len()).sum::<usize>();
+    let scores = |v: &[f64]| {
+        let set = set_of(base, cands, v);
+        Some((calib.nrmse(machine, &set)?, holdout.nrmse(machine, &set)?))
+    };
+    let (values, (calib_n, hold_n)) = match scores(&start.1) {
+        Some(s) => (start.1, s),
+        // A fit that cannot simulate every blow falls back to the best point of the simpler
+        // model, polished: a light die thrown ahead by a stiff contact rattles on it without
+        // end in some blows (the family's hertz-tresca press, report seed 4900: a 45 kg die
+        // at 1e12 N/m fitted the calibration blows, and a holdout blow ran to the 1 s
+        // limit), and the candidate would otherwise be lost with its rigid fit.
+        None => {
+            let n = used(&start.1);
+            let i = (0..scan.points.len())
+                .filter(|&i| scan.costs[i].is_finite() && used(&scan.points[i]) < n)
+                .min_by(|a, b| scan.costs[*a].total_cmp(&scan.costs[*b]))?;
+            let simpler = local(&scan.points[i], scan.costs[i]).1;
+            let s = scores(&simpler)?;
+            (simpler, s)
+        }
+    };
     let effects = effects_of(cands, &values);
     Some(Fitted {
         name: cands.iter().map(|c| c.name).collect::<Vec<_>>().join("+"),
