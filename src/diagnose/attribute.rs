@@ -92,9 +92,9 @@ impl Candidate {
 
     /// A press foundation's ring scanned finely about `at` (this candidate's values): its
     /// spring over half the coarse grid's step either way, at `RING_ZETAS`, the mass as at
-    /// `at`. Empty for the other candidates, and on a hammer: its blow's window holds a few
-    /// of a foundation's periods (five of 250 Hz in 20 ms), not the press's tens, and each
-    /// local search is time against the hammer's budget (issue 41: 5 s a case).
+    /// `at`. Empty for the other candidates, and on a hammer: its 20 ms window holds a few
+    /// of a foundation's periods (five of 250 Hz), each extra local search is time against
+    /// the hammer's budget (issue 41: 5 s a case), and the scan was set on press cases only.
     pub(super) fn ring_points(&self, kind: MachineKind, at: &[f64]) -> Vec<Vec<f64>> {
         if self.name != "foundation" || kind != MachineKind::ScrewPress {
             return Vec::new();
