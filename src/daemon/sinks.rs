@@ -126,8 +126,10 @@ mod tests {
                 }
                 let mut body = vec![0; len];
                 let _ = r.read_exact(&mut body);
-                let _ = (&stream).write_all(b"HTTP/1.1 200 OK\r\ncontent-length: 0\r\nconnection: close\r\n\r\n");
+                // The body is handed over before the reply: once the client has its 200, the
+                // test may read the bodies (replying first lost the last one to that race once).
                 let _ = tx.send(String::from_utf8_lossy(&body).into_owned());
+                let _ = (&stream).write_all(b"HTTP/1.1 200 OK\r\ncontent-length: 0\r\nconnection: close\r\n\r\n");
             }
         });
         (url, rx)
