@@ -8,6 +8,14 @@ use crate::physics::machine::Machine;
 
 use super::localise::nrmse;
 
+/// The fewest periods of a ring in a blow's window that `ring_band_hz` counts: under two,
+/// a foundation's spring is a compliance to the blow, which the coarse grid and the local
+/// search fit without a fine scan.
+const RING_MIN_PERIODS: f64 = 2.0;
+/// The fewest samples a period of a ring that `ring_band_hz` counts: a ring sampled more
+/// coarsely is lost in the sensor's anti-alias filter and the blow's own high band.
+const RING_SAMPLES_PER_PERIOD: f64 = 10.0;
+
 /// Blows to fit or score: the objective (references, process, kind) and each blow's
 /// baseline window.
 #[derive(Debug, Clone)]
@@ -46,6 +54,16 @@ impl BlowSet {
             return 0.0;
         };
         blow_residuals(r, s, *w, 1.0 / self.obj.refs.len() as f64).map(|x| x * x).sum()
+    }
+
+    /// The frequencies (Hz) of a ring these blows can show: at least `RING_MIN_PERIODS`
+    /// periods in the longest window, at most the highest sample rate over
+    /// `RING_SAMPLES_PER_PERIOD`. Empty (its floor above its ceiling) without blows.
+    pub fn ring_band_hz(&self) -> (f64, f64) {
+        let longest =
+            self.obj.refs.iter().zip(&self.windows).map(|(r, w)| (w.1 - w.0) as f64 * r.dt_s).fold(0.0, f64::max);
+        let finest = self.obj.refs.iter().map(|r| r.dt_s).fold(f64::INFINITY, f64::min);
+        (RING_MIN_PERIODS / longest, 1.0 / (RING_SAMPLES_PER_PERIOD * finest))
     }
 
     /// Sensor noise over the peak, mean over the blows: the load's spread before each

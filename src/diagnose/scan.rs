@@ -71,9 +71,15 @@ impl<'c> Scan<'c> {
     /// search into a worse valley: as the grid's starts, it took 3 of the family's 60
     /// rigid-eq3 press foundations at tune seeds 4120–4179 from a holdout shrink of
     /// 0.85–0.93 to 0.52–0.79, the local search ending on a lighter foundation.
-    pub(super) fn starts(&mut self, cands: &[&Candidate], held: usize, kind: MachineKind) -> Vec<usize> {
+    pub(super) fn starts(
+        &mut self,
+        cands: &[&Candidate],
+        held: usize,
+        kind: MachineKind,
+        band_hz: (f64, f64),
+    ) -> Vec<usize> {
         let mut starts = self.distinct_best(GRID_STARTS);
-        let ring = ring_points(cands, held, kind, &self.best_points());
+        let ring = ring_points(cands, held, kind, &self.best_points(), band_hz);
         if let Some(i) = self.add_best(ring).filter(|&i| self.costs[i].is_finite())
             && !starts.contains(&i)
         {
@@ -219,15 +225,23 @@ pub(super) fn fine_points(
 }
 
 /// Each candidate's ring scan (`Candidate::ring_points`, a press foundation's) about each of
-/// `around`, for the candidates not held, the other parameters as there.
-fn ring_points(cands: &[&Candidate], held: usize, kind: MachineKind, around: &[Vec<f64>]) -> Vec<Vec<f64>> {
+/// `around`, over `band_hz` about the first (the best), for the candidates not held, the
+/// other parameters as there.
+fn ring_points(
+    cands: &[&Candidate],
+    held: usize,
+    kind: MachineKind,
+    around: &[Vec<f64>],
+    band_hz: (f64, f64),
+) -> Vec<Vec<f64>> {
     let mut first = 0;
     let mut out = Vec::new();
     for c in cands {
         let n = c.params.len();
         if first >= held {
-            for pt in around {
-                out.extend(c.ring_points(kind, &pt[first..first + n]).into_iter().map(|r| {
+            for (i, pt) in around.iter().enumerate() {
+                let band = (i == 0).then_some(band_hz);
+                out.extend(c.ring_points(kind, &pt[first..first + n], band).into_iter().map(|r| {
                     let mut v = pt.clone();
                     v[first..first + n].copy_from_slice(&r);
                     v
