@@ -1,6 +1,7 @@
 //! The blows a diagnosis fits or scores (`BlowSet`): the objective's references with each
 //! blow's baseline window, and how a model with given effects is scored on them.
 
+use crate::identify::clip::adc_step;
 use crate::identify::objective::{Objective, Reference, Setting, Simulated};
 use crate::physics::billet::{BilletLaw, LoadEffects};
 use crate::physics::effects::EffectSet;
@@ -67,23 +68,22 @@ impl BlowSet {
     }
 
     /// Sensor noise over the peak, mean over the blows: the load's spread before each
-    /// window (less 10 samples), where nothing touches the sensor.
+    /// window (less 10 samples), where nothing touches the sensor, and never less than the
+    /// ADC's own quantisation noise q/√12 (q the smallest step between the blow's distinct
+    /// load values, as `identify::clip` finds it): a noise under one step leaves the
+    /// pre-window constant, and a spread of 0 would make any residual a gap. A blow with
+    /// fewer than 5 samples before its window has no spread to measure and is left out;
+    /// when no blow has one, the quantisation floor alone is returned.
     pub fn noise_nrmse(&self) -> f64 {
-        let v: Vec<f64> = self
-            .obj
-            .refs
-            .iter()
-            .zip(&self.windows)
-            .map(|(r, w)| {
+        let blows = || self.obj.refs.iter().zip(&self.windows);
+        let floor = |r: &Reference| quantisation_noise_n(&r.load_n) / r.peak_n;
+        let measured: Vec<f64> = blows()
+            .filter_map(|(r, w)| {
                 let pre = &r.load_n[..w.0.saturating_sub(10).min(r.load_n.len())];
-                if pre.len() < 5 {
-                    return 0.0;
-                }
-                let m = pre.iter().sum::<f64>() / pre.len() as f64;
-                (pre.iter().map(|x| (x - m).powi(2)).sum::<f64>() / pre.len() as f64).sqrt() / r.peak_n
+                (pre.len() >= 5).then(|| (spread(pre) / r.peak_n).max(floor(r)))
             })
             .collect();
-        mean(&v)
+        if measured.is_empty() { mean(&blows().map(|(r, _)| floor(r)).collect::<Vec<_>>()) } else { mean(&measured) }
     }
 
     /// The gap a clearance's closure shows on these blows, m: the distance the lower tool
@@ -148,7 +148,91 @@ fn blow_residuals(r: &Reference, s: &Simulated, (a, b): (usize, usize), share: f
     (a..b).map(move |i| w * (r.load_n[i] - s.load_n.get(i).copied().unwrap_or(0.0)))
 }
 
+/// The population standard deviation of `v` (n ≥ 1).
+fn spread(v: &[f64]) -> f64 {
+    let m = v.iter().sum::<f64>() / v.len() as f64;
+    (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+/// The quantisation noise q/√12 of a signal whose ADC step is q (0 with fewer than two
+/// distinct values).
+fn quantisation_noise_n(load_n: &[f64]) -> f64 {
+    let q = adc_step(load_n.iter().copied());
+    if q.is_finite() { q / 12f64.sqrt() } else { 0.0 }
+}
+
 /// The mean of `v` (NaN when empty): a set's errors over its blows.
 pub fn mean(v: &[f64]) -> f64 {
     if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::machine::MachineKind;
+
+    /// A blow of 3000 samples at 100 kHz: a half-sine of 1 MN from sample 1000 over 2000,
+    /// plus `noise` (a fixed ±1 pattern, N), rounded to a step of `q` N; its window starts
+    /// at `start`.
+    fn blow(noise: f64, q: f64, start: usize) -> (Reference, (usize, usize)) {
+        let load_n: Vec<f64> = (0..3000)
+            .map(|i| {
+                let x = if i >= 1000 { 1e6 * (std::f64::consts::PI * (i - 1000) as f64 / 2000.0).sin() } else { 0.0 };
+                let n = if i % 3 == 0 { noise } else { -0.5 * noise };
+                ((x + n) / q).round() * q
+            })
+            .collect();
+        let r = Reference {
+            label: "b".into(),
+            v0_mps: 4.0,
+            dt_s: 1e-5,
+            load_n,
+            i_window_start: 0,
+            measured: None,
+            t_align_s: 1e-2,
+            peak_n: 1e6,
+            noise_n: None,
+            blow_index: None,
+            t_ram_contact_s: None,
+            approach: None,
+        };
+        (r, (start, 3000))
+    }
+
+    fn set(blows: Vec<(Reference, (usize, usize))>) -> BlowSet {
+        let (refs, windows): (Vec<_>, Vec<_>) = blows.into_iter().unzip();
+        let fitted = vec![true; refs.len()];
+        BlowSet { obj: Objective::new(refs, fitted, Setting::Bare, MachineKind::Hammer), windows, mode2_hz: 0.0 }
+    }
+
+    // A noise well above the ADC step is the pre-window's spread: the ±1 pattern (+a, −a/2,
+    // −a/2) has a standard deviation of a/√2.
+    #[test]
+    fn the_noise_is_the_pre_window_spread() {
+        let got = set(vec![blow(2000.0, 1.0, 1000)]).noise_nrmse();
+        let want = 2000.0 / 2f64.sqrt() / 1e6;
+        assert!((got / want - 1.0).abs() < 0.01, "{got} against {want}");
+    }
+
+    // A noise under half the ADC step leaves the pre-window constant; the noise is then the
+    // quantisation's, q/√12, not 0 (tune press 4162 of the family read 0 and its strength
+    // infinite, issue 41).
+    #[test]
+    fn a_noise_under_the_adc_step_is_the_quantisation_noise() {
+        let q = 500.0;
+        let got = set(vec![blow(100.0, q, 1000)]).noise_nrmse();
+        let want = q / 12f64.sqrt() / 1e6;
+        assert!((got / want - 1.0).abs() < 1e-9, "{got} against {want}");
+    }
+
+    // A blow whose window leaves fewer than 5 samples before it has no spread to measure:
+    // it is left out, not counted as noise 0.
+    #[test]
+    fn a_blow_without_a_pre_window_is_left_out() {
+        let alone = set(vec![blow(2000.0, 1.0, 1000)]).noise_nrmse();
+        let with_short = set(vec![blow(2000.0, 1.0, 1000), blow(2000.0, 1.0, 12)]).noise_nrmse();
+        assert!((with_short / alone - 1.0).abs() < 1e-12, "{with_short} against {alone}");
+        let only_short = set(vec![blow(2000.0, 500.0, 12)]).noise_nrmse();
+        assert!((only_short / (500.0 / 12f64.sqrt() / 1e6) - 1.0).abs() < 1e-9, "{only_short}");
+    }
 }

@@ -38,6 +38,15 @@ pub(crate) fn clipped(blow: &Blow, i_peak: usize) -> Option<(f64, usize)> {
 /// step q (the smallest step between the blow's distinct values) round to the same value
 /// with a chance p ≈ q / (2 √π σ) (their difference has sd σ√2; the chance it falls within
 /// ±q/2 of 0); a run of n, anywhere among the blow's N samples, about N p^(n−1).
+/// The ADC's step as a signal shows it: the smallest step between its distinct finite
+/// values (INFINITY with fewer than two).
+pub fn adc_step(values: impl Iterator<Item = f64>) -> f64 {
+    let mut v: Vec<f64> = values.filter(|x| x.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    v.windows(2).map(|w| w[1] - w[0]).fold(f64::INFINITY, f64::min)
+}
+
 fn clip_run(blow: &Blow) -> usize {
     let pre: Vec<f64> = blow.samples[..blow.i_trigger.min(blow.samples.len())].iter().map(|s| s.load_n).collect();
     if pre.len() < 2 {
@@ -45,10 +54,7 @@ fn clip_run(blow: &Blow) -> usize {
     }
     let mean = pre.iter().sum::<f64>() / pre.len() as f64;
     let sd = (pre.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (pre.len() - 1) as f64).sqrt();
-    let mut values: Vec<f64> = blow.samples.iter().map(|s| s.load_n).filter(|v| v.is_finite()).collect();
-    values.sort_by(f64::total_cmp);
-    values.dedup();
-    let step = values.windows(2).map(|w| w[1] - w[0]).fold(f64::INFINITY, f64::min);
+    let step = adc_step(blow.samples.iter().map(|s| s.load_n));
     let p = if sd > 0.0 && step.is_finite() {
         (step / (2.0 * std::f64::consts::PI.sqrt() * sd)).min(CLIP_PAIR_P_MAX)
     } else {
